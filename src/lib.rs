@@ -1,0 +1,12 @@
+//! # shelldsa
+//!
+//! Design sensitivity analysis of finite-deformation elastoplastic shells, discretised meshfree on
+//! CAD surfaces, with frictionless rigid-tool contact (Choi, Yi, Kim, Botkin, DETC 2003). Every
+//! derivative is computable three ways: the hand-derived continuum method, a dual-number reference
+//! through the same generic kernels, and finite differences ([`verification`]).
+
+pub mod material;
+pub mod scalar;
+pub mod verification;
+
+pub use scalar::Real;

@@ -1,0 +1,131 @@
+//! Hand-derived design sensitivity of the material point (eqs 44–49), extended to material
+//! parameters as design variables.
+//!
+//! Differentiating the backward-Euler equations (eq 20) and the consistency condition (eq 21)
+//! with respect to a design parameter τ, with `η = σ − α`, `c = ⅔H(1 − β)`, `f1 = 1 + λc`,
+//! `Ξ = [f1 I + λDP]⁻¹`, `θ = 1 − ⅔βHλ`, `w = Ξ(cI + DP)η` and `f2 = ⅔βHφ² + θ ηᵀPw`:
+//!
+//! ```text
+//! r      = ⁿσ̇ − ⁿα̇ + Ḋ Δε + D Δε̇ − λ ċ η − λ Ḋ P η          (explicit driving term)
+//! q      = σ̇0 + (βH)˙ ⁿ⁺¹ē^p + βH ⁿė^p                          (yield-radius term, eq 12)
+//! λ̇      = (θ ηᵀPΞ r − √⅔ φ q) / f2                            (eq 46)
+//! η̇      = Ξ r − λ̇ w
+//! ⁿ⁺¹σ̇   = f1 η̇ + ⁿα̇ + (c λ̇ + λ ċ) η                          (eqs 44, 47)
+//! ⁿ⁺¹α̇   = ⁿα̇ + (c λ̇ + λ ċ) η + λ c η̇                         (eq 45)
+//! ⁿ⁺¹ė^p = ⁿė^p + √⅔ (λ̇ φ + λ ηᵀPη̇ / φ)
+//! ```
+//!
+//! The stress sensitivity is linear in `Δε̇`: `ⁿ⁺¹σ̇ = D^ep Δε̇ + σ^fic` (eq 47), where σ^fic
+//! collects the history terms (`ⁿσ̇, ⁿα̇, ⁿė^p`, eq 49) and the material-parameter terms.
+//! The paper's eqs (46)–(49) as transcribed differ in the factors f2 and f3; this form is the one
+//! the dual-number derivative of [`super::return_map`] confirms.
+
+use super::{elastic_matrix, eta_p_eta, p_matrix, xi_matrix, Mat5, MaterialParams, MaterialState, ReturnMap, Vec5, SQRT_2_3};
+
+/// Material-point sensitivity split into the named groups of the design-sensitivity equation:
+/// the three parts add up to the total.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MaterialSensitivityTerms {
+    /// Strain terms: the response to `Δε̇` (for the stress, `D^ep Δε̇`).
+    pub strain: MaterialState<f64>,
+    /// History terms: the response to `ⁿσ̇, ⁿα̇, ⁿė^p` (eq 49).
+    pub history: MaterialState<f64>,
+    /// Material-parameter terms: the response to `Ė, ν̇, k̇, σ̇0, Ḣ, β̇`.
+    pub material: MaterialState<f64>,
+}
+
+impl MaterialSensitivityTerms {
+    /// The whole sensitivity `ⁿ⁺¹(σ̇, α̇, ė^p)`.
+    pub fn total(&self) -> MaterialState<f64> {
+        self.strain.add(&self.history).add(&self.material)
+    }
+    /// The fictitious stress `σ^fic` of eq (47): history and material terms of the stress.
+    pub fn sigma_fic(&self) -> Vec5<f64> {
+        self.history.stress + self.material.stress
+    }
+}
+
+/// `Ḋ` for parameter sensitivities `dm`, from `D11 = E/(1−ν²)`, `D12 = νD11`, `G = E/(2(1+ν))`,
+/// transverse shear `kG`.
+pub fn elastic_matrix_derivative(m: &MaterialParams<f64>, dm: &MaterialParams<f64>) -> Mat5<f64> {
+    let (e, nu, k) = (m.young, m.poisson, m.shear_factor);
+    let one_m = 1.0 - nu * nu;
+    let c = e / one_m;
+    let dc = dm.young / one_m + e * 2.0 * nu * dm.poisson / (one_m * one_m);
+    let g = e / (2.0 * (1.0 + nu));
+    let dg = dm.young / (2.0 * (1.0 + nu)) - e * dm.poisson / (2.0 * (1.0 + nu) * (1.0 + nu));
+    let mut d = Mat5::zeros();
+    d[(0, 0)] = dc;
+    d[(1, 1)] = dc;
+    d[(0, 1)] = dc * nu + c * dm.poisson;
+    d[(1, 0)] = d[(0, 1)];
+    d[(2, 2)] = dg;
+    d[(3, 3)] = dm.shear_factor * g + k * dg;
+    d[(4, 4)] = d[(3, 3)];
+    d
+}
+
+/// Sensitivity of one return mapping, linear in its three inputs:
+/// `dm` (parameter sensitivities), `dn` (history sensitivities `ⁿ(σ̇, α̇, ė^p)`) and `ddeps` (`Δε̇`).
+///
+/// `m`, `deps` and `out` are the analysis data of the step: parameters, the strain increment and the outcome of [`super::return_map`] (its branch decides elastic/plastic).
+pub fn material_sensitivity(
+    m: &MaterialParams<f64>,
+    deps: &Vec5<f64>,
+    out: &ReturnMap<f64>,
+    dm: &MaterialParams<f64>,
+    dn: &MaterialState<f64>,
+    ddeps: &Vec5<f64>,
+) -> MaterialState<f64> {
+    let d = elastic_matrix(m);
+    let dd = elastic_matrix_derivative(m, dm);
+    let dsigma_tr = dn.stress + dd * deps + d * ddeps;
+    if !out.plastic {
+        // Elastic branch: σ = ⁿσ + D Δε, α and ē^p unchanged.
+        return MaterialState { stress: dsigma_tr, back_stress: dn.back_stress, eps_p: dn.eps_p };
+    }
+    let p = p_matrix::<f64>();
+    let lambda = out.lambda;
+    let (h, beta) = (m.hardening, m.beta);
+    let c = m.kinematic_modulus();
+    let dc = 2.0 / 3.0 * ((1.0 - beta) * dm.hardening - h * dm.beta);
+    let f1 = 1.0 + lambda * c;
+    let xi = xi_matrix(m, lambda);
+    let eta = out.state.stress - out.state.back_stress;
+    let phi = eta_p_eta(&eta).sqrt();
+    let theta = 1.0 - 2.0 / 3.0 * beta * h * lambda;
+    let p_eta = p * eta;
+    let w = xi * (eta * c + d * p_eta);
+    let f2 = 2.0 / 3.0 * beta * h * phi * phi + theta * p_eta.dot(&w);
+
+    let r = dsigma_tr - dn.back_stress - eta * (lambda * dc) - dd * p_eta * lambda;
+    let q = dm.sigma0 + (dm.beta * h + beta * dm.hardening) * out.state.eps_p + beta * h * dn.eps_p;
+    let xi_r = xi * r;
+    let dlambda = (theta * p_eta.dot(&xi_r) - SQRT_2_3 * phi * q) / f2;
+    let deta = xi_r - w * dlambda;
+    let dshift = eta * (c * dlambda + lambda * dc);
+    let dback = dn.back_stress + dshift + deta * (lambda * c);
+    let dstress = deta * f1 + dn.back_stress + dshift;
+    let dphi = p_eta.dot(&deta) / phi;
+    let deps_p = dn.eps_p + SQRT_2_3 * (dlambda * phi + lambda * dphi);
+    MaterialState { stress: dstress, back_stress: dback, eps_p: deps_p }
+}
+
+/// [`material_sensitivity`] split into its strain, history and material-parameter groups.
+pub fn material_sensitivity_terms(
+    m: &MaterialParams<f64>,
+    deps: &Vec5<f64>,
+    out: &ReturnMap<f64>,
+    dm: &MaterialParams<f64>,
+    dn: &MaterialState<f64>,
+    ddeps: &Vec5<f64>,
+) -> MaterialSensitivityTerms {
+    let z_m = MaterialParams::zero();
+    let z_n = MaterialState::zero();
+    let z_e = Vec5::zeros();
+    MaterialSensitivityTerms {
+        strain: material_sensitivity(m, deps, out, &z_m, &z_n, ddeps),
+        history: material_sensitivity(m, deps, out, &z_m, dn, &z_e),
+        material: material_sensitivity(m, deps, out, dm, &z_n, &z_e),
+    }
+}
