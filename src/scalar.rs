@@ -37,7 +37,10 @@ pub type DualN<const N: usize> = num_dual::DualSVec64<N>;
 
 /// The derivative parts of an `N`-direction dual number as an array.
 pub fn dual_parts<const N: usize>(x: &DualN<N>) -> [f64; N] {
-    let v = x.eps.clone().unwrap_generic(nalgebra::Const::<N>, nalgebra::U1);
+    let v = x
+        .eps
+        .clone()
+        .unwrap_generic(nalgebra::Const::<N>, nalgebra::U1);
     let mut out = [0.0; N];
     for (o, e) in out.iter_mut().zip(v.iter()) {
         *o = *e;
@@ -56,7 +59,17 @@ mod tests {
     use nalgebra::Matrix3;
 
     fn kernel<T: Real>(x: T) -> T {
-        let m = Matrix3::new(x, T::cst(1.0), T::zero(), T::zero(), x * 2.0, T::zero(), T::zero(), T::zero(), T::one());
+        let m = Matrix3::new(
+            x,
+            T::cst(1.0),
+            T::zero(),
+            T::zero(),
+            x * 2.0,
+            T::zero(),
+            T::zero(),
+            T::zero(),
+            T::one(),
+        );
         let inv = m.try_inverse().expect("invertible");
         inv[(0, 0)] + x.sqrt() * 3.0
     }

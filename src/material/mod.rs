@@ -16,7 +16,10 @@ mod sensitivity;
 
 pub use params::{MaterialError, MaterialParams};
 pub use params::{N_PARAMS, PARAM_NAMES};
-pub use sensitivity::{elastic_matrix_derivative, material_sensitivity, material_sensitivity_terms, MaterialSensitivityTerms};
+pub use sensitivity::{
+    elastic_matrix_derivative, material_sensitivity, material_sensitivity_terms,
+    MaterialSensitivityTerms,
+};
 
 use crate::scalar::Real;
 use nalgebra::{SMatrix, SVector};
@@ -43,7 +46,11 @@ pub struct MaterialState<T> {
 impl<T: Real> MaterialState<T> {
     /// Virgin state: no stress, no back stress, no plastic strain.
     pub fn virgin() -> Self {
-        MaterialState { stress: Vec5::zeros(), back_stress: Vec5::zeros(), eps_p: T::zero() }
+        MaterialState {
+            stress: Vec5::zeros(),
+            back_stress: Vec5::zeros(),
+            eps_p: T::zero(),
+        }
     }
     /// Real parts.
     pub fn value(&self) -> MaterialState<f64> {
@@ -82,7 +89,11 @@ impl MaterialState<f64> {
     }
     /// The zero state.
     pub fn zero() -> Self {
-        MaterialState { stress: Vec5::zeros(), back_stress: Vec5::zeros(), eps_p: 0.0 }
+        MaterialState {
+            stress: Vec5::zeros(),
+            back_stress: Vec5::zeros(),
+            eps_p: 0.0,
+        }
     }
 }
 
@@ -137,7 +148,8 @@ pub fn elastic_matrix<T: Real>(m: &MaterialParams<T>) -> Mat5<T> {
 /// `ηᵀ P η` (eq 10 without the factor ½): the squared `φ` of eq (15).
 pub fn eta_p_eta<T: Real>(eta: &Vec5<T>) -> T {
     let (a, b) = (eta[0], eta[1]);
-    (a * a + b * b - a * b) * (2.0 / 3.0) + (eta[2] * eta[2] + eta[3] * eta[3] + eta[4] * eta[4]) * 2.0
+    (a * a + b * b - a * b) * (2.0 / 3.0)
+        + (eta[2] * eta[2] + eta[3] * eta[3] + eta[4] * eta[4]) * 2.0
 }
 
 /// Yield function of eq (10): `f = ½ ηᵀPη − ⅓ κ²`, κ of eq (12).
@@ -206,7 +218,13 @@ pub fn xi_matrix<T: Real>(m: &MaterialParams<T>, lambda: T) -> Mat5<T> {
 
 /// Consistency function `F(λ) = ½φ²(λ) − ⅓κ²(λ)` (the squared form of eq 21) and `dF/dλ`, with
 /// `φ²(λ) = Σ p_i a_i² / (1 + λ e_i)²`, `e_i = c + d_i p_i`, `κ = σ0 + βH(ē^p_n + √⅔ λ φ)`.
-fn consistency<T: Real>(m: &MaterialParams<T>, sp: &Spectral<T>, a: &[T; 5], eps_p_n: T, lambda: T) -> (T, T) {
+fn consistency<T: Real>(
+    m: &MaterialParams<T>,
+    sp: &Spectral<T>,
+    a: &[T; 5],
+    eps_p_n: T,
+    lambda: T,
+) -> (T, T) {
     let c = m.kinematic_modulus();
     let mut phi2 = T::zero();
     let mut dphi2 = T::zero();
@@ -220,9 +238,16 @@ fn consistency<T: Real>(m: &MaterialParams<T>, sp: &Spectral<T>, a: &[T; 5], eps
     let phi = phi2.sqrt();
     let bh = m.beta * m.hardening;
     let kappa = m.sigma0 + bh * (eps_p_n + lambda * phi * SQRT_2_3);
-    let dphi = if phi > T::zero() { dphi2 / (phi * 2.0) } else { T::zero() };
+    let dphi = if phi > T::zero() {
+        dphi2 / (phi * 2.0)
+    } else {
+        T::zero()
+    };
     let dkappa = bh * (phi + lambda * dphi) * SQRT_2_3;
-    (phi2 * 0.5 - kappa * kappa / 3.0, dphi2 * 0.5 - kappa * dkappa * (2.0 / 3.0))
+    (
+        phi2 * 0.5 - kappa * kappa / 3.0,
+        dphi2 * 0.5 - kappa * dkappa * (2.0 / 3.0),
+    )
 }
 
 /// Maximum Newton iterations on the consistency condition.
@@ -248,7 +273,10 @@ pub fn return_map<T: Real>(
     m.validate()?;
     for (index, v) in deps.iter().enumerate() {
         if !v.value().is_finite() {
-            return Err(MaterialError::NonFiniteStrain { index, value: v.value() });
+            return Err(MaterialError::NonFiniteStrain {
+                index,
+                value: v.value(),
+            });
         }
     }
     let d = elastic_matrix(m);
@@ -258,8 +286,17 @@ pub fn return_map<T: Real>(
     let f_tr = eta_p_eta(&eta_tr) * 0.5 - kappa_n * kappa_n / 3.0;
     let scale = (kappa_n * kappa_n / 3.0).value();
     if f_tr.value() <= TRIAL_TOL * scale {
-        let state = MaterialState { stress: sigma_tr, back_stress: n.back_stress, eps_p: n.eps_p };
-        return Ok(ReturnMap { state, lambda: T::zero(), plastic: false, iterations: 0 });
+        let state = MaterialState {
+            stress: sigma_tr,
+            back_stress: n.back_stress,
+            eps_p: n.eps_p,
+        };
+        return Ok(ReturnMap {
+            state,
+            lambda: T::zero(),
+            plastic: false,
+            iterations: 0,
+        });
     }
 
     let sp = Spectral::new(m);
@@ -286,13 +323,25 @@ pub fn return_map<T: Real>(
     let eta = Spectral::from_basis(&b);
     let phi = eta_p_eta(&eta).sqrt();
     let back_stress = n.back_stress + eta * (lambda * c);
-    let state = MaterialState { stress: eta + back_stress, back_stress, eps_p: n.eps_p + lambda * phi * SQRT_2_3 };
-    Ok(ReturnMap { state, lambda, plastic: true, iterations })
+    let state = MaterialState {
+        stress: eta + back_stress,
+        back_stress,
+        eps_p: n.eps_p + lambda * phi * SQRT_2_3,
+    };
+    Ok(ReturnMap {
+        state,
+        lambda,
+        plastic: true,
+        iterations,
+    })
 }
 
 /// Safeguarded Newton on `F(λ) = 0`, `F(0) > 0`, `F(λ) < 0` for large λ: returns λ and the
 /// iteration count.
-fn solve_consistency(f: &dyn Fn(f64) -> (f64, f64), scale: f64) -> Result<(f64, usize), MaterialError> {
+fn solve_consistency(
+    f: &dyn Fn(f64) -> (f64, f64),
+    scale: f64,
+) -> Result<(f64, usize), MaterialError> {
     let tol = 1e-15 * scale;
     let (f0, df0) = f(0.0);
     // Bracket [lo, hi] with F(lo) > 0 > F(hi).
@@ -304,13 +353,20 @@ fn solve_consistency(f: &dyn Fn(f64) -> (f64, f64), scale: f64) -> Result<(f64, 
         hi *= 2.0;
         grow += 1;
         if grow > 200 || !hi.is_finite() {
-            return Err(MaterialError::ReturnMapNotConverged { iterations: grow, residual: f(hi).0 / scale });
+            return Err(MaterialError::ReturnMapNotConverged {
+                iterations: grow,
+                residual: f(hi).0 / scale,
+            });
         }
     }
     let mut lambda = 0.0;
     let (mut fv, mut dfv) = (f0, df0);
     for it in 1..=MAX_RETURN_ITERATIONS {
-        let mut next = if dfv < 0.0 { lambda - fv / dfv } else { f64::NAN };
+        let mut next = if dfv < 0.0 {
+            lambda - fv / dfv
+        } else {
+            f64::NAN
+        };
         if !(next > lo && next < hi) {
             next = 0.5 * (lo + hi);
         }
@@ -326,7 +382,10 @@ fn solve_consistency(f: &dyn Fn(f64) -> (f64, f64), scale: f64) -> Result<(f64, 
             return Ok((lambda, it));
         }
     }
-    Err(MaterialError::ReturnMapNotConverged { iterations: MAX_RETURN_ITERATIONS, residual: fv / scale })
+    Err(MaterialError::ReturnMapNotConverged {
+        iterations: MAX_RETURN_ITERATIONS,
+        residual: fv / scale,
+    })
 }
 
 /// Consistent (algorithmic) tangent `D^ep = ∂ⁿ⁺¹σ/∂Δε` of eq (48), derived by hand.
@@ -356,4 +415,3 @@ pub fn consistent_tangent(m: &MaterialParams<f64>, out: &ReturnMap<f64>) -> Mat5
     let f2 = 2.0 / 3.0 * m.beta * m.hardening * phi2 + theta * eta.dot(&(p * w));
     xi * d * f1 - u * u.transpose() * (theta / f2)
 }
-

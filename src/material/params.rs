@@ -55,12 +55,32 @@ pub struct MaterialParams<T> {
 /// Number of material parameters.
 pub const N_PARAMS: usize = 6;
 /// Parameter names in the order of [`MaterialParams::to_array`].
-pub const PARAM_NAMES: [&str; N_PARAMS] = ["young", "poisson", "shear_factor", "sigma0", "hardening", "beta"];
+pub const PARAM_NAMES: [&str; N_PARAMS] = [
+    "young",
+    "poisson",
+    "shear_factor",
+    "sigma0",
+    "hardening",
+    "beta",
+];
 
 impl MaterialParams<f64> {
     /// Validated parameters with the default shear correction factor 5/6.
-    pub fn new(young: f64, poisson: f64, sigma0: f64, hardening: f64, beta: f64) -> Result<Self, MaterialError> {
-        let m = MaterialParams { young, poisson, shear_factor: 5.0 / 6.0, sigma0, hardening, beta };
+    pub fn new(
+        young: f64,
+        poisson: f64,
+        sigma0: f64,
+        hardening: f64,
+        beta: f64,
+    ) -> Result<Self, MaterialError> {
+        let m = MaterialParams {
+            young,
+            poisson,
+            shear_factor: 5.0 / 6.0,
+            sigma0,
+            hardening,
+            beta,
+        };
         m.validate()?;
         Ok(m)
     }
@@ -83,11 +103,25 @@ impl MaterialParams<f64> {
 impl<T: Real> MaterialParams<T> {
     /// `[E, ν, k, σ0, H, β]`.
     pub fn to_array(&self) -> [T; N_PARAMS] {
-        [self.young, self.poisson, self.shear_factor, self.sigma0, self.hardening, self.beta]
+        [
+            self.young,
+            self.poisson,
+            self.shear_factor,
+            self.sigma0,
+            self.hardening,
+            self.beta,
+        ]
     }
     /// From `[E, ν, k, σ0, H, β]`.
     pub fn from_array(a: [T; N_PARAMS]) -> Self {
-        MaterialParams { young: a[0], poisson: a[1], shear_factor: a[2], sigma0: a[3], hardening: a[4], beta: a[5] }
+        MaterialParams {
+            young: a[0],
+            poisson: a[1],
+            shear_factor: a[2],
+            sigma0: a[3],
+            hardening: a[4],
+            beta: a[5],
+        }
     }
     /// Real parts.
     pub fn value(&self) -> MaterialParams<f64> {
@@ -105,15 +139,44 @@ impl<T: Real> MaterialParams<T> {
             if ok && value.is_finite() {
                 Ok(())
             } else {
-                Err(MaterialError::InvalidParameter { name, value, expected })
+                Err(MaterialError::InvalidParameter {
+                    name,
+                    value,
+                    expected,
+                })
             }
         };
         check("young", v.young, v.young > 0.0, "a finite value > 0")?;
-        check("poisson", v.poisson, v.poisson > -1.0 && v.poisson < 0.5, "a value in (-1, 0.5)")?;
-        check("shear_factor", v.shear_factor, v.shear_factor > 0.0, "a finite value > 0 (default 5/6)")?;
-        check("sigma0", v.sigma0, v.sigma0 > 0.0, "a finite initial yield stress > 0")?;
-        check("hardening", v.hardening, v.hardening >= 0.0, "a finite hardening modulus >= 0")?;
-        check("beta", v.beta, (0.0..=1.0).contains(&v.beta), "a value in [0, 1] (1 isotropic, 0 kinematic)")?;
+        check(
+            "poisson",
+            v.poisson,
+            v.poisson > -1.0 && v.poisson < 0.5,
+            "a value in (-1, 0.5)",
+        )?;
+        check(
+            "shear_factor",
+            v.shear_factor,
+            v.shear_factor > 0.0,
+            "a finite value > 0 (default 5/6)",
+        )?;
+        check(
+            "sigma0",
+            v.sigma0,
+            v.sigma0 > 0.0,
+            "a finite initial yield stress > 0",
+        )?;
+        check(
+            "hardening",
+            v.hardening,
+            v.hardening >= 0.0,
+            "a finite hardening modulus >= 0",
+        )?;
+        check(
+            "beta",
+            v.beta,
+            (0.0..=1.0).contains(&v.beta),
+            "a value in [0, 1] (1 isotropic, 0 kinematic)",
+        )?;
         Ok(())
     }
 }

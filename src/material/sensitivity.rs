@@ -20,7 +20,10 @@
 //! The paper's eqs (46)–(49) as transcribed differ in the factors f2 and f3; this form is the one
 //! the dual-number derivative of [`super::return_map`] confirms.
 
-use super::{elastic_matrix, eta_p_eta, p_matrix, xi_matrix, Mat5, MaterialParams, MaterialState, ReturnMap, Vec5, SQRT_2_3};
+use super::{
+    elastic_matrix, eta_p_eta, p_matrix, xi_matrix, Mat5, MaterialParams, MaterialState, ReturnMap,
+    Vec5, SQRT_2_3,
+};
 
 /// Material-point sensitivity split into the named groups of the design-sensitivity equation:
 /// the three parts add up to the total.
@@ -82,7 +85,11 @@ pub fn material_sensitivity(
     let dsigma_tr = dn.stress + dd * deps + d * ddeps;
     if !out.plastic {
         // Elastic branch: σ = ⁿσ + D Δε, α and ē^p unchanged.
-        return MaterialState { stress: dsigma_tr, back_stress: dn.back_stress, eps_p: dn.eps_p };
+        return MaterialState {
+            stress: dsigma_tr,
+            back_stress: dn.back_stress,
+            eps_p: dn.eps_p,
+        };
     }
     let p = p_matrix::<f64>();
     let lambda = out.lambda;
@@ -108,7 +115,11 @@ pub fn material_sensitivity(
     let dstress = deta * f1 + dn.back_stress + dshift;
     let dphi = p_eta.dot(&deta) / phi;
     let deps_p = dn.eps_p + SQRT_2_3 * (dlambda * phi + lambda * dphi);
-    MaterialState { stress: dstress, back_stress: dback, eps_p: deps_p }
+    MaterialState {
+        stress: dstress,
+        back_stress: dback,
+        eps_p: deps_p,
+    }
 }
 
 /// [`material_sensitivity`] split into its strain, history and material-parameter groups.

@@ -16,6 +16,8 @@
 //! largest `|b|` of the reference: a relative error for components that matter, an absolute error
 //! (relative to the largest component) for components that are round-off-sized.
 
+pub mod material_path;
+
 use crate::scalar::{Dual, Real};
 use nalgebra::DMatrix;
 use std::fmt;
@@ -53,13 +55,24 @@ pub fn values<F: Differentiable>(f: &F, x: &[f64]) -> Vec<f64> {
 /// Jacobian `∂y/∂x` (outputs × inputs) from dual numbers: one [`Dual`] pass per input.
 pub fn dual_jacobian<F: Differentiable>(f: &F, x: &[f64]) -> DMatrix<f64> {
     let n = f.n_inputs();
-    assert_eq!(x.len(), n, "dual_jacobian: x has {} entries, f takes {n}", x.len());
+    assert_eq!(
+        x.len(),
+        n,
+        "dual_jacobian: x has {} entries, f takes {n}",
+        x.len()
+    );
     let mut cols: Vec<Vec<f64>> = Vec::with_capacity(n);
     for j in 0..n {
         let xd: Vec<Dual> = x
             .iter()
             .enumerate()
-            .map(|(k, &v)| if k == j { Dual::from_re(v).derivative() } else { Dual::from_re(v) })
+            .map(|(k, &v)| {
+                if k == j {
+                    Dual::from_re(v).derivative()
+                } else {
+                    Dual::from_re(v)
+                }
+            })
             .collect();
         cols.push(f.eval(&xd).iter().map(|y| y.eps).collect());
     }
@@ -119,7 +132,12 @@ pub struct CentralDifference {
 /// Central differences of `f` at `x` for every input.
 pub fn central_jacobian<F: Differentiable>(f: &F, x: &[f64], step: StepSize) -> CentralDifference {
     let n = f.n_inputs();
-    assert_eq!(x.len(), n, "central_jacobian: x has {} entries, f takes {n}", x.len());
+    assert_eq!(
+        x.len(),
+        n,
+        "central_jacobian: x has {} entries, f takes {n}",
+        x.len()
+    );
     let base_set = f.active_set(x);
     let mut cols = Vec::with_capacity(n);
     let mut steps = Vec::with_capacity(n);
@@ -133,7 +151,12 @@ pub fn central_jacobian<F: Differentiable>(f: &F, x: &[f64], step: StepSize) -> 
         let h_eff = (xp[j] - xm[j]) * 0.5; // the step actually represented in floating point
         let yp: Vec<f64> = f.eval(&xp);
         let ym: Vec<f64> = f.eval(&xm);
-        cols.push(yp.iter().zip(&ym).map(|(p, m)| (p - m) / (2.0 * h_eff)).collect::<Vec<f64>>());
+        cols.push(
+            yp.iter()
+                .zip(&ym)
+                .map(|(p, m)| (p - m) / (2.0 * h_eff))
+                .collect::<Vec<f64>>(),
+        );
         steps.push(h_eff);
         if !base_set.is_empty() {
             let sp = f.active_set(&xp);
@@ -143,12 +166,20 @@ pub fn central_jacobian<F: Differentiable>(f: &F, x: &[f64], step: StepSize) -> 
                 .map(|k| (k, f.active_label(k)))
                 .collect();
             if !entries.is_empty() {
-                flips.push(ActiveSetFlip { input: j, input_label: f.input_label(j), entries });
+                flips.push(ActiveSetFlip {
+                    input: j,
+                    input_label: f.input_label(j),
+                    entries,
+                });
             }
         }
     }
     let m = cols.first().map_or(0, Vec::len);
-    CentralDifference { jacobian: DMatrix::from_fn(m, n, |i, j| cols[j][i]), steps, flips }
+    CentralDifference {
+        jacobian: DMatrix::from_fn(m, n, |i, j| cols[j][i]),
+        steps,
+        flips,
+    }
 }
 
 /// Tolerance of a comparison: `|a − b| ≤ rel · max(|b|, floor · max|b|)` for every component.
@@ -229,7 +260,11 @@ impl fmt::Display for Comparison {
             self.compared
         )?;
         if let (Some(w), Some((o, i))) = (&self.worst, &self.worst_labels) {
-            write!(f, "\n{:>42} worst ∂{o}/∂{i}: {:+.12e} vs {:+.12e}", "", w.value, w.reference)?;
+            write!(
+                f,
+                "\n{:>42} worst ∂{o}/∂{i}: {:+.12e} vs {:+.12e}",
+                "", w.value, w.reference
+            )?;
         }
         Ok(())
     }
@@ -273,12 +308,26 @@ pub fn compare_matrices(
                 Some(w) => error > w.error || error.is_nan(),
             };
             if worse {
-                worst = Some(ComponentError { output: i, input: j, value: a, reference: b, error });
+                worst = Some(ComponentError {
+                    output: i,
+                    input: j,
+                    value: a,
+                    reference: b,
+                    error,
+                });
             }
         }
     }
     let worst_labels = worst.as_ref().map(|w| labels(w.output, w.input));
-    Comparison { name: name.to_string(), tol, scale, worst, failures, compared, worst_labels }
+    Comparison {
+        name: name.to_string(),
+        tol,
+        scale,
+        worst,
+        failures,
+        compared,
+        worst_labels,
+    }
 }
 
 /// Compare a hand-derived Jacobian with a reference Jacobian of `f`.
@@ -309,7 +358,11 @@ pub struct CheckOptions {
 impl CheckOptions {
     /// Tolerances `dual_rel` and `fd_rel` with the default floor and step.
     pub fn new(dual_rel: f64, fd_rel: f64) -> Self {
-        CheckOptions { dual: Tolerance::rel(dual_rel), fd: Tolerance::rel(fd_rel), step: StepSize::default() }
+        CheckOptions {
+            dual: Tolerance::rel(dual_rel),
+            fd: Tolerance::rel(fd_rel),
+            step: StepSize::default(),
+        }
     }
 }
 
@@ -345,7 +398,11 @@ impl fmt::Display for DerivativeReport {
             .iter()
             .fold((f64::INFINITY, 0.0_f64), |(a, b), &h| (a.min(h), b.max(h)));
         writeln!(f, "{}", self.vs_fd)?;
-        write!(f, "{:>42} central-difference step h in [{hmin:.2e}, {hmax:.2e}]", "")?;
+        write!(
+            f,
+            "{:>42} central-difference step h in [{hmin:.2e}, {hmax:.2e}]",
+            ""
+        )?;
         for flip in &self.fd.flips {
             let names: Vec<&str> = flip.entries.iter().map(|(_, s)| s.as_str()).collect();
             write!(
@@ -371,9 +428,29 @@ pub fn check<F: Differentiable>(
     let dual = dual_jacobian(f, x);
     let fd = central_jacobian(f, x, opts.step);
     let skip: Vec<usize> = fd.flips.iter().map(|fl| fl.input).collect();
-    let vs_dual = compare(f, "hand-derived vs dual numbers", hand, &dual, opts.dual, &[]);
-    let vs_fd = compare(f, "hand-derived vs central differences", hand, &fd.jacobian, opts.fd, &skip);
-    DerivativeReport { title: title.to_string(), vs_dual, vs_fd, fd, dual }
+    let vs_dual = compare(
+        f,
+        "hand-derived vs dual numbers",
+        hand,
+        &dual,
+        opts.dual,
+        &[],
+    );
+    let vs_fd = compare(
+        f,
+        "hand-derived vs central differences",
+        hand,
+        &fd.jacobian,
+        opts.fd,
+        &skip,
+    );
+    DerivativeReport {
+        title: title.to_string(),
+        vs_dual,
+        vs_fd,
+        fd,
+        dual,
+    }
 }
 
 /// One row of a Taylor remainder test.
@@ -432,13 +509,28 @@ mod tests {
     }
 
     fn toy_jacobian(x: &[f64]) -> DMatrix<f64> {
-        DMatrix::from_row_slice(2, 2, &[2.0 * x[0] * x[1], x[0] * x[0], x[0].cos(), 3.0 * x[1] * x[1]])
+        DMatrix::from_row_slice(
+            2,
+            2,
+            &[
+                2.0 * x[0] * x[1],
+                x[0] * x[0],
+                x[0].cos(),
+                3.0 * x[1] * x[1],
+            ],
+        )
     }
 
     #[test]
     fn correct_jacobian_passes_three_ways() {
         let x = [0.7, -1.3];
-        let r = check(&Toy, "toy", &x, &toy_jacobian(&x), CheckOptions::new(1e-14, 1e-8));
+        let r = check(
+            &Toy,
+            "toy",
+            &x,
+            &toy_jacobian(&x),
+            CheckOptions::new(1e-14, 1e-8),
+        );
         assert!(r.passed(), "{r}");
         assert!(r.fd.flips.is_empty());
     }
@@ -481,7 +573,13 @@ mod tests {
 
     #[test]
     fn active_set_flip_is_reported_and_left_out() {
-        let r = check(&Kink, "kink", &[1e-9], &DMatrix::from_element(1, 1, 1.0), CheckOptions::new(1e-14, 1e-8));
+        let r = check(
+            &Kink,
+            "kink",
+            &[1e-9],
+            &DMatrix::from_element(1, 1, 1.0),
+            CheckOptions::new(1e-14, 1e-8),
+        );
         assert_eq!(r.fd.flips.len(), 1);
         assert_eq!(r.vs_fd.compared, 0);
         assert!(r.to_string().contains("active set flips"));
@@ -491,7 +589,10 @@ mod tests {
     fn taylor_rate_is_two_for_exact_and_one_for_wrong_derivative() {
         let x = [0.7, -1.3];
         let d = [0.3, 0.8];
-        let jd: Vec<f64> = (toy_jacobian(&x) * nalgebra::DVector::from_row_slice(&d)).iter().copied().collect();
+        let jd: Vec<f64> = (toy_jacobian(&x) * nalgebra::DVector::from_row_slice(&d))
+            .iter()
+            .copied()
+            .collect();
         let hs = [1e-1, 5e-2, 2.5e-2, 1.25e-2];
         let rows = taylor_remainder(&Toy, &x, &d, &jd, &hs);
         for r in &rows[1..] {
