@@ -5,6 +5,8 @@
 //! derivative is computable three ways: the hand-derived continuum method, a dual-number reference
 //! through the same generic kernels, and finite differences ([`verification`]).
 
+pub mod cli;
+pub mod io;
 pub mod material;
 pub mod scalar;
 pub mod verification;

@@ -37,10 +37,7 @@ pub type DualN<const N: usize> = num_dual::DualSVec64<N>;
 
 /// The derivative parts of an `N`-direction dual number as an array.
 pub fn dual_parts<const N: usize>(x: &DualN<N>) -> [f64; N] {
-    let v = x
-        .eps
-        .clone()
-        .unwrap_generic(nalgebra::Const::<N>, nalgebra::U1);
+    let v = x.eps.unwrap_generic(nalgebra::Const::<N>, nalgebra::U1);
     let mut out = [0.0; N];
     for (o, e) in out.iter_mut().zip(v.iter()) {
         *o = *e;

@@ -228,10 +228,10 @@ fn consistency<T: Real>(
     let c = m.kinematic_modulus();
     let mut phi2 = T::zero();
     let mut dphi2 = T::zero();
-    for i in 0..5 {
-        let e = c + sp.d[i] * sp.p[i];
+    for ((ai, di), pi) in a.iter().zip(&sp.d).zip(&sp.p) {
+        let e = c + *di * *pi;
         let den = T::one() + lambda * e;
-        let t = a[i] * a[i] * sp.p[i] / (den * den);
+        let t = *ai * *ai * *pi / (den * den);
         phi2 += t;
         dphi2 -= t * e * 2.0 / den;
     }

@@ -299,8 +299,8 @@ pub fn compare_matrices(
             let denom = b.abs().max(tol.floor * scale).max(f64::MIN_POSITIVE);
             let error = if a == b { 0.0 } else { (a - b).abs() / denom };
             compared += 1;
-            // A NaN error is a failure: `!(error <= tol)` catches it.
-            if !(error <= tol.rel) {
+            // A NaN error is a failure.
+            if error.is_nan() || error > tol.rel {
                 failures += 1;
             }
             let worse = match &worst {

@@ -1,0 +1,249 @@
+//! The `shelldsa` command line.
+
+use crate::io::{read_case, Case, MaterialPathCase};
+use crate::material::STATE_LABELS;
+use crate::scalar::Dual;
+use crate::verification::Tolerance;
+use clap::{Parser, Subcommand};
+use serde_json::json;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Design sensitivity analysis of nonlinear shells, checked three ways.
+#[derive(Debug, Parser)]
+#[command(name = "shelldsa", version, about)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run a case: the analysis and every derivative method, with results written to --out.
+    Run {
+        /// Case file (TOML).
+        case: PathBuf,
+        /// Output directory (created if missing).
+        #[arg(long, default_value = "out")]
+        out: PathBuf,
+        /// Print only the summary.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Read and validate a case file without running it.
+    Check {
+        /// Case file (TOML).
+        case: PathBuf,
+    },
+}
+
+/// Exit status: 0 success, 1 bad input or I/O failure, 2 derivative check outside tolerance.
+pub fn main_with_args<I: IntoIterator<Item = String>>(args: I) -> i32 {
+    let cli = match Cli::try_parse_from(args) {
+        Ok(c) => c,
+        Err(e) => {
+            let _ = e.print();
+            return if e.use_stderr() { 1 } else { 0 };
+        }
+    };
+    let result = match cli.command {
+        Command::Check { case } => read_case(&case).map(|c| {
+            println!("{}: ok ({})", case.display(), describe(&c));
+            0
+        }),
+        Command::Run { case, out, quiet } => read_case(&case).map(|c| run(&c, &out, quiet)),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e}");
+            1
+        }
+    }
+}
+
+fn describe(c: &Case) -> String {
+    match c {
+        Case::MaterialPath(m) => format!(
+            "material-path, {} steps, design variable `{}`",
+            m.path.n_steps(),
+            m.design_name
+        ),
+    }
+}
+
+fn run(case: &Case, out: &Path, quiet: bool) -> i32 {
+    if let Err(e) = std::fs::create_dir_all(out) {
+        eprintln!(
+            "error: cannot create output directory {}: {e}",
+            out.display()
+        );
+        return 1;
+    }
+    match case {
+        Case::MaterialPath(c) => match run_material_path(c, out, quiet) {
+            Ok(code) => code,
+            Err(e) => {
+                eprintln!("error: {e}");
+                1
+            }
+        },
+    }
+}
+
+fn run_material_path(
+    c: &MaterialPathCase,
+    out: &Path,
+    quiet: bool,
+) -> Result<i32, Box<dyn std::error::Error>> {
+    let start = Instant::now();
+    let p = &c.path;
+    // Time each method on its own.
+    let t = Instant::now();
+    let (states, plastic) = p.run::<f64>(p.tau)?;
+    let t_analysis = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let hand = p.hand_derived()?;
+    let t_continuum = (t.elapsed().as_secs_f64() - t_analysis).max(0.0);
+    let t = Instant::now();
+    let (dual_states, _) = p.run(Dual::from_re(p.tau).derivative())?;
+    let t_dual = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let (sp, _) = p.run::<f64>(p.tau + c.fd_step)?;
+    let (sm, _) = p.run::<f64>(p.tau - c.fd_step)?;
+    let t_fd = t.elapsed().as_secs_f64();
+    let check = p.check(
+        c.fd_step,
+        Tolerance::rel(c.check.dual_rel),
+        Tolerance {
+            rel: c.check.fd_rel,
+            floor: c.check.fd_floor,
+        },
+    )?;
+
+    let mut steps = Vec::with_capacity(p.n_steps());
+    let mut csv = String::from("step,plastic,component,value,continuum,dual,fd_central\n");
+    for k in 0..p.n_steps() {
+        let v = states[k].to_array();
+        let h = hand.sensitivities[k].to_array();
+        let d = dual_state_eps(&dual_states[k]);
+        let fp = sp[k].to_array();
+        let fm = sm[k].to_array();
+        let mut comps = serde_json::Map::new();
+        for i in 0..11 {
+            let fd = (fp[i] - fm[i]) / (2.0 * c.fd_step);
+            comps.insert(
+                STATE_LABELS[i].into(),
+                json!({"value": v[i], "continuum": h[i], "dual": d[i], "fd_central": fd, "fd_step": c.fd_step}),
+            );
+            csv.push_str(&format!(
+                "{},{},{},{:.16e},{:.16e},{:.16e},{:.16e}\n",
+                k + 1,
+                plastic[k],
+                STATE_LABELS[i],
+                v[i],
+                h[i],
+                d[i],
+                fd
+            ));
+        }
+        let sc = &check.per_step[k];
+        steps.push(json!({
+            "step": k + 1,
+            "plastic": plastic[k],
+            "iterations": hand.iterations[k],
+            "components": comps,
+            "error_vs_dual": sc.dual_error,
+            "error_vs_fd": sc.fd_error,
+            "status_flips_within_fd_step": sc.flipped,
+        }));
+    }
+    let passed = check.passed();
+    let results = json!({
+        "kind": "material-path",
+        "title": c.title,
+        "design_variable": c.design_name,
+        "tau": p.tau,
+        "wall_time_s": start.elapsed().as_secs_f64(),
+        "timing_s": {"analysis": t_analysis, "continuum": t_continuum, "dual": t_dual, "fd": t_fd},
+        "check": {
+            "passed": passed,
+            "dual": {"max_scaled_error": check.vs_dual.max_error(), "tolerance": c.check.dual_rel},
+            "fd": {"max_scaled_error": check.vs_fd.max_error(), "tolerance": c.check.fd_rel, "floor": c.check.fd_floor},
+            "flipped_steps": check.flipped_steps.iter().map(|k| k + 1).collect::<Vec<_>>(),
+        },
+        "steps": steps,
+    });
+    std::fs::write(
+        out.join("results.json"),
+        serde_json::to_string_pretty(&results)?,
+    )?;
+    std::fs::write(out.join("sensitivity.csv"), csv)?;
+
+    let mut o = std::io::stdout().lock();
+    writeln!(
+        o,
+        "{} — design variable `{}` at τ = {}",
+        c.title, c.design_name, p.tau
+    )?;
+    if !quiet {
+        writeln!(
+            o,
+            "{:>4} {:>7} {:>14} {:>14} {:>14} {:>14} {:>9}",
+            "step", "status", "σ11", "σ̇11 continuum", "σ̇11 dual", "σ̇11 FD", "FD/cont%"
+        )?;
+        for k in 0..p.n_steps() {
+            let fd = (sp[k].stress[0] - sm[k].stress[0]) / (2.0 * c.fd_step);
+            let h = hand.sensitivities[k].stress[0];
+            writeln!(
+                o,
+                "{:>4} {:>7} {:>14.6e} {:>14.6e} {:>14.6e} {:>14.6e} {:>9.4}",
+                k + 1,
+                if plastic[k] { "plastic" } else { "elastic" },
+                states[k].stress[0],
+                h,
+                dual_states[k].stress[0].eps,
+                fd,
+                100.0 * fd / h
+            )?;
+        }
+        writeln!(
+            o,
+            "\nper-step errors (all 11 history components, scaled):\n{check}"
+        )?;
+    } else {
+        writeln!(o, "{}\n{}", check.vs_dual, check.vs_fd)?;
+    }
+    writeln!(
+        o,
+        "timing: analysis {:.3e} s, continuum DSA {:.3e} s, dual {:.3e} s, FD {:.3e} s",
+        t_analysis, t_continuum, t_dual, t_fd
+    )?;
+    writeln!(
+        o,
+        "wrote {} and {}",
+        out.join("results.json").display(),
+        out.join("sensitivity.csv").display()
+    )?;
+    writeln!(
+        o,
+        "{}",
+        if passed {
+            "derivative check: PASSED"
+        } else {
+            "derivative check: FAILED"
+        }
+    )?;
+    Ok(if passed { 0 } else { 2 })
+}
+
+fn dual_state_eps(s: &crate::material::MaterialState<Dual>) -> [f64; 11] {
+    let mut a = [0.0; 11];
+    for i in 0..5 {
+        a[i] = s.stress[i].eps;
+        a[5 + i] = s.back_stress[i].eps;
+    }
+    a[10] = s.eps_p.eps;
+    a
+}

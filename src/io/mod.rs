@@ -1,0 +1,442 @@
+//! Case files in, results out. Nothing numerical here.
+//!
+//! A case file is TOML; its `[problem] kind` selects the problem type. Implemented so far:
+//! `kind = "material-path"`, the three-way design-sensitivity check of a material point driven
+//! along a strain path (see `verification/material-point-path/case.toml` for an annotated
+//! example).
+
+use crate::material::{MaterialError, MaterialParams, Vec5};
+use crate::verification::material_path::MaterialPath;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// Errors reading a case file. Each names the file, the key and what was expected.
+#[derive(Debug, Error)]
+pub enum CaseError {
+    /// The file could not be read.
+    #[error("cannot read case file {path}: {source}")]
+    Read {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// TOML syntax error, unknown key or wrong type (the message names key, line and column).
+    #[error("case file {path}: {message}")]
+    Parse {
+        /// File.
+        path: PathBuf,
+        /// Parser message.
+        message: String,
+    },
+    /// A value outside its admissible range.
+    #[error("case file {path}: `{key}` = {value} is invalid: expected {expected}")]
+    Invalid {
+        /// File.
+        path: PathBuf,
+        /// Dotted key.
+        key: String,
+        /// Value as written.
+        value: String,
+        /// What was expected.
+        expected: String,
+    },
+}
+
+/// `[problem]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ProblemSpec {
+    #[allow(dead_code)] // dispatched on before this struct is parsed
+    kind: String,
+    #[serde(default)]
+    title: Option<String>,
+}
+
+/// `[material]` (all keys required except `shear_factor`, default 5/6).
+#[derive(Debug, Deserialize, Clone, Copy)]
+#[serde(deny_unknown_fields)]
+pub struct MaterialSpec {
+    young: f64,
+    poisson: f64,
+    #[serde(default = "default_shear_factor")]
+    shear_factor: f64,
+    sigma0: f64,
+    hardening: f64,
+    beta: f64,
+}
+
+fn default_shear_factor() -> f64 {
+    5.0 / 6.0
+}
+
+/// `[design.material_rate]`: d(parameter)/dτ, all default 0.
+#[derive(Debug, Deserialize, Default, Clone, Copy)]
+#[serde(deny_unknown_fields)]
+struct MaterialRateSpec {
+    #[serde(default)]
+    young: f64,
+    #[serde(default)]
+    poisson: f64,
+    #[serde(default)]
+    shear_factor: f64,
+    #[serde(default)]
+    sigma0: f64,
+    #[serde(default)]
+    hardening: f64,
+    #[serde(default)]
+    beta: f64,
+}
+
+/// `[design]`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DesignSpec {
+    #[serde(default = "default_tau_name")]
+    name: String,
+    #[serde(default)]
+    tau: f64,
+    #[serde(default = "default_fd_step")]
+    fd_step: f64,
+    #[serde(default)]
+    material_rate: MaterialRateSpec,
+}
+
+fn default_tau_name() -> String {
+    "tau".into()
+}
+fn default_fd_step() -> f64 {
+    1e-6
+}
+
+/// One `[[path.segment]]`: `steps` equal increments.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SegmentSpec {
+    steps: usize,
+    increment: [f64; 5],
+    #[serde(default)]
+    rate: [f64; 5],
+}
+
+/// `[path]`: either a named generator or explicit segments.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PathSpec {
+    #[serde(default)]
+    generator: Option<String>,
+    #[serde(default)]
+    segment: Vec<SegmentSpec>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MaterialPathFile {
+    problem: ProblemSpec,
+    material: MaterialSpec,
+    design: DesignSpec,
+    path: PathSpec,
+    #[serde(default)]
+    check: Option<CheckSpec>,
+}
+
+/// `[check]`: tolerances of the three-way comparison.
+#[derive(Debug, Deserialize, Clone, Copy)]
+#[serde(deny_unknown_fields)]
+pub struct CheckSpec {
+    /// Continuum (hand-derived) against dual numbers, relative.
+    pub dual_rel: f64,
+    /// Continuum against central differences, relative.
+    pub fd_rel: f64,
+    /// Absolute floor of the FD comparison as a fraction of the largest sensitivity.
+    pub fd_floor: f64,
+}
+
+impl Default for CheckSpec {
+    fn default() -> Self {
+        CheckSpec {
+            dual_rel: 1e-9,
+            fd_rel: 1e-5,
+            fd_floor: 1e-4,
+        }
+    }
+}
+
+/// A material-point path case.
+#[derive(Debug, Clone)]
+pub struct MaterialPathCase {
+    /// Title for reports.
+    pub title: String,
+    /// Design-variable name.
+    pub design_name: String,
+    /// The path, material and design dependence.
+    pub path: MaterialPath,
+    /// Finite-difference step on τ.
+    pub fd_step: f64,
+    /// Tolerances.
+    pub check: CheckSpec,
+}
+
+/// A parsed case.
+#[derive(Debug, Clone)]
+pub enum Case {
+    /// `kind = "material-path"`.
+    MaterialPath(MaterialPathCase),
+}
+
+/// Problem kinds this build understands.
+pub const KINDS: &[&str] = &["material-path"];
+
+/// Read and validate a case file.
+pub fn read_case(path: &Path) -> Result<Case, CaseError> {
+    let text = std::fs::read_to_string(path).map_err(|source| CaseError::Read {
+        path: path.into(),
+        source,
+    })?;
+    parse_case(&text, path)
+}
+
+/// Parse and validate case-file text (`path` names the file in messages).
+pub fn parse_case(text: &str, path: &Path) -> Result<Case, CaseError> {
+    let parse_err = |e: toml::de::Error| CaseError::Parse {
+        path: path.into(),
+        message: e.to_string(),
+    };
+    #[derive(Deserialize)]
+    struct Head {
+        problem: Option<toml::Value>,
+    }
+    let head: Head = toml::from_str(text).map_err(parse_err)?;
+    let kind = head
+        .problem
+        .as_ref()
+        .and_then(|p| p.get("kind"))
+        .and_then(|k| k.as_str())
+        .map(str::to_owned);
+    let invalid = |key: &str, value: String, expected: String| CaseError::Invalid {
+        path: path.into(),
+        key: key.into(),
+        value,
+        expected,
+    };
+    match kind.as_deref() {
+        Some("material-path") => {
+            let f: MaterialPathFile = toml::from_str(text).map_err(parse_err)?;
+            material_path_case(f, path)
+        }
+        Some(other) => Err(invalid(
+            "problem.kind",
+            format!("{other:?}"),
+            format!("one of {KINDS:?}"),
+        )),
+        None => Err(invalid(
+            "problem.kind",
+            "(missing)".into(),
+            format!("a [problem] table with kind = one of {KINDS:?}"),
+        )),
+    }
+}
+
+fn material_path_case(f: MaterialPathFile, path: &Path) -> Result<Case, CaseError> {
+    let invalid = |key: &str, value: String, expected: &str| CaseError::Invalid {
+        path: path.into(),
+        key: key.into(),
+        value,
+        expected: expected.into(),
+    };
+    let m = f.material;
+    let material = MaterialParams {
+        young: m.young,
+        poisson: m.poisson,
+        shear_factor: m.shear_factor,
+        sigma0: m.sigma0,
+        hardening: m.hardening,
+        beta: m.beta,
+    };
+    material.validate().map_err(|e| match e {
+        MaterialError::InvalidParameter {
+            name,
+            value,
+            expected,
+        } => invalid(&format!("material.{name}"), value.to_string(), expected),
+        other => invalid("material", String::new(), &other.to_string()),
+    })?;
+    let r = f.design.material_rate;
+    let material_rate = MaterialParams {
+        young: r.young,
+        poisson: r.poisson,
+        shear_factor: r.shear_factor,
+        sigma0: r.sigma0,
+        hardening: r.hardening,
+        beta: r.beta,
+    };
+    for (name, v) in crate::material::PARAM_NAMES
+        .iter()
+        .zip(material_rate.to_array())
+    {
+        if !v.is_finite() {
+            return Err(invalid(
+                &format!("design.material_rate.{name}"),
+                v.to_string(),
+                "a finite number",
+            ));
+        }
+    }
+    let h = f.design.fd_step;
+    if !(h > 0.0 && h.is_finite()) {
+        return Err(invalid(
+            "design.fd_step",
+            h.to_string(),
+            "a finite step > 0",
+        ));
+    }
+    if !f.design.tau.is_finite() {
+        return Err(invalid(
+            "design.tau",
+            f.design.tau.to_string(),
+            "a finite number",
+        ));
+    }
+    let mut mp = match (&f.path.generator, f.path.segment.is_empty()) {
+        (Some(g), true) if g == "non-proportional-60" => {
+            MaterialPath::non_proportional_60(material.beta)
+                .map_err(|e| invalid("path.generator", g.clone(), &e.to_string()))?
+        }
+        (Some(g), true) => {
+            return Err(invalid(
+                "path.generator",
+                format!("{g:?}"),
+                "\"non-proportional-60\" or [[path.segment]] tables",
+            ))
+        }
+        (Some(_), false) => {
+            return Err(invalid(
+                "path",
+                "generator and segments".into(),
+                "either `generator` or [[path.segment]], not both",
+            ))
+        }
+        (None, true) => {
+            return Err(invalid(
+                "path",
+                "(empty)".into(),
+                "`generator` or at least one [[path.segment]]",
+            ))
+        }
+        (None, false) => {
+            let mut inc = Vec::new();
+            let mut rates = Vec::new();
+            for (i, s) in f.path.segment.iter().enumerate() {
+                if s.steps == 0 {
+                    return Err(invalid(
+                        &format!("path.segment[{i}].steps"),
+                        "0".into(),
+                        "an integer >= 1",
+                    ));
+                }
+                for (c, v) in s.increment.iter().chain(&s.rate).enumerate() {
+                    if !v.is_finite() {
+                        let key = if c < 5 { "increment" } else { "rate" };
+                        return Err(invalid(
+                            &format!("path.segment[{i}].{key}[{}]", c % 5),
+                            v.to_string(),
+                            "a finite number",
+                        ));
+                    }
+                }
+                for _ in 0..s.steps {
+                    inc.push(Vec5::from(s.increment));
+                    rates.push(Vec5::from(s.rate));
+                }
+            }
+            MaterialPath {
+                material,
+                material_rate: MaterialParams::zero(),
+                increments: inc,
+                increment_rates: rates,
+                tau: 0.0,
+            }
+        }
+    };
+    mp.material = material;
+    mp.material_rate = material_rate;
+    mp.tau = f.design.tau;
+    Ok(Case::MaterialPath(MaterialPathCase {
+        title: f
+            .problem
+            .title
+            .unwrap_or_else(|| "material-point path".into()),
+        design_name: f.design.name,
+        path: mp,
+        fd_step: h,
+        check: f.check.unwrap_or_default(),
+    }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"
+[problem]
+kind = "material-path"
+[material]
+young = 210000.0
+poisson = 0.3
+sigma0 = 250.0
+hardening = 1000.0
+beta = 0.5
+[design]
+material_rate = { young = 21000.0 }
+[[path.segment]]
+steps = 3
+increment = [1e-3, 0.0, 0.0, 0.0, 0.0]
+rate = [1e-4, 0.0, 0.0, 0.0, 0.0]
+"#;
+
+    fn err(text: &str) -> String {
+        parse_case(text, Path::new("case.toml"))
+            .unwrap_err()
+            .to_string()
+    }
+
+    #[test]
+    fn good_case_parses() {
+        let Case::MaterialPath(c) = parse_case(GOOD, Path::new("case.toml")).unwrap();
+        assert_eq!(c.path.n_steps(), 3);
+        assert_eq!(c.path.material_rate.young, 21000.0);
+        assert_eq!(c.path.material.shear_factor, 5.0 / 6.0);
+    }
+
+    #[test]
+    fn errors_name_key_value_and_expectation() {
+        let e = err(&GOOD.replace("poisson = 0.3", "poisson = 0.7"));
+        assert!(
+            e.contains("material.poisson") && e.contains("0.7") && e.contains("(-1, 0.5)"),
+            "{e}"
+        );
+        let e = err(&GOOD.replace("beta = 0.5", "beta = 2.0"));
+        assert!(e.contains("material.beta") && e.contains('2'), "{e}");
+        let e = err(&GOOD.replace("sigma0 = 250.0", "sigma0 = -1.0"));
+        assert!(e.contains("material.sigma0") && e.contains("-1"), "{e}");
+        let e = err(&GOOD.replace("steps = 3", "steps = 0"));
+        assert!(e.contains("path.segment[0].steps"), "{e}");
+        let e = err(&GOOD.replace("kind = \"material-path\"", "kind = \"shell\""));
+        assert!(
+            e.contains("problem.kind") && e.contains("shell") && e.contains("material-path"),
+            "{e}"
+        );
+        // Unknown key (a typo) is named by the TOML layer.
+        let e = err(&GOOD.replace("hardening = 1000.0", "hardenning = 1000.0"));
+        assert!(e.contains("hardenning"), "{e}");
+        // Wrong type.
+        let e = err(&GOOD.replace("young = 210000.0", "young = \"steel\""));
+        assert!(e.contains("young") || e.contains("steel"), "{e}");
+        let e = err(&GOOD.replace(
+            "increment = [1e-3, 0.0, 0.0, 0.0, 0.0]",
+            "increment = [1e-3, 0.0]",
+        ));
+        assert!(e.contains("increment") || e.contains("5"), "{e}");
+    }
+}
