@@ -180,6 +180,16 @@ fn run_material_path(
         serde_json::to_string_pretty(&results)?,
     )?;
     std::fs::write(out.join("sensitivity.csv"), csv)?;
+    plot_material_path(
+        c,
+        &states,
+        &hand.sensitivities,
+        &dual_states,
+        &sp,
+        &sm,
+        &check,
+        &out.join("sensitivity.png"),
+    )?;
 
     let mut o = std::io::stdout().lock();
     writeln!(
@@ -222,9 +232,8 @@ fn run_material_path(
     )?;
     writeln!(
         o,
-        "wrote {} and {}",
-        out.join("results.json").display(),
-        out.join("sensitivity.csv").display()
+        "wrote results.json, sensitivity.csv and sensitivity.png to {}",
+        out.display()
     )?;
     writeln!(
         o,
@@ -246,4 +255,95 @@ fn dual_state_eps(s: &crate::material::MaterialState<Dual>) -> [f64; 11] {
     }
     a[10] = s.eps_p.eps;
     a
+}
+
+/// Response, sensitivity three ways, and per-step errors: `sensitivity.png`.
+#[allow(clippy::too_many_arguments)]
+fn plot_material_path(
+    c: &MaterialPathCase,
+    states: &[crate::material::MaterialState<f64>],
+    hand: &[crate::material::MaterialState<f64>],
+    dual: &[crate::material::MaterialState<Dual>],
+    sp: &[crate::material::MaterialState<f64>],
+    sm: &[crate::material::MaterialState<f64>],
+    check: &crate::verification::material_path::PathCheck,
+    path: &Path,
+) -> Result<(), String> {
+    use crate::io::plot::{figure, Panel, Scale, Series};
+    let steps = |f: &dyn Fn(usize) -> f64| -> Vec<(f64, f64)> {
+        (0..states.len()).map(|k| ((k + 1) as f64, f(k))).collect()
+    };
+    let h = c.fd_step;
+    let title = format!("{}: sensitivity d/d{} three ways", c.title, c.design_name);
+    figure(
+        path,
+        1000,
+        1100,
+        &[
+            Panel {
+                title: "response",
+                x_label: "step",
+                y_label: "stress",
+                y_scale: Scale::Linear,
+                series: vec![
+                    Series {
+                        label: "σ11",
+                        points: steps(&|k| states[k].stress[0]),
+                        markers: false,
+                    },
+                    Series {
+                        label: "σ12",
+                        points: steps(&|k| states[k].stress[2]),
+                        markers: false,
+                    },
+                    Series {
+                        label: "α11",
+                        points: steps(&|k| states[k].back_stress[0]),
+                        markers: false,
+                    },
+                ],
+            },
+            Panel {
+                title: &title,
+                x_label: "step",
+                y_label: "dσ11/dτ",
+                y_scale: Scale::Linear,
+                series: vec![
+                    Series {
+                        label: "continuum (eqs 44-49)",
+                        points: steps(&|k| hand[k].stress[0]),
+                        markers: false,
+                    },
+                    Series {
+                        label: "dual numbers",
+                        points: steps(&|k| dual[k].stress[0].eps),
+                        markers: true,
+                    },
+                    Series {
+                        label: "central difference",
+                        points: steps(&|k| (sp[k].stress[0] - sm[k].stress[0]) / (2.0 * h)),
+                        markers: true,
+                    },
+                ],
+            },
+            Panel {
+                title: "worst scaled error per step (all 11 history components)",
+                x_label: "step",
+                y_label: "error",
+                y_scale: Scale::Log,
+                series: vec![
+                    Series {
+                        label: "continuum vs dual",
+                        points: steps(&|k| check.per_step[k].dual_error),
+                        markers: true,
+                    },
+                    Series {
+                        label: "continuum vs FD",
+                        points: steps(&|k| check.per_step[k].fd_error),
+                        markers: true,
+                    },
+                ],
+            },
+        ],
+    )
 }

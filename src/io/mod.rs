@@ -5,6 +5,8 @@
 //! along a strain path (see `verification/material-point-path/case.toml` for an annotated
 //! example).
 
+pub mod plot;
+
 use crate::material::{MaterialError, MaterialParams, Vec5};
 use crate::verification::material_path::MaterialPath;
 use serde::Deserialize;
