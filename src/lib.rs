@@ -7,6 +7,7 @@
 
 pub mod cli;
 pub mod io;
+pub mod kinematics;
 pub mod material;
 pub mod scalar;
 pub mod verification;
