@@ -5,6 +5,7 @@
 //! derivative is computable three ways: the hand-derived continuum method, a dual-number reference
 //! through the same generic kernels, and finite differences ([`verification`]).
 
+pub mod geometry;
 pub mod material;
 pub mod scalar;
 pub mod verification;
