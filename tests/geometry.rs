@@ -1099,3 +1099,47 @@ fn toml_specs_build_surfaces() {
             .unwrap();
     expect_err(bad.build(), "radius");
 }
+
+// ---------------------------------------------------------------------------------------------
+// Random parameters.
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
+
+    /// Hand-derived derivatives equal dual-number derivatives anywhere in the domain (including
+    /// next to knots, where finite differences would straddle), for every surface; and a
+    /// two-direction dual seeds (u, v) at once.
+    #[test]
+    fn hand_derivatives_match_duals_anywhere(fu in 0.0..=1.0f64, fv in 0.0..=1.0f64) {
+        for (name, s) in all_surfaces() {
+            let dom = s.domain();
+            let u = dom[0][0] + fu * (dom[0][1] - dom[0][0]);
+            let v = dom[1][0] + fv * (dom[1][1] - dom[1][0]);
+            let d = s.eval(u, v);
+            let h = hand_jacobian(&d);
+            let j = shelldsa::verification::dual_jacobian(&ByParameter(&s), &[u, v]);
+            // Round-off against the largest component, as in `parametric_derivatives_three_ways`.
+            proptest::prop_assert!((j - &h).amax() <= 1e-13 * h.amax(), "{} at ({}, {})", name, u, v);
+            let dn = s.lift::<shelldsa::scalar::DualN<2>>().eval(
+                shelldsa::scalar::seed::<2>(u, 0),
+                shelldsa::scalar::seed::<2>(v, 1),
+            );
+            for c in 0..3 {
+                let p = shelldsa::scalar::dual_parts(&dn.x[c]);
+                proptest::prop_assert!((p[0] - d.xu[c]).abs() <= 1e-13 * h.amax());
+                proptest::prop_assert!((p[1] - d.xv[c]).abs() <= 1e-13 * h.amax());
+            }
+        }
+    }
+
+    /// Partition of unity and non-negativity at random parameters of a degree-3 non-uniform
+    /// knot vector with a double interior knot.
+    #[test]
+    fn partition_of_unity_random(t in 0.0..=1.0f64) {
+        let k = [0.0, 0.0, 0.0, 0.0, 0.1, 0.35, 0.35, 0.8, 1.0, 1.0, 1.0, 1.0];
+        let span = find_span(8, 3, t, &k);
+        let n = basis_function_derivatives(span, t, 3, &k).unwrap();
+        proptest::prop_assert!((n[0].iter().sum::<f64>() - 1.0).abs() <= 1e-15);
+        proptest::prop_assert!(n[0].iter().all(|&x| x >= 0.0));
+    }
+}
