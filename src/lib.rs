@@ -6,6 +6,7 @@
 //! through the same generic kernels, and finite differences ([`verification`]).
 
 pub mod material;
+pub mod meshfree;
 pub mod scalar;
 pub mod verification;
 
