@@ -2,7 +2,7 @@
 //!
 //! Every particle is binned into all cells its support rectangle overlaps (compressed-row storage),
 //! so a query looks at one cell and filters its candidates with the exact predicate
-//! [`covers`](super::kernel::covers). With the cell size equal to the median support half-width,
+//! [`covers`]. With the cell size equal to the median support half-width,
 //! a particle occupies about 9 cells and a query inspects about `(3/2)² ≈ 2.3` times as many
 //! candidates as it returns; the cost does not grow with the number of particles.
 
