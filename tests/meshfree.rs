@@ -120,6 +120,11 @@ fn regression_value_unit_grid() {
     println!("Ψ(5,5) = {a:.15}, Ψ(6,5) = {b:.15}");
     assert!((a - 0.393444444444).abs() < 1e-11, "Ψ(5,5) = {a}");
     assert!((b - 0.232111111111).abs() < 1e-11, "Ψ(6,5) = {b}");
+    // The parallel batch gives the same numbers.
+    let many = sf.evaluate_many(&[[5.3, 5.0], [2.25, 7.5]]).unwrap();
+    assert_eq!(many[0].neighbours(), out.neighbours());
+    assert_eq!(many[0].values(), out.values());
+    assert_eq!(many[0].gradients(), out.gradients());
     // The generic kernel gives the same numbers.
     let (v, _) = rk_shape_functions(
         [5.3, 5.0],
