@@ -10,6 +10,7 @@ pub mod geometry;
 pub mod io;
 pub mod kinematics;
 pub mod material;
+pub mod meshfree;
 pub mod scalar;
 pub mod verification;
 
