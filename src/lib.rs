@@ -12,6 +12,7 @@ pub mod kinematics;
 pub mod material;
 pub mod meshfree;
 pub mod scalar;
+pub mod shell;
 pub mod verification;
 
 pub use scalar::Real;

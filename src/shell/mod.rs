@@ -1,0 +1,41 @@
+//! The meshfree shell: thickness-degenerated, shear-deformable, 5 DOF per particle (3
+//! translations, 2 director rotations), finite rotations, updated Lagrangian with the
+//! Hughes–Winget update (paper §2.3–2.4; plan in docs/shell-formulation.md).
+//!
+//! So far: the point kernel ([`point`]): kinematics, stress update and internal force at one
+//! quadrature point, generic over the scalar, and its consistent tangent from hand-derived
+//! directional derivatives; the director rotation ([`rotation`]).
+
+pub mod point;
+pub mod rotation;
+
+use crate::kinematics::KinematicsError;
+use crate::material::MaterialError;
+use thiserror::Error;
+
+/// Errors of the shell kernels.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum ShellError {
+    /// A configuration Jacobian with non-positive determinant (an inverted shell).
+    #[error("{what} has determinant {det:e} <= 0: the shell is inverted or the step too large")]
+    NonPositiveJacobian {
+        /// Which Jacobian.
+        what: &'static str,
+        /// Its determinant.
+        det: f64,
+    },
+    /// Inconsistent input sizes.
+    #[error("expected {expected} degrees of freedom at the point, got {got}")]
+    Dimension {
+        /// Expected length.
+        expected: usize,
+        /// Given length.
+        got: usize,
+    },
+    /// Kinematics failure.
+    #[error(transparent)]
+    Kinematics(#[from] KinematicsError),
+    /// Material failure.
+    #[error(transparent)]
+    Material(#[from] MaterialError),
+}

@@ -1,0 +1,354 @@
+//! Shell kinematics, stress update and internal force at one quadrature point (ξ, ζ), with the
+//! consistent tangent from hand-derived directional derivatives (docs/shell-formulation.md §3–5).
+//!
+//! Configuration at step n and at a point:
+//! `x̄ⁿ,α = x̄⁰,α + Σ Ψ_I,α ū_Iⁿ`, `dⁿ = n⁰ + Σ Ψ_I (d_Iⁿ − d_I⁰)` (and its ξ-derivatives),
+//! `Jⁿ = ∂ⁿx/∂(ξ1, ξ2, ζ) = [x̄ⁿ,1 + ζt/2 dⁿ,1 | x̄ⁿ,2 + ζt/2 dⁿ,2 | t/2 dⁿ]`.
+//! Increment with DOFs `(Δū_I, α_I)`: `Δd_I = d_I(α_I) − d_Iⁿ`, and
+//! `G = ∂Δz/∂(ξ, ζ) = [Σ Ψ_I,1 (Δū_I + ζt/2 Δd_I) | Σ Ψ_I,2 (…) | t/2 Σ Ψ_I Δd_I]`.
+//! Then `H = G Jⁿ⁻¹` (eq 28's gradient on ⁿx), the Hughes–Winget update (eqs 22–31), the return
+//! map in the lamina frame (eqs 19–21), `ⁿ⁺¹Q = ⁿQ rᵀ` (eq 27), `σᵍ = Qᵀσˡ Q` (eq 26).
+//! Internal virtual work (eq 32) on `ⁿ⁺¹J = Jⁿ + G`: `w ∫ ∂δz/∂x : σ det J = w Gδ : P` with
+//! `P = det(J) σᵍ J⁻ᵀ`; so for particle I, `f_I = Ψ_I,1 P:1 + Ψ_I,2 P:2` (translations) and
+//! `r_Iβ = ∂d_I/∂α_β · m_I`, `m_I = ζt/2 (Ψ_I,1 P:1 + Ψ_I,2 P:2) + t/2 Ψ_I P:3` (rotations).
+
+use super::rotation::{director_derivatives, rotate_director};
+use super::ShellError;
+use crate::kinematics::{
+    frame_update, frame_update_dot, global_stress, global_stress_dot, hughes_winget,
+    hughes_winget_dot, local_strain_increment, local_strain_increment_dot, mid_step_gradient,
+    mid_step_gradient_dot, strain_to_vec5, stress_from_vec5, M3,
+};
+use crate::material::{consistent_tangent, return_map, MaterialParams, MaterialState, ReturnMap};
+use crate::scalar::Real;
+use nalgebra::{DMatrix, Vector3};
+
+type V3<T> = Vector3<T>;
+
+/// Degrees of freedom per particle: 3 translations, 2 director rotations.
+pub const DOFS_PER_PARTICLE: usize = 5;
+
+/// Initial (CAD) geometry at an in-plane quadrature point: position derivatives and the unit
+/// normal with its derivatives. Generic: a shape design variable enters here.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfacePoint<T> {
+    /// `x̄⁰,1`, `x̄⁰,2`.
+    pub x_a: [V3<T>; 2],
+    /// `n⁰`.
+    pub n: V3<T>,
+    /// `n⁰,1`, `n⁰,2`.
+    pub n_a: [V3<T>; 2],
+}
+
+impl<T: Real> SurfacePoint<T> {
+    /// From surface derivatives: `n = c/|c|`, `c = x,1 × x,2`, `n,α = (c,α − n (n·c,α))/|c|`.
+    pub fn from_derivs(s: &crate::geometry::SurfaceDerivs<T>) -> Self {
+        let c = s.xu.cross(&s.xv);
+        let len = c.norm();
+        let n = c / len;
+        let cu = s.xuu.cross(&s.xv) + s.xu.cross(&s.xuv);
+        let cv = s.xuv.cross(&s.xv) + s.xu.cross(&s.xvv);
+        let proj = |ca: V3<T>| (ca - n * n.dot(&ca)) / len;
+        SurfacePoint {
+            x_a: [s.xu, s.xv],
+            n,
+            n_a: [proj(cu), proj(cv)],
+        }
+    }
+    /// The initial lamina frame: rows `e1 = x̄,1/|x̄,1|`, `e2 = n × e1`, `e3 = n`.
+    pub fn initial_frame(&self) -> M3<T> {
+        let e1 = self.x_a[0].normalize();
+        let e2 = self.n.cross(&e1);
+        M3::from_rows(&[e1.transpose(), e2.transpose(), self.n.transpose()])
+    }
+}
+
+/// Committed state of one particle (the generalised coefficients of the RK approximation).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ParticleState<T> {
+    /// Mid-surface displacement coefficient `ū_Iⁿ`.
+    pub u: V3<T>,
+    /// Director coefficient `d_Iⁿ` (unit).
+    pub d: V3<T>,
+    /// Initial director coefficient `d_I⁰`.
+    pub d0: V3<T>,
+    /// Rotation axes `e1_I, e2_I ⟂ d_Iⁿ` of the two rotation DOFs.
+    pub e: [V3<T>; 2],
+}
+
+/// One neighbour's shape-function data at the point (on the parameter domain: design-free).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ShapeData {
+    /// `Ψ_I`.
+    pub psi: f64,
+    /// `Ψ_I,1`, `Ψ_I,2`.
+    pub dpsi: [f64; 2],
+}
+
+/// History at the point: lamina frame and material state (stress in the lamina frame).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PointHistory<T> {
+    /// Lamina frame `Q` (rows are the lamina basis vectors).
+    pub frame: M3<T>,
+    /// Stress, back stress, effective plastic strain.
+    pub material: MaterialState<T>,
+}
+
+/// Everything a point evaluation needs.
+#[derive(Clone, Copy, Debug)]
+pub struct PointInput<'a, T> {
+    /// Initial geometry.
+    pub surface: &'a SurfacePoint<T>,
+    /// Thickness coordinate ζ in [−1, 1].
+    pub zeta: f64,
+    /// Shell thickness `t`.
+    pub thickness: T,
+    /// Quadrature weight (parameter-domain weight times thickness weight).
+    pub weight: f64,
+    /// Shape functions of the neighbours.
+    pub shape: &'a [ShapeData],
+    /// Committed states of the neighbours (same order).
+    pub particles: &'a [ParticleState<T>],
+    /// Material.
+    pub material: &'a MaterialParams<T>,
+    /// Committed history at the point.
+    pub history: &'a PointHistory<T>,
+}
+
+/// Result of a point evaluation.
+#[derive(Clone, Debug)]
+pub struct PointResult<T> {
+    /// Internal force, `5 × n_neighbours`, ordered `[f_I (3), r_I1, r_I2]` per neighbour.
+    pub residual: Vec<T>,
+    /// Trial history at n+1.
+    pub history: PointHistory<T>,
+    /// Outcome of the return map.
+    pub return_map: ReturnMap<T>,
+}
+
+/// Configuration matrices at step n: `Jⁿ`.
+fn step_start_jacobian<T: Real>(inp: &PointInput<T>) -> M3<T> {
+    let s = inp.surface;
+    let mut xa = s.x_a;
+    let mut d = s.n;
+    let mut da = s.n_a;
+    for (sh, p) in inp.shape.iter().zip(inp.particles) {
+        let dd = p.d - p.d0;
+        for a in 0..2 {
+            xa[a] += p.u * T::cst(sh.dpsi[a]);
+            da[a] += dd * T::cst(sh.dpsi[a]);
+        }
+        d += dd * T::cst(sh.psi);
+    }
+    let half_t = inp.thickness * 0.5;
+    let z = half_t * inp.zeta;
+    M3::from_columns(&[xa[0] + da[0] * z, xa[1] + da[1] * z, d * half_t])
+}
+
+/// Gradient of the increment `G = ∂Δz/∂(ξ, ζ)` from per-particle `(Δū_I, Δd_I)`.
+fn increment_gradient<T: Real>(inp: &PointInput<T>, du: &[V3<T>], dd: &[V3<T>]) -> M3<T> {
+    let half_t = inp.thickness * 0.5;
+    let z = half_t * inp.zeta;
+    let mut c = [V3::zeros(), V3::zeros(), V3::zeros()];
+    for ((sh, u), d) in inp.shape.iter().zip(du).zip(dd) {
+        let top = *u + *d * z;
+        c[0] += top * T::cst(sh.dpsi[0]);
+        c[1] += top * T::cst(sh.dpsi[1]);
+        c[2] += *d * (half_t * sh.psi);
+    }
+    M3::from_columns(&c)
+}
+
+fn invert<T: Real>(m: &M3<T>, what: &'static str) -> Result<(T, M3<T>), ShellError> {
+    let det = m.determinant();
+    if det.value().is_nan() || det.value() <= 0.0 {
+        return Err(ShellError::NonPositiveJacobian {
+            what,
+            det: det.value(),
+        });
+    }
+    let inv = m.try_inverse().ok_or(ShellError::NonPositiveJacobian {
+        what,
+        det: det.value(),
+    })?;
+    Ok((det, inv))
+}
+
+/// Residual (internal force) of the point for DOF increments `dofs` (5 per neighbour:
+/// `Δū_I` then `α_I`), generic over the scalar: with dual numbers this is the reference.
+pub fn point_residual<T: Real>(
+    inp: &PointInput<T>,
+    dofs: &[T],
+) -> Result<PointResult<T>, ShellError> {
+    let n = inp.shape.len();
+    if dofs.len() != DOFS_PER_PARTICLE * n || inp.particles.len() != n {
+        return Err(ShellError::Dimension {
+            expected: DOFS_PER_PARTICLE * n,
+            got: dofs.len(),
+        });
+    }
+    let mut du = Vec::with_capacity(n);
+    let mut dd = Vec::with_capacity(n);
+    let mut d_new = Vec::with_capacity(n);
+    for (i, p) in inp.particles.iter().enumerate() {
+        let q = &dofs[DOFS_PER_PARTICLE * i..DOFS_PER_PARTICLE * (i + 1)];
+        du.push(V3::new(q[0], q[1], q[2]));
+        let d = rotate_director(&p.d, &p.e[0], &p.e[1], [q[3], q[4]]);
+        dd.push(d - p.d);
+        d_new.push(d);
+    }
+    let jn = step_start_jacobian(inp);
+    let g = increment_gradient(inp, &du, &dd);
+    let (_, jn_inv) = invert(&jn, "Jⁿ (step-start configuration)")?;
+    let h = g * jn_inv;
+    let l = mid_step_gradient(&h)?;
+    let inc = hughes_winget(&l)?;
+    let q_n = inp.history.frame;
+    let deps_l = local_strain_increment(&q_n, &inc.r_half, &inc.deps);
+    let rm = return_map(
+        inp.material,
+        &inp.history.material,
+        &strain_to_vec5(&deps_l),
+    )?;
+    let q1 = frame_update(&q_n, &inc.r);
+    let sigma_g = global_stress(&q1, &stress_from_vec5(&rm.state.stress));
+    let j1 = jn + g;
+    let (det1, j1_inv) = invert(&j1, "ⁿ⁺¹J (end-of-step configuration)")?;
+    let p = sigma_g * j1_inv.transpose() * (det1 * T::cst(inp.weight));
+    let half_t = inp.thickness * 0.5;
+    let z = half_t * inp.zeta;
+    let mut residual = Vec::with_capacity(DOFS_PER_PARTICLE * n);
+    for (i, sh) in inp.shape.iter().enumerate() {
+        let f = p.column(0) * T::cst(sh.dpsi[0]) + p.column(1) * T::cst(sh.dpsi[1]);
+        let m = f * z + p.column(2) * (half_t * sh.psi);
+        let pi = &inp.particles[i];
+        let q = &dofs[DOFS_PER_PARTICLE * i..DOFS_PER_PARTICLE * (i + 1)];
+        // Virtual director of the rotation DOFs: the exact ∂d_I/∂α_β of Rodrigues' formula.
+        let da = director_first_derivatives(pi, [q[3], q[4]]);
+        residual.extend_from_slice(&[f[0], f[1], f[2], da[0].dot(&m), da[1].dot(&m)]);
+    }
+    Ok(PointResult {
+        residual,
+        history: PointHistory {
+            frame: q1,
+            material: rm.state,
+        },
+        return_map: rm,
+    })
+}
+
+/// `∂d/∂α_β` of Rodrigues' formula, generic (same formula as
+/// [`super::rotation::director_derivatives`], written over `T` so the residual is generic).
+fn director_first_derivatives<T: Real>(p: &ParticleState<T>, alpha: [T; 2]) -> [V3<T>; 2] {
+    let theta = p.e[0] * alpha[0] + p.e[1] * alpha[1];
+    let x = theta.dot(&theta);
+    let (f1, f2, f1p, f2p) = super::rotation::rodrigues_with_first_derivatives(x);
+    let c = theta.cross(&p.d);
+    let tc = theta.cross(&c);
+    std::array::from_fn(|b| {
+        let xb = theta.dot(&p.e[b]) * 2.0;
+        let cb = p.e[b].cross(&p.d);
+        let wb = p.e[b].cross(&c) + theta.cross(&cb);
+        c * (f1p * xb) + cb * f1 + tc * (f2p * xb) + wb * f2
+    })
+}
+
+/// Consistent tangent `∂r/∂dofs` of [`point_residual`] (5n × 5n), assembled column by column
+/// from hand-derived directional derivatives of every stage (docs/shell-formulation.md §5):
+/// `Ġ` → `Ḣ = Ġ Jⁿ⁻¹` → `L̇` (eqs 56–57) → `Δε̇, ṙ, ½ṙ` (eqs 54–55, 58) → `Δε̇ˡ` (eq 50) →
+/// `σ̇ˡ = D^ep Δε̇ˡ` (eq 47) → `Q̇`, `σ̇ᵍ` (eqs 42, 51) → `Ṗ` → `ṙ_a`, plus the change of the
+/// rotation virtual fields (`∂²d/∂α²`).
+pub fn point_tangent(
+    inp: &PointInput<f64>,
+    dofs: &[f64],
+    res: &PointResult<f64>,
+) -> Result<DMatrix<f64>, ShellError> {
+    let n = inp.shape.len();
+    let nd = DOFS_PER_PARTICLE * n;
+    let mut du = Vec::with_capacity(n);
+    let mut dd = Vec::with_capacity(n);
+    let mut dirs = Vec::with_capacity(n);
+    for (i, p) in inp.particles.iter().enumerate() {
+        let q = &dofs[DOFS_PER_PARTICLE * i..DOFS_PER_PARTICLE * (i + 1)];
+        du.push(V3::new(q[0], q[1], q[2]));
+        let dr = director_derivatives(&p.d, &p.e[0], &p.e[1], [q[3], q[4]]);
+        dd.push(dr.d - p.d);
+        dirs.push(dr);
+    }
+    let jn = step_start_jacobian(inp);
+    let g = increment_gradient(inp, &du, &dd);
+    let (_, jn_inv) = invert(&jn, "Jⁿ (step-start configuration)")?;
+    let h = g * jn_inv;
+    let l = mid_step_gradient(&h)?;
+    let inc = hughes_winget(&l)?;
+    let q_n = inp.history.frame;
+    let dep = consistent_tangent(inp.material, &res.return_map);
+    let q1 = res.history.frame;
+    let sigma_l = stress_from_vec5(&res.history.material.stress);
+    let sigma_g = global_stress(&q1, &sigma_l);
+    let j1 = jn + g;
+    let (det1, j1_inv) = invert(&j1, "ⁿ⁺¹J (end-of-step configuration)")?;
+    let w = inp.weight;
+    let p = sigma_g * j1_inv.transpose() * (det1 * w);
+    let half_t = inp.thickness * 0.5;
+    let z = half_t * inp.zeta;
+    let m_of = |pm: &M3<f64>, sh: &ShapeData| {
+        let f = pm.column(0) * sh.dpsi[0] + pm.column(1) * sh.dpsi[1];
+        (f, f * z + pm.column(2) * (half_t * sh.psi))
+    };
+    let mut k = DMatrix::zeros(nd, nd);
+    for col in 0..nd {
+        let (pk, ck) = (col / DOFS_PER_PARTICLE, col % DOFS_PER_PARTICLE);
+        let shk = &inp.shape[pk];
+        // Ġ for this direction: a unit translation, or the director rate ∂d/∂α.
+        let (vu, vd) = if ck < 3 {
+            let mut e = V3::zeros();
+            e[ck] = 1.0;
+            (e, V3::zeros())
+        } else {
+            (V3::zeros(), dirs[pk].d_a[ck - 3])
+        };
+        let top = vu + vd * z;
+        let g_dot = M3::from_columns(&[
+            top * shk.dpsi[0],
+            top * shk.dpsi[1],
+            vd * (half_t * shk.psi),
+        ]);
+        let h_dot = g_dot * jn_inv;
+        let l_dot = mid_step_gradient_dot(&h, &h_dot)?;
+        let inc_dot = hughes_winget_dot(&inc, &l_dot);
+        let deps_l_dot = local_strain_increment_dot(
+            &q_n,
+            &M3::zeros(),
+            &inc.r_half,
+            &inc_dot.r_half_dot,
+            &inc.deps,
+            &inc_dot.deps_dot,
+        );
+        let sigma_l_dot = stress_from_vec5(&(dep * strain_to_vec5(&deps_l_dot)));
+        let q1_dot = frame_update_dot(&q_n, &M3::zeros(), &inc.r, &inc_dot.r_dot);
+        let sigma_g_dot = global_stress_dot(&q1, &q1_dot, &sigma_l, &sigma_l_dot);
+        // P = det(J) σ J⁻ᵀ w, J̇ = Ġ: Ṗ = w det J [tr(J⁻¹J̇) σ J⁻ᵀ + σ̇ J⁻ᵀ − σ J⁻ᵀ J̇ᵀ J⁻ᵀ].
+        let jinv_t = j1_inv.transpose();
+        let tr = (j1_inv * g_dot).trace();
+        let p_dot = (sigma_g * jinv_t * tr + sigma_g_dot * jinv_t
+            - sigma_g * jinv_t * g_dot.transpose() * jinv_t)
+            * (det1 * w);
+        for (i, sh) in inp.shape.iter().enumerate() {
+            let (f_dot, m_dot) = m_of(&p_dot, sh);
+            let r0 = DOFS_PER_PARTICLE * i;
+            k[(r0, col)] = f_dot[0];
+            k[(r0 + 1, col)] = f_dot[1];
+            k[(r0 + 2, col)] = f_dot[2];
+            for b in 0..2 {
+                let mut v = dirs[i].d_a[b].dot(&m_dot);
+                if i == pk && ck >= 3 {
+                    let (_, m) = m_of(&p, sh);
+                    v += dirs[i].d_ab[b][ck - 3].dot(&m);
+                }
+                k[(r0 + 3 + b, col)] = v;
+            }
+        }
+    }
+    Ok(k)
+}
