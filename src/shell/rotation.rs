@@ -180,7 +180,7 @@ mod tests {
 
     #[test]
     fn coefficients_match_closed_forms_and_are_continuous_at_the_switch() {
-        for &x in &[1e-8, 0.01, 0.5, 2.0, 3.999_999, 4.0, 9.0] {
+        for &x in &[1e-8f64, 0.01, 0.5, 2.0, 3.999_999, 4.0, 9.0] {
             let s: f64 = x.sqrt();
             let (f1, f2) = rodrigues_coefficients(x);
             // Closed forms lose ~ε/x relative accuracy to cancellation for small x.
