@@ -2,10 +2,11 @@
 //! translations, 2 director rotations), finite rotations, updated Lagrangian with the
 //! Hughes–Winget update (paper §2.3–2.4; plan in docs/shell-formulation.md).
 //!
-//! So far: the point kernel ([`point`]): kinematics, stress update and internal force at one
+//! So far: the assembled model ([`model`]), the point kernel ([`point`]): kinematics, stress update and internal force at one
 //! quadrature point, generic over the scalar, and its consistent tangent from hand-derived
 //! directional derivatives; the director rotation ([`rotation`]).
 
+pub mod model;
 pub mod point;
 pub mod rotation;
 
@@ -32,6 +33,9 @@ pub enum ShellError {
         /// Given length.
         got: usize,
     },
+    /// Invalid model input (geometry, particles, parameters).
+    #[error("{0}")]
+    InvalidInput(String),
     /// Kinematics failure.
     #[error(transparent)]
     Kinematics(#[from] KinematicsError),
