@@ -40,17 +40,15 @@ fn model() -> ShellModel {
     let s3 = (0.6f64).sqrt();
     let thick = vec![(-s3, 5.0 / 9.0), (0.0, 8.0 / 9.0), (s3, 5.0 / 9.0)];
     let material = MaterialParams::new(7.0e4, 0.34, 184.3, 70.0, 0.5).unwrap();
-    ShellModel::new(
-        &surface,
-        grid.positions,
+    let disc = Discretisation {
+        particle_uv: grid.positions,
         supports,
-        Basis::Quadratic,
-        &quad,
-        thick,
-        0.1,
-        material,
-    )
-    .unwrap()
+        basis: Basis::Quadratic,
+        quadrature: quad,
+        thickness_rule: thick,
+        thickness: 0.1,
+    };
+    ShellModel::new(&surface, disc, material).unwrap()
 }
 
 struct Residual<'a>(&'a ShellModel);
