@@ -44,6 +44,7 @@ fn simo_taylor_cross_check_states() {
         ),
     ];
     let m = steel(1.0);
+    let mut worst = 0.0f64;
     for (e, r) in cases {
         let out = return_map(
             &m,
@@ -60,13 +61,13 @@ fn simo_taylor_cross_check_states() {
             .enumerate()
         {
             let scale = if k < 3 { 300.0 } else { 1e-2 };
-            assert!(
-                (got - want).abs() <= 1e-9 * want.abs().max(scale),
-                "strain {e:?}, entry {k}: {got} vs {want}"
-            );
+            let dev = (got - want).abs() / want.abs().max(scale);
+            worst = worst.max(dev);
+            assert!(dev <= 1e-9, "strain {e:?}, entry {k}: {got} vs {want}");
         }
         assert_eq!((s[3], s[4]), (0.0, 0.0));
     }
+    println!("worst scaled deviation from the reference values: {worst:.2e}");
 }
 
 /// At a converged plastic point the yield function vanishes (to round-off of ⅓κ² ≈ 2e4: 1e-12
