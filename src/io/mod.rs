@@ -6,6 +6,7 @@
 //! example).
 
 pub mod plot;
+pub mod vtu;
 
 use crate::material::{MaterialError, MaterialParams, Vec5};
 use crate::verification::material_path::MaterialPath;
