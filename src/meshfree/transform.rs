@@ -28,7 +28,10 @@
 //!   These rows are computed once (`|J|` LU solves). Then `W = K T` and `K̃ = Tᵀ W` are two sparse
 //!   products with a sparse accumulator: row `r` of `W` is `K_r·` with every entry in a constrained
 //!   column replaced by that entry times the corresponding row of `T`; row `i` of `K̃` is
-//!   `[i ∈ U] W_i· + Σ_{a ∈ J} T_{a i} W_a·`. The fill is confined to the `J ∪ near(J)` block.
+//!   `[i ∈ U] W_i· + Σ_{a ∈ J} T_{a i} W_a·`, whose second term is nonzero only for `i` in
+//!   `S = J ∪ near(J)` and is computed per component as one dense product
+//!   `T_{J S}ᵀ W_{J ·}` (a GEMM of size `|S| × |J| × (columns of the J rows of W)`). The fill is
+//!   confined to the `S` block and the cost is dominated by that product, `O(|S| |J| |S| k)`.
 //!   `Λ_JJ⁻¹` is dense but its entries decay quickly away from the diagonal; a relative drop
 //!   tolerance ([`Transformation::with_drop_tolerance`], default 0 = exact) can keep the fill
 //!   small on large problems.
@@ -768,7 +771,48 @@ impl Transformation {
             col_idx: w_idx,
             values: w_val,
         };
-        // K̃ = Tᵀ W: row (i, c) = [i ∈ U] W_(i,c) + Σ_a T_{J_a i} W_(J_a, c).
+        // K̃ = Tᵀ W: row (i, c) = [i ∈ U] W_(i,c) + Σ_a T_{J_a i} W_(J_a, c). The second term is
+        // nonzero only for particles i in S = J ∪ near(J); per component it is the dense product
+        // P_c = T_S (|S| × |J|) · W_{J,c} (|J| × |columns of the J rows of W|), done with a GEMM.
+        let m = self.constrained.len();
+        let s_list: Vec<usize> = (0..self.n_particles)
+            .filter(|&i| self.inv_cols[i].iter().any(|&(_, t)| keep(t)))
+            .collect();
+        let mut s_slot = vec![NOT_CONSTRAINED; self.n_particles];
+        for (k, &i) in s_list.iter().enumerate() {
+            s_slot[i] = k;
+        }
+        let mut col_slot = vec![NOT_CONSTRAINED; nd];
+        let mut cols: Vec<usize> = Vec::new();
+        for &j in &self.constrained {
+            for c in 0..comps {
+                for (q, _) in w.row(comps * j + c) {
+                    if col_slot[q] == NOT_CONSTRAINED {
+                        col_slot[q] = cols.len();
+                        cols.push(q);
+                    }
+                }
+            }
+        }
+        let mut ts = DMatrix::zeros(s_list.len(), m);
+        for (k, &i) in s_list.iter().enumerate() {
+            for &(a, t) in &self.inv_cols[i] {
+                if keep(t) {
+                    ts[(k, a)] = t;
+                }
+            }
+        }
+        let products: Vec<DMatrix<f64>> = (0..comps)
+            .map(|c| {
+                let mut wj = DMatrix::zeros(m, cols.len());
+                for (a, &j) in self.constrained.iter().enumerate() {
+                    for (q, v) in w.row(comps * j + c) {
+                        wj[(a, col_slot[q])] = v;
+                    }
+                }
+                &ts * wj
+            })
+            .collect();
         let mut row_ptr = Vec::with_capacity(nd + 1);
         let mut col_idx = Vec::new();
         let mut values = Vec::new();
@@ -776,15 +820,17 @@ impl Transformation {
         for r in 0..nd {
             let (i, c) = (r / comps, r % comps);
             if self.slot[i] == NOT_CONSTRAINED {
-                for (s, v) in w.row(r) {
-                    acc.add(s, v);
+                for (q, v) in w.row(r) {
+                    acc.add(q, v);
                 }
             }
-            for &(a, t) in &self.inv_cols[i] {
-                if keep(t) {
-                    let ra = comps * self.constrained[a] + c;
-                    for (s, v) in w.row(ra) {
-                        acc.add(s, t * v);
+            let k = s_slot[i];
+            if k != NOT_CONSTRAINED {
+                let p = &products[c];
+                for (l, &q) in cols.iter().enumerate() {
+                    let v = p[(k, l)];
+                    if v != 0.0 {
+                        acc.add(q, v);
                     }
                 }
             }
