@@ -40,8 +40,10 @@
 
 pub mod kernel;
 pub mod particles;
+pub mod quadrature;
 pub mod search;
 pub mod shape;
+pub mod transform;
 
 pub use kernel::{covers, cubic_bspline, kernel_1d, tensor_kernel};
 pub use particles::{
