@@ -9,6 +9,7 @@ pub mod cli;
 pub mod io;
 pub mod material;
 pub mod scalar;
+pub mod solver;
 pub mod verification;
 
 pub use scalar::Real;
