@@ -371,16 +371,24 @@ fn singular_and_non_finite_matrices_are_errors_not_panics() {
         "{err:?}"
     );
     // Cholesky of an indefinite matrix names the DOF with the non-positive pivot: supported
-    // chain (SPD) plus a decoupled negative diagonal entry at DOF 3.
+    // chain (SPD) with DOF 3 decoupled and given a negative diagonal (DOFs 4, 5 are then held
+    // by an extra diagonal at 5). Whatever the fill-reducing order, the failing pivot is DOF 3,
+    // which checks the mapping from the permuted elimination step back to the DOF.
     let mut solver = LinearSolver::new(&p, Method::Cholesky, SolverOptions::default()).unwrap();
     spring(&mut values, None);
     values[p.diag_slot(0)] += 1.0;
     solver.factorize(&values).unwrap();
+    for (r, c) in [(2, 3), (3, 2), (3, 4), (4, 3)] {
+        values[p.slot(r, c).unwrap()] = 0.0;
+    }
+    values[p.diag_slot(2)] -= 1.0;
+    values[p.diag_slot(4)] -= 1.0;
+    values[p.diag_slot(5)] += 1.0;
     values[p.diag_slot(3)] = -5.0;
     let err = solver.factorize(&values).unwrap_err();
     println!("{err}");
     assert!(
-        matches!(err, SolverError::NotPositiveDefinite { .. }),
+        matches!(err, SolverError::NotPositiveDefinite { dof: 3, .. }),
         "{err:?}"
     );
     // Non-finite right-hand side.
@@ -744,6 +752,51 @@ fn converged_hook_sees_factorised_tangent_for_sensitivity_solves() {
             (fd - b.2[i]).abs() <= 1e-3 * b.2[6].abs(),
             "{i}: {fd} vs {}",
             b.2[i]
+        );
+    }
+}
+
+#[test]
+fn cholesky_names_the_failing_dof_on_a_large_supernodal_sized_system() {
+    // 25×25 nodes × 3 DOFs with 3×3-node cells: large and dense enough for faer's supernodal
+    // Cholesky (the small test above runs the simplicial kernel; faer numbers the failing pivot
+    // differently in the two, 1-based vs 0-based).
+    let nn = 25;
+    let mut cells = Vec::new();
+    for i in 0..nn - 2 {
+        for j in 0..nn - 2 {
+            let mut dofs = Vec::new();
+            for a in 0..3 {
+                for b in 0..3 {
+                    let nd = (i + a) * nn + j + b;
+                    dofs.extend([3 * nd, 3 * nd + 1, 3 * nd + 2]);
+                }
+            }
+            cells.push(dofs);
+        }
+    }
+    let p = SparsityPattern::from_cells(3 * nn * nn, &cells).unwrap();
+    let mut rng = Rng(3);
+    let values = random_values(&p, &mut rng, true, 1.0);
+    let mut solver = LinearSolver::new(&p, Method::Cholesky, SolverOptions::default()).unwrap();
+    solver.factorize(&values).unwrap();
+    // Decouple DOF k (the rest is a principal submatrix of an SPD matrix, still SPD) and make
+    // its diagonal negative.
+    for k in [0, 1000, 3 * nn * nn - 1] {
+        let mut v = values.clone();
+        for (j, w) in
+            (0..p.n_dofs()).flat_map(|j| (p.col_ptr()[j]..p.col_ptr()[j + 1]).map(move |q| (j, q)))
+        {
+            let i = p.row_idx()[w];
+            if (i == k || j == k) && i != j {
+                v[w] = 0.0;
+            }
+        }
+        v[p.diag_slot(k)] = -1.0;
+        let err = solver.factorize(&v).unwrap_err();
+        assert!(
+            matches!(err, SolverError::NotPositiveDefinite { dof, .. } if dof == k),
+            "{k}: {err:?}"
         );
     }
 }

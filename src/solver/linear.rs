@@ -227,6 +227,12 @@ impl LinearSolver {
                     Default::default(),
                 );
                 if let Err(LltError::NonPositivePivot { index }) = res {
+                    // faer 0.24 reports this index 1-based from the simplicial kernel and
+                    // 0-based from the (dense, per supernode) supernodal kernel.
+                    let index = match symbolic.raw() {
+                        cholesky::SymbolicCholeskyRaw::Simplicial(_) => index.saturating_sub(1),
+                        cholesky::SymbolicCholeskyRaw::Supernodal(_) => index,
+                    };
                     let dof = symbolic.perm().map_or(index, |p| p.arrays().0[index]);
                     return Err(SolverError::NotPositiveDefinite { dof, step: index });
                 }

@@ -497,7 +497,7 @@ impl NewtonSolver {
             }
             if k == 0 {
                 r_ref = rnorm.max(problem.force_norm(load));
-            } else if rnorm > o.divergence_factor * r_ref {
+            } else if r_ref > 0.0 && rnorm > o.divergence_factor * r_ref {
                 return Err(FailureReason::Diverged {
                     ratio: rnorm / r_ref,
                 });
@@ -518,7 +518,7 @@ impl NewtonSolver {
             rec.energy_norms.push(e);
             if k == 0 {
                 e0 = e;
-            } else if e > o.divergence_factor * e0 {
+            } else if e0 > 0.0 && e > o.divergence_factor * e0 {
                 return Err(FailureReason::Diverged { ratio: e / e0 });
             }
             if res_ok && e <= (o.energy_rtol * e0).max(o.energy_atol) {
