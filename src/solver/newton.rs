@@ -49,7 +49,8 @@ pub trait NonlinearProblem {
     fn n_dofs(&self) -> usize;
     /// Residual `r = f_int(u) − λ f_ext` (any consistent sign; the tangent is `∂r/∂u`).
     fn residual(&mut self, u: &[f64], load: f64, r: &mut [f64]) -> Result<(), ProblemError>;
-    /// Tangent `∂r/∂u` into `values`, aligned with the pattern given to the driver.
+    /// Tangent `∂r/∂u` into `values`, aligned with the pattern given to the driver; every entry
+    /// must be overwritten (the driver's buffer holds the eliminated previous tangent).
     fn tangent(&mut self, u: &[f64], load: f64, values: &mut [f64]) -> Result<(), ProblemError>;
     /// Both at once (override to share one assembly pass); the driver calls only this.
     fn residual_and_tangent(
