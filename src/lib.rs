@@ -13,6 +13,7 @@ pub mod material;
 pub mod meshfree;
 pub mod scalar;
 pub mod shell;
+pub mod solver;
 pub mod verification;
 
 pub use scalar::Real;

@@ -1,0 +1,550 @@
+//! Newton–Raphson driver with load stepping and automatic step cutting.
+//!
+//! One step goes from the committed state at load factor `λ_n` to `λ = λ_n + Δλ`. Every
+//! iteration `k` evaluates the residual `r(u_k, λ)` and the tangent `K = ∂r/∂u` (one call,
+//! [`NonlinearProblem::residual_and_tangent`]), eliminates the essential conditions with the
+//! increments `g − u_c` (so a prescribed motion enters through the consistent linear predictor
+//! `−K_fc Δg` at `k = 0` and is satisfied exactly afterwards), factorises and solves
+//! `K Δu_k = −r_k`. The iterate is converged when both
+//! - `‖r_k‖ ≤ max(residual_rtol · r_ref, residual_atol)`, with `r_ref = max(‖r_0‖,
+//!   force_norm(λ))` over free DOFs (at `k = 0`, `r_0` includes `K_fc Δg`), and
+//! - `|Δu_kᵀ r_k| ≤ max(energy_rtol · |Δu_0ᵀ r_0|, energy_atol)` (not required at `k = 0`),
+//!
+//! hold. The converged increment `Δu_k` is *not* applied: the committed state is exactly the
+//! one at which residual, history and tangent were last evaluated, and the solver then holds
+//! the factorised tangent at the converged configuration, which is what the design sensitivity
+//! equation needs (the paper's eq. 65 reuses the decomposed tangent without iteration).
+//! [`NonlinearProblem::on_converged`] is called at that point, before
+//! [`NonlinearProblem::commit`].
+//!
+//! A step fails on a non-finite or diverging residual (`‖r_k‖` or the energy growing by more
+//! than `divergence_factor` over iteration 0), too many iterations, a singular tangent, or a
+//! recoverable [`ProblemError`]; it is then restored ([`NonlinearProblem::restore`]) and retried
+//! with `cut_factor · Δλ`. After a step that converged in at most `easy_iterations`, `Δλ` grows
+//! by `grow_factor` up to `max_step`. Below `min_step` the run stops with a [`NewtonFailure`]
+//! naming the load level, the reason and the residual norms, and keeping every converged step.
+
+use super::{EssentialBc, LinearSolver, SolverError, SparsityPattern};
+use std::fmt;
+
+/// Error reported by a problem's residual, tangent or convergence hook.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ProblemError {
+    /// The evaluation failed at this state but a smaller step may succeed (a return map that
+    /// did not converge, an inverted cell, a contact search that lost the tool...).
+    #[error("{0}")]
+    Recoverable(String),
+    /// No step size can help: stop the run.
+    #[error("fatal: {0}")]
+    Fatal(String),
+}
+
+/// A nonlinear system `r(u, λ) = 0` with explicit history (committed and trial state).
+///
+/// Residual and tangent are evaluated from the *committed* history and the trial `u`; the
+/// trial history produced by the last evaluation becomes the committed one in
+/// [`NonlinearProblem::commit`] and is discarded in [`NonlinearProblem::restore`].
+pub trait NonlinearProblem {
+    /// Number of unknowns.
+    fn n_dofs(&self) -> usize;
+    /// Residual `r = f_int(u) − λ f_ext` (any consistent sign; the tangent is `∂r/∂u`).
+    fn residual(&mut self, u: &[f64], load: f64, r: &mut [f64]) -> Result<(), ProblemError>;
+    /// Tangent `∂r/∂u` into `values`, aligned with the pattern given to the driver; every entry
+    /// must be overwritten (the driver's buffer holds the eliminated previous tangent).
+    fn tangent(&mut self, u: &[f64], load: f64, values: &mut [f64]) -> Result<(), ProblemError>;
+    /// Both at once (override to share one assembly pass); the driver calls only this.
+    fn residual_and_tangent(
+        &mut self,
+        u: &[f64],
+        load: f64,
+        r: &mut [f64],
+        values: &mut [f64],
+    ) -> Result<(), ProblemError> {
+        self.residual(u, load, r)?;
+        self.tangent(u, load, values)
+    }
+    /// Essential conditions `(dof, value)` at load level `load` (default: none).
+    fn essential(&self, _load: f64) -> Vec<(usize, f64)> {
+        Vec::new()
+    }
+    /// A force scale at `load` (e.g. `‖λ f_ext‖`), a floor of the residual reference so that the
+    /// relative tolerance never asks for less than round-off in small steps (default 0).
+    fn force_norm(&self, _load: f64) -> f64 {
+        0.0
+    }
+    /// Called at a converged step before `commit`, with the tangent at the converged state
+    /// factorised in `step.solver` (the design sensitivity hook). An error stops the run
+    /// (a recoverable one is reported like a fatal one: the step has converged).
+    fn on_converged(&mut self, _step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
+        Ok(())
+    }
+    /// Accept the converged state `u` at `load` (trial history becomes committed).
+    fn commit(&mut self, u: &[f64], load: f64);
+    /// Reject the current trial state (back to the committed history).
+    fn restore(&mut self);
+}
+
+/// What [`NonlinearProblem::on_converged`] sees.
+#[derive(Debug)]
+pub struct ConvergedStep<'a> {
+    /// Index of this converged step (0-based).
+    pub step: usize,
+    /// Load factor reached.
+    pub load: f64,
+    /// Converged unknowns.
+    pub u: &'a [f64],
+    /// Iteration record of the step.
+    pub record: &'a StepRecord,
+    /// Solver holding the factorised tangent at `u`, essential conditions eliminated.
+    pub solver: &'a LinearSolver,
+    /// The essential conditions eliminated in `solver` (zero their entries in sensitivity
+    /// right-hand sides).
+    pub essential: &'a EssentialBc,
+}
+
+/// Convergence and divergence settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NewtonOptions {
+    /// Relative residual tolerance (default 1e-8).
+    pub residual_rtol: f64,
+    /// Absolute residual floor (default 0).
+    pub residual_atol: f64,
+    /// Relative energy tolerance on `|Δuᵀ r|` (default 1e-14: the energy scales like the
+    /// residual squared, so this is about `residual_rtol²` with two digits of slack).
+    pub energy_rtol: f64,
+    /// Absolute energy floor (default 0).
+    pub energy_atol: f64,
+    /// Maximum iterations per step (default 20).
+    pub max_iterations: usize,
+    /// Divergence when `‖r_k‖ > factor · r_ref` or `|Δu_kᵀ r_k| > factor · |Δu_0ᵀ r_0|`
+    /// (default 1e8).
+    pub divergence_factor: f64,
+}
+
+impl Default for NewtonOptions {
+    fn default() -> Self {
+        Self {
+            residual_rtol: 1e-8,
+            residual_atol: 0.0,
+            energy_rtol: 1e-14,
+            energy_atol: 0.0,
+            max_iterations: 20,
+            divergence_factor: 1e8,
+        }
+    }
+}
+
+/// Load stepping from `start` to `end` (load factors, `end ≥ start`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoadStepping {
+    /// Initial load factor (the problem's committed state must be at this level).
+    pub start: f64,
+    /// Final load factor.
+    pub end: f64,
+    /// First step size.
+    pub initial_step: f64,
+    /// Smallest step tried before giving up.
+    pub min_step: f64,
+    /// Largest step.
+    pub max_step: f64,
+    /// Factor applied to the step after a failure (default 0.5).
+    pub cut_factor: f64,
+    /// Factor applied after an easy step (default 1.5).
+    pub grow_factor: f64,
+    /// A step converging in at most this many iterations is easy (default 4).
+    pub easy_iterations: usize,
+    /// Maximum number of step attempts, converged or not (default 10 000).
+    pub max_attempts: usize,
+}
+
+impl Default for LoadStepping {
+    fn default() -> Self {
+        Self {
+            start: 0.0,
+            end: 1.0,
+            initial_step: 0.1,
+            min_step: 1e-6,
+            max_step: 1.0,
+            cut_factor: 0.5,
+            grow_factor: 1.5,
+            easy_iterations: 4,
+            max_attempts: 10_000,
+        }
+    }
+}
+
+/// Why a step attempt failed.
+#[derive(Debug, Clone, PartialEq)]
+pub enum FailureReason {
+    /// No convergence within `max_iterations`.
+    MaxIterations(usize),
+    /// Residual or energy grew by more than `divergence_factor` (`ratio` observed).
+    Diverged {
+        /// Observed growth over iteration 0.
+        ratio: f64,
+    },
+    /// The residual contained NaN or infinity.
+    NonFiniteResidual,
+    /// Factorisation or solve failed (e.g. singular tangent at a limit point).
+    LinearSolver(SolverError),
+    /// The problem reported an error.
+    Problem(ProblemError),
+    /// Invalid stepping or input (not retried).
+    Setup(String),
+    /// `max_attempts` step attempts used up.
+    TooManyAttempts(usize),
+}
+
+impl fmt::Display for FailureReason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            FailureReason::MaxIterations(n) => write!(f, "no convergence in {n} iterations"),
+            FailureReason::Diverged { ratio } => {
+                write!(f, "diverged (growth {ratio:.3e} over the first iteration)")
+            }
+            FailureReason::NonFiniteResidual => write!(f, "non-finite residual"),
+            FailureReason::LinearSolver(e) => write!(f, "linear solver: {e}"),
+            FailureReason::Problem(e) => write!(f, "problem: {e}"),
+            FailureReason::Setup(s) => write!(f, "setup: {s}"),
+            FailureReason::TooManyAttempts(n) => write!(f, "{n} step attempts used up"),
+        }
+    }
+}
+
+impl FailureReason {
+    fn retryable(&self) -> bool {
+        !matches!(
+            self,
+            FailureReason::Problem(ProblemError::Fatal(_))
+                | FailureReason::Setup(_)
+                | FailureReason::TooManyAttempts(_)
+        )
+    }
+}
+
+/// Record of one step attempt.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepRecord {
+    /// Load factor at the start of the attempt.
+    pub load_start: f64,
+    /// Load factor aimed at (reached if converged).
+    pub load: f64,
+    /// Step size `Δλ`.
+    pub step_size: f64,
+    /// Number of Newton updates applied (= residual evaluations − 1 when converged).
+    pub iterations: usize,
+    /// `‖r_k‖` over free DOFs for every evaluation `k`.
+    pub residual_norms: Vec<f64>,
+    /// `|Δu_kᵀ r_k|` for every solve.
+    pub energy_norms: Vec<f64>,
+    /// Whether the attempt converged.
+    pub converged: bool,
+    /// Why it failed, if it did.
+    pub failure: Option<FailureReason>,
+}
+
+/// Result of a run: the last converged state and every attempt.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NewtonReport {
+    /// Unknowns at the last converged step (the initial ones if none converged).
+    pub u: Vec<f64>,
+    /// Load factor of `u`.
+    pub load: f64,
+    /// Every attempt in order, converged or not.
+    pub attempts: Vec<StepRecord>,
+}
+
+impl NewtonReport {
+    /// The converged steps in order.
+    pub fn converged_steps(&self) -> impl Iterator<Item = &StepRecord> {
+        self.attempts.iter().filter(|s| s.converged)
+    }
+}
+
+/// A run that stopped before reaching the end load.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NewtonFailure {
+    /// Load factor of the last converged state.
+    pub converged_load: f64,
+    /// Load factor of the last (failed) attempt.
+    pub attempted_load: f64,
+    /// Step size of the last attempt.
+    pub step_size: f64,
+    /// Why the last attempt failed.
+    pub reason: FailureReason,
+    /// Residual norms of the last attempt.
+    pub last_residuals: Vec<f64>,
+    /// Everything converged so far.
+    pub report: NewtonReport,
+}
+
+impl fmt::Display for NewtonFailure {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "Newton stopped at load factor {:.6e} (last converged {:.6e}, step {:.3e}): {}; \
+             residual norms of the last attempt: [",
+            self.attempted_load, self.converged_load, self.step_size, self.reason
+        )?;
+        for (k, r) in self.last_residuals.iter().enumerate() {
+            write!(f, "{}{r:.3e}", if k > 0 { ", " } else { "" })?;
+        }
+        write!(f, "]")
+    }
+}
+
+impl std::error::Error for NewtonFailure {}
+
+/// The driver: options plus load stepping.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct NewtonSolver {
+    /// Convergence settings.
+    pub options: NewtonOptions,
+    /// Load stepping.
+    pub stepping: LoadStepping,
+}
+
+struct Work {
+    r: Vec<f64>,
+    rhs: Vec<f64>,
+    du: Vec<f64>,
+    values: Vec<f64>,
+    g: Vec<f64>,
+}
+
+impl NewtonSolver {
+    /// Run without a progress callback.
+    pub fn run<P: NonlinearProblem>(
+        &self,
+        problem: &mut P,
+        pattern: &SparsityPattern,
+        solver: &mut LinearSolver,
+        u0: &[f64],
+    ) -> Result<NewtonReport, Box<NewtonFailure>> {
+        self.run_with_progress(problem, pattern, solver, u0, |_| {})
+    }
+
+    /// Run from the committed state `u0` at `stepping.start` to `stepping.end`, calling
+    /// `progress` after every converged (and committed) step.
+    pub fn run_with_progress<P: NonlinearProblem, F: FnMut(&StepRecord)>(
+        &self,
+        problem: &mut P,
+        pattern: &SparsityPattern,
+        solver: &mut LinearSolver,
+        u0: &[f64],
+        mut progress: F,
+    ) -> Result<NewtonReport, Box<NewtonFailure>> {
+        let st = self.stepping;
+        let n = problem.n_dofs();
+        let mut report = NewtonReport {
+            u: u0.to_vec(),
+            load: st.start,
+            attempts: Vec::new(),
+        };
+        let fail = |report: NewtonReport, load: f64, step: f64, reason, res: Vec<f64>| {
+            Box::new(NewtonFailure {
+                converged_load: report.load,
+                attempted_load: load,
+                step_size: step,
+                reason,
+                last_residuals: res,
+                report,
+            })
+        };
+        let setup = if u0.len() != n || pattern.n_dofs() != n || solver.n_dofs() != n {
+            Some(format!(
+                "sizes differ: problem {n}, u0 {}, pattern {}, solver {}",
+                u0.len(),
+                pattern.n_dofs(),
+                solver.n_dofs()
+            ))
+        } else if !(st.end >= st.start
+            && st.min_step > 0.0
+            && st.initial_step >= st.min_step
+            && st.max_step >= st.min_step
+            && st.cut_factor > 0.0
+            && st.cut_factor < 1.0
+            && st.grow_factor >= 1.0)
+        {
+            Some(format!("invalid load stepping {st:?}"))
+        } else {
+            None
+        };
+        if let Some(msg) = setup {
+            return Err(fail(
+                report,
+                st.start,
+                0.0,
+                FailureReason::Setup(msg),
+                vec![],
+            ));
+        }
+        let mut work = Work {
+            r: vec![0.0; n],
+            rhs: vec![0.0; n],
+            du: vec![0.0; n],
+            values: vec![0.0; pattern.nnz()],
+            g: Vec::new(),
+        };
+        let mut step = st.initial_step.min(st.max_step);
+        let mut n_converged = 0;
+        let scale = st.end.abs().max(st.start.abs()).max(1.0);
+        while st.end - report.load > 1e-12 * scale {
+            if report.attempts.len() >= st.max_attempts {
+                let reason = FailureReason::TooManyAttempts(st.max_attempts);
+                let load = report.load;
+                return Err(fail(report, load, step, reason, vec![]));
+            }
+            let remaining = st.end - report.load;
+            let (dl, target) = if remaining <= step * (1.0 + 1e-9) {
+                (remaining, st.end)
+            } else {
+                (step, report.load + step)
+            };
+            let mut u = report.u.clone();
+            let mut rec = StepRecord {
+                load_start: report.load,
+                load: target,
+                step_size: dl,
+                iterations: 0,
+                residual_norms: Vec::new(),
+                energy_norms: Vec::new(),
+                converged: false,
+                failure: None,
+            };
+            let outcome = self.attempt(
+                problem, pattern, solver, &mut u, target, &mut rec, &mut work,
+            );
+            match outcome {
+                Ok(bc) => {
+                    rec.converged = true;
+                    let hook = problem.on_converged(&ConvergedStep {
+                        step: n_converged,
+                        load: target,
+                        u: &u,
+                        record: &rec,
+                        solver,
+                        essential: &bc,
+                    });
+                    if let Err(e) = hook {
+                        problem.restore();
+                        rec.converged = false;
+                        let reason = FailureReason::Problem(ProblemError::Fatal(format!(
+                            "on_converged: {e}"
+                        )));
+                        rec.failure = Some(reason.clone());
+                        let res = rec.residual_norms.clone();
+                        report.attempts.push(rec);
+                        return Err(fail(report, target, dl, reason, res));
+                    }
+                    problem.commit(&u, target);
+                    n_converged += 1;
+                    report.u = u;
+                    report.load = target;
+                    progress(&rec);
+                    if rec.iterations <= st.easy_iterations {
+                        step = (step * st.grow_factor).min(st.max_step);
+                    }
+                    report.attempts.push(rec);
+                }
+                Err(reason) => {
+                    problem.restore();
+                    rec.failure = Some(reason.clone());
+                    let res = rec.residual_norms.clone();
+                    report.attempts.push(rec);
+                    let cut = dl * st.cut_factor;
+                    if !reason.retryable() || cut < st.min_step {
+                        return Err(fail(report, target, dl, reason, res));
+                    }
+                    step = cut;
+                }
+            }
+        }
+        Ok(report)
+    }
+
+    /// One step attempt; on success returns the essential conditions eliminated in `solver`.
+    #[allow(clippy::too_many_arguments)]
+    fn attempt<P: NonlinearProblem>(
+        &self,
+        problem: &mut P,
+        pattern: &SparsityPattern,
+        solver: &mut LinearSolver,
+        u: &mut [f64],
+        load: f64,
+        rec: &mut StepRecord,
+        w: &mut Work,
+    ) -> Result<EssentialBc, FailureReason> {
+        let o = self.options;
+        let bc = EssentialBc::new(u.len(), &problem.essential(load))
+            .map_err(|e| FailureReason::Setup(e.to_string()))?;
+        let mut r_ref = 0.0;
+        let mut e0 = 0.0;
+        for k in 0..=o.max_iterations {
+            problem
+                .residual_and_tangent(u, load, &mut w.r, &mut w.values)
+                .map_err(FailureReason::Problem)?;
+            w.g.clear();
+            w.g.extend(bc.dofs().iter().zip(bc.values()).map(|(&d, &v)| v - u[d]));
+            for (x, r) in w.rhs.iter_mut().zip(&w.r) {
+                *x = -r;
+            }
+            bc.apply_with(pattern, &mut w.values, &mut w.rhs, &w.g)
+                .map_err(FailureReason::LinearSolver)?;
+            let rnorm = free_dot(&bc, &w.rhs, &w.rhs).sqrt();
+            rec.residual_norms.push(rnorm);
+            if !rnorm.is_finite() {
+                return Err(FailureReason::NonFiniteResidual);
+            }
+            if k == 0 {
+                r_ref = rnorm.max(problem.force_norm(load));
+            } else if r_ref > 0.0 && rnorm > o.divergence_factor * r_ref {
+                return Err(FailureReason::Diverged {
+                    ratio: rnorm / r_ref,
+                });
+            }
+            let constraints_met = w.g.iter().all(|&x| x == 0.0);
+            let res_ok = constraints_met && rnorm <= (o.residual_rtol * r_ref).max(o.residual_atol);
+            solver
+                .factorize(&w.values)
+                .map_err(FailureReason::LinearSolver)?;
+            if res_ok && k == 0 {
+                return Ok(bc);
+            }
+            w.du.copy_from_slice(&w.rhs);
+            solver
+                .solve_in_place(&mut w.du)
+                .map_err(FailureReason::LinearSolver)?;
+            let e = free_dot(&bc, &w.du, &w.rhs).abs();
+            rec.energy_norms.push(e);
+            if k == 0 {
+                e0 = e;
+            } else if e0 > 0.0 && e > o.divergence_factor * e0 {
+                return Err(FailureReason::Diverged { ratio: e / e0 });
+            }
+            if res_ok && e <= (o.energy_rtol * e0).max(o.energy_atol) {
+                return Ok(bc);
+            }
+            if k == o.max_iterations {
+                return Err(FailureReason::MaxIterations(o.max_iterations));
+            }
+            for (x, d) in u.iter_mut().zip(&w.du) {
+                *x += d;
+            }
+            for (&d, &v) in bc.dofs().iter().zip(bc.values()) {
+                u[d] = v;
+            }
+            rec.iterations = k + 1;
+        }
+        unreachable!("the loop returns at k = max_iterations")
+    }
+}
+
+fn free_dot(bc: &EssentialBc, a: &[f64], b: &[f64]) -> f64 {
+    a.iter()
+        .zip(b)
+        .enumerate()
+        .filter(|(i, _)| !bc.is_constrained(*i))
+        .map(|(_, (x, y))| x * y)
+        .sum()
+}

@@ -1,0 +1,206 @@
+//! Sparsity pattern of the global matrix, built once from cell DOF lists.
+
+use super::{check_len, SolverError};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMat, SymbolicSparseColMatRef};
+
+/// Compressed-column (CSC) pattern with sorted row indices, the full diagonal, and for every cell
+/// a precomputed map from local `(i, j)` to the slot in the values array.
+///
+/// A cell is the set of DOFs coupled by one integration cell or one particle support: every pair
+/// of its DOFs is a structural nonzero. The diagonal is always stored (even for a DOF no cell
+/// touches) so that essential conditions can put a unit diagonal without changing the pattern.
+#[derive(Debug, Clone)]
+pub struct SparsityPattern {
+    n: usize,
+    symbolic: SymbolicSparseColMat<usize>,
+    cell_ptr: Vec<usize>,
+    cell_dofs: Vec<usize>,
+    slot_ptr: Vec<usize>,
+    slots: Vec<usize>,
+    diag: Vec<usize>,
+}
+
+impl SparsityPattern {
+    /// Pattern of `n_dofs` unknowns coupled by `cells` (each a list of global DOF indices; a DOF
+    /// may repeat within a cell, its contributions are then summed).
+    pub fn from_cells(n_dofs: usize, cells: &[Vec<usize>]) -> Result<Self, SolverError> {
+        for (cell, dofs) in cells.iter().enumerate() {
+            if let Some((local, &dof)) = dofs.iter().enumerate().find(|(_, &d)| d >= n_dofs) {
+                return Err(SolverError::DofOutOfRange {
+                    cell,
+                    local,
+                    dof,
+                    n_dofs,
+                });
+            }
+        }
+        // DOF -> cells containing it (CSR-like).
+        let mut count = vec![0usize; n_dofs + 1];
+        for dofs in cells {
+            for &d in dofs {
+                count[d + 1] += 1;
+            }
+        }
+        for i in 0..n_dofs {
+            count[i + 1] += count[i];
+        }
+        let mut fill = count.clone();
+        let mut dof_cells = vec![0usize; count[n_dofs]];
+        for (c, dofs) in cells.iter().enumerate() {
+            for &d in dofs {
+                dof_cells[fill[d]] = c;
+                fill[d] += 1;
+            }
+        }
+        // Column j: union of the DOFs of every cell containing j, plus j itself.
+        let mut col_ptr = Vec::with_capacity(n_dofs + 1);
+        col_ptr.push(0usize);
+        let mut row_idx = Vec::new();
+        let mut mark = vec![usize::MAX; n_dofs];
+        let mut col = Vec::new();
+        for j in 0..n_dofs {
+            col.clear();
+            mark[j] = j;
+            col.push(j);
+            for &c in &dof_cells[count[j]..count[j + 1]] {
+                for &i in &cells[c] {
+                    if mark[i] != j {
+                        mark[i] = j;
+                        col.push(i);
+                    }
+                }
+            }
+            col.sort_unstable();
+            row_idx.extend_from_slice(&col);
+            col_ptr.push(row_idx.len());
+        }
+        let diag = (0..n_dofs)
+            .map(|j| {
+                let rows = &row_idx[col_ptr[j]..col_ptr[j + 1]];
+                col_ptr[j] + rows.binary_search(&j).expect("diagonal inserted")
+            })
+            .collect();
+        let mut cell_ptr = Vec::with_capacity(cells.len() + 1);
+        let mut slot_ptr = Vec::with_capacity(cells.len() + 1);
+        cell_ptr.push(0);
+        slot_ptr.push(0);
+        let mut cell_dofs = Vec::new();
+        let mut slots = Vec::new();
+        for dofs in cells {
+            // Column-major local order (slot of local (i, j) at j * m + i), matching nalgebra.
+            for &cj in dofs {
+                let rows = &row_idx[col_ptr[cj]..col_ptr[cj + 1]];
+                for &ri in dofs {
+                    let k = rows.binary_search(&ri).expect("cell pair in pattern");
+                    slots.push(col_ptr[cj] + k);
+                }
+            }
+            cell_dofs.extend_from_slice(dofs);
+            cell_ptr.push(cell_dofs.len());
+            slot_ptr.push(slots.len());
+        }
+        let symbolic = SymbolicSparseColMat::new_checked(n_dofs, n_dofs, col_ptr, None, row_idx);
+        Ok(Self {
+            n: n_dofs,
+            symbolic,
+            cell_ptr,
+            cell_dofs,
+            slot_ptr,
+            slots,
+            diag,
+        })
+    }
+
+    /// Number of DOFs (rows = columns).
+    pub fn n_dofs(&self) -> usize {
+        self.n
+    }
+
+    /// Number of cells.
+    pub fn n_cells(&self) -> usize {
+        self.cell_ptr.len() - 1
+    }
+
+    /// Number of stored entries (length of the values array).
+    pub fn nnz(&self) -> usize {
+        self.symbolic.row_idx().len()
+    }
+
+    /// Column pointers (length `n_dofs + 1`).
+    pub fn col_ptr(&self) -> &[usize] {
+        self.symbolic.col_ptr()
+    }
+
+    /// Row indices, sorted within each column.
+    pub fn row_idx(&self) -> &[usize] {
+        self.symbolic.row_idx()
+    }
+
+    /// Global DOFs of cell `c`.
+    pub fn cell_dofs(&self, c: usize) -> &[usize] {
+        &self.cell_dofs[self.cell_ptr[c]..self.cell_ptr[c + 1]]
+    }
+
+    /// Slots of cell `c`: local `(i, j)` of an `m × m` cell matrix is stored at `slots[j * m + i]`.
+    pub fn cell_slots(&self, c: usize) -> &[usize] {
+        &self.slots[self.slot_ptr[c]..self.slot_ptr[c + 1]]
+    }
+
+    /// Slot of the diagonal entry of DOF `i`.
+    pub fn diag_slot(&self, i: usize) -> usize {
+        self.diag[i]
+    }
+
+    /// Slot of entry `(row, col)`, if it is in the pattern.
+    pub fn slot(&self, row: usize, col: usize) -> Option<usize> {
+        if row >= self.n || col >= self.n {
+            return None;
+        }
+        let (p0, p1) = (self.col_ptr()[col], self.col_ptr()[col + 1]);
+        self.row_idx()[p0..p1]
+            .binary_search(&row)
+            .ok()
+            .map(|k| p0 + k)
+    }
+
+    /// The faer symbolic structure.
+    pub fn symbolic(&self) -> SymbolicSparseColMatRef<'_, usize> {
+        self.symbolic.as_ref()
+    }
+
+    /// A faer matrix view of `values` over this pattern.
+    ///
+    /// # Panics
+    /// If `values.len() != self.nnz()`.
+    pub fn matrix<'a>(&'a self, values: &'a [f64]) -> SparseColMatRef<'a, usize, f64> {
+        SparseColMatRef::new(self.symbolic(), values)
+    }
+
+    /// `y = A x` for the matrix with `values` over this pattern.
+    pub fn mat_vec(&self, values: &[f64], x: &[f64], y: &mut [f64]) -> Result<(), SolverError> {
+        check_len("values", values.len(), self.nnz())?;
+        check_len("x", x.len(), self.n)?;
+        check_len("y", y.len(), self.n)?;
+        y.fill(0.0);
+        let (cp, ri) = (self.col_ptr(), self.row_idx());
+        for j in 0..self.n {
+            let xj = x[j];
+            for p in cp[j]..cp[j + 1] {
+                y[ri[p]] += values[p] * xj;
+            }
+        }
+        Ok(())
+    }
+
+    /// Dense copy (for tests and small diagnostics).
+    pub fn to_dense(&self, values: &[f64]) -> nalgebra::DMatrix<f64> {
+        let mut a = nalgebra::DMatrix::zeros(self.n, self.n);
+        let (cp, ri) = (self.col_ptr(), self.row_idx());
+        for j in 0..self.n {
+            for p in cp[j]..cp[j + 1] {
+                a[(ri[p], j)] = values[p];
+            }
+        }
+        a
+    }
+}

@@ -1,0 +1,802 @@
+//! Global linear algebra and Newton driver (`shelldsa::solver`).
+
+use nalgebra::{DMatrix, DVector};
+use shelldsa::solver::*;
+use std::convert::Infallible;
+
+/// Small deterministic generator (xorshift64*), uniform in [-1, 1).
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        let x = self.0.wrapping_mul(0x2545_F491_4F6C_DD1D);
+        (x >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (((self.next() + 1.0) * 0.5 * n as f64) as usize).min(n - 1)
+    }
+}
+
+/// Random cells of 2..=6 DOFs (some repeated DOFs inside a cell) plus a chain so the matrix is
+/// irreducible.
+fn random_cells(n: usize, n_cells: usize, rng: &mut Rng) -> Vec<Vec<usize>> {
+    let mut cells: Vec<Vec<usize>> = (0..n - 1).map(|i| vec![i, i + 1]).collect();
+    for _ in 0..n_cells {
+        let m = 2 + rng.below(5);
+        cells.push((0..m).map(|_| rng.below(n)).collect());
+    }
+    cells
+}
+
+/// Random values over the pattern: unsymmetric, or SPD (cell matrices `B Bᵀ`), plus a diagonal
+/// shift `shift` that keeps the matrix safely nonsingular.
+fn random_values(p: &SparsityPattern, rng: &mut Rng, spd: bool, shift: f64) -> Vec<f64> {
+    let mut values = vec![0.0; p.nnz()];
+    let mut rhs = vec![0.0; p.n_dofs()];
+    let locals: Vec<DMatrix<f64>> = (0..p.n_cells())
+        .map(|c| {
+            let m = p.cell_dofs(c).len();
+            let b = DMatrix::from_fn(m, m, |_, _| rng.next());
+            if spd {
+                &b * b.transpose()
+            } else {
+                b
+            }
+        })
+        .collect();
+    assemble(p, &mut values, &mut rhs, Execution::Serial, |c| {
+        let m = locals[c].nrows();
+        Ok::<_, Infallible>((locals[c].clone(), DVector::zeros(m)))
+    })
+    .unwrap();
+    for i in 0..p.n_dofs() {
+        values[p.diag_slot(i)] += shift;
+    }
+    values
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+/// Normwise relative residual ‖A x − b‖ / (‖A‖_F ‖x‖ + ‖b‖): the backward error of the solve.
+fn backward_error(p: &SparsityPattern, values: &[f64], x: &[f64], b: &[f64]) -> f64 {
+    let mut ax = vec![0.0; x.len()];
+    p.mat_vec(values, x, &mut ax).unwrap();
+    let r: Vec<f64> = ax.iter().zip(b).map(|(a, b)| a - b).collect();
+    norm(&r) / (norm(values) * norm(x) + norm(b))
+}
+
+#[test]
+fn pattern_is_sorted_csc_with_diagonal_and_cell_slots() {
+    let cells = vec![vec![0, 3], vec![3, 1, 3], vec![]];
+    let p = SparsityPattern::from_cells(5, &cells).unwrap();
+    assert_eq!(p.n_dofs(), 5);
+    assert_eq!(p.col_ptr(), &[0, 2, 4, 5, 8, 9]);
+    assert_eq!(p.row_idx(), &[0, 3, 1, 3, 2, 0, 1, 3, 4]);
+    // cell 1 local (i, j) at j*m + i: (row 3, col 1) is local (0, 1) -> slot of (3, 1) = 3.
+    assert_eq!(p.cell_slots(1)[3], p.slot(3, 1).unwrap());
+    assert_eq!(p.cell_slots(1).len(), 9);
+    assert_eq!(p.slot(2, 0), None);
+    assert_eq!(p.diag_slot(4), 8);
+}
+
+#[test]
+fn pattern_rejects_out_of_range_dof_naming_cell_and_index() {
+    let err = SparsityPattern::from_cells(4, &[vec![0, 1], vec![2, 7, 1]]).unwrap_err();
+    assert_eq!(
+        err,
+        SolverError::DofOutOfRange {
+            cell: 1,
+            local: 1,
+            dof: 7,
+            n_dofs: 4
+        }
+    );
+    assert!(err.to_string().contains("cell 1") && err.to_string().contains('7'));
+}
+
+#[test]
+fn lu_and_cholesky_match_dense_lu_on_random_sparse_matrices() {
+    let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+    let n = 80;
+    let cells = random_cells(n, 60, &mut rng);
+    let p = SparsityPattern::from_cells(n, &cells).unwrap();
+    for (spd, method) in [
+        (false, Method::Lu),
+        (true, Method::Lu),
+        (true, Method::Cholesky),
+    ] {
+        // The shift keeps cond(A) moderate (< 1e4 for these sizes), so the dense and sparse
+        // solutions must agree to ~cond·ε ≈ 1e-12; the backward error of a stable factorisation
+        // is a small multiple of ε independent of cond, hence the 1e-12 bound with margin.
+        let values = random_values(&p, &mut rng, spd, 4.0);
+        let b: Vec<f64> = (0..n).map(|_| rng.next()).collect();
+        let mut solver = LinearSolver::new(&p, method, SolverOptions::default()).unwrap();
+        solver.factorize(&values).unwrap();
+        let mut x = b.clone();
+        solver.solve_in_place(&mut x).unwrap();
+        let dense = p.to_dense(&values);
+        let xd = dense
+            .clone()
+            .lu()
+            .solve(&DVector::from_vec(b.clone()))
+            .unwrap();
+        let diff = x
+            .iter()
+            .zip(xd.iter())
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        let be = backward_error(&p, &values, &x, &b);
+        println!(
+            "{method:?} spd={spd}: backward error {be:.2e}, |x - x_dense|/|x| {:.2e}",
+            diff / norm(&x)
+        );
+        assert!(be < 1e-12, "{method:?}: backward error {be:e}");
+        assert!(
+            diff / norm(&x) < 1e-12,
+            "{method:?}: differs from dense LU by {diff:e}"
+        );
+    }
+}
+
+#[test]
+fn symbolic_reuse_equals_fresh_factorisation_bit_for_bit() {
+    let mut rng = Rng(7);
+    let n = 120;
+    let p = SparsityPattern::from_cells(n, &random_cells(n, 100, &mut rng)).unwrap();
+    let v1 = random_values(&p, &mut rng, false, 3.0);
+    let v2 = random_values(&p, &mut rng, false, 3.0);
+    let b: Vec<f64> = (0..n).map(|_| rng.next()).collect();
+    for method in [Method::Lu, Method::Cholesky] {
+        let (v1, v2) = if method == Method::Cholesky {
+            (
+                random_values(&p, &mut rng, true, 1.0),
+                random_values(&p, &mut rng, true, 1.0),
+            )
+        } else {
+            (v1.clone(), v2.clone())
+        };
+        let mut reused = LinearSolver::new(&p, method, SolverOptions::default()).unwrap();
+        reused.factorize(&v1).unwrap();
+        reused.factorize(&v2).unwrap();
+        assert_eq!(reused.n_factorizations(), 2);
+        let mut fresh = LinearSolver::new(&p, method, SolverOptions::default()).unwrap();
+        fresh.factorize(&v2).unwrap();
+        let (mut x1, mut x2) = (b.clone(), b.clone());
+        reused.solve_in_place(&mut x1).unwrap();
+        fresh.solve_in_place(&mut x2).unwrap();
+        assert_eq!(x1, x2, "{method:?}");
+    }
+}
+
+#[test]
+fn multi_rhs_equals_single_solves() {
+    let mut rng = Rng(11);
+    let n = 150;
+    let p = SparsityPattern::from_cells(n, &random_cells(n, 150, &mut rng)).unwrap();
+    let values = random_values(&p, &mut rng, false, 4.0);
+    let k = 5;
+    let b: Vec<f64> = (0..n * k).map(|_| rng.next()).collect();
+    for par in [Parallelism::Sequential, Parallelism::Rayon(0)] {
+        let opts = SolverOptions {
+            parallelism: par,
+            ..Default::default()
+        };
+        let mut solver = LinearSolver::new(&p, Method::Lu, opts).unwrap();
+        solver.factorize(&values).unwrap();
+        let mut multi = b.clone();
+        solver.solve_columns_in_place(&mut multi, k).unwrap();
+        let mut mat = faer::Mat::from_fn(n, k, |i, j| b[j * n + i]);
+        solver.solve_multi_in_place(mat.as_mut()).unwrap();
+        let mut worst = 0.0f64;
+        for j in 0..k {
+            let mut single = b[j * n..(j + 1) * n].to_vec();
+            solver.solve_in_place(&mut single).unwrap();
+            let s = norm(&single);
+            for i in 0..n {
+                worst = worst.max((single[i] - multi[j * n + i]).abs() / s);
+                assert_eq!(mat[(i, j)], multi[j * n + i]);
+            }
+        }
+        println!("{par:?}: multi vs single max relative difference {worst:.2e}");
+        // Blocked and single-column triangular solves may sum in a different order: allow a
+        // few ulps relative to the solution norm.
+        assert!(worst <= 1e-14, "{worst:e}");
+    }
+}
+
+/// 1-D bar `−EA u'' = q` on [0, L], linear elements, `u(0) = 0`, `u(L) = uL`: linear elements
+/// with consistent loads are nodally exact, so elimination must reproduce
+/// `u(x) = q x (L − x) / (2 EA) + uL x / L` to round-off.
+#[test]
+fn dirichlet_elimination_gives_exact_bar_solution() {
+    let (ne, len, ea, q, ul) = (6usize, 3.0, 2.5, 1.7, 0.3);
+    let h = len / ne as f64;
+    let cells: Vec<Vec<usize>> = (0..ne).map(|e| vec![e, e + 1]).collect();
+    let p = SparsityPattern::from_cells(ne + 1, &cells).unwrap();
+    let exact = |x: f64| q * x * (len - x) / (2.0 * ea) + ul * x / len;
+    for method in [Method::Lu, Method::Cholesky] {
+        let mut values = vec![0.0; p.nnz()];
+        let mut f = vec![0.0; ne + 1];
+        assemble(&p, &mut values, &mut f, Execution::Parallel, |_| {
+            let k = DMatrix::from_row_slice(2, 2, &[1.0, -1.0, -1.0, 1.0]) * (ea / h);
+            Ok::<_, Infallible>((k, DVector::from_element(2, q * h / 2.0)))
+        })
+        .unwrap();
+        let bc = EssentialBc::new(ne + 1, &[(0, 0.0), (ne, ul)]).unwrap();
+        bc.apply(&p, &mut values, &mut f).unwrap();
+        // Symmetry is kept by the elimination.
+        let d = p.to_dense(&values);
+        assert_eq!(d, d.transpose());
+        let mut solver = LinearSolver::new(&p, method, SolverOptions::default()).unwrap();
+        solver.factorize(&values).unwrap();
+        solver.solve_in_place(&mut f).unwrap();
+        for (i, u) in f.iter().enumerate() {
+            let ue = exact(i as f64 * h);
+            // Round-off of a 7-unknown solve: a few ε relative to the largest value (~0.9).
+            assert!((u - ue).abs() <= 1e-14, "{method:?} node {i}: {u} vs {ue}");
+        }
+        assert_eq!(f[ne], ul);
+    }
+}
+
+#[test]
+fn serial_and_parallel_assembly_are_bit_identical() {
+    // 40×40 grid of 2-DOF nodes, cells = 3×3 node blocks (18 DOFs), 1444 cells: several batches.
+    let nn = 40;
+    let node = |i: usize, j: usize| i * nn + j;
+    let mut cells = Vec::new();
+    for i in 0..nn - 2 {
+        for j in 0..nn - 2 {
+            let mut dofs = Vec::new();
+            for a in 0..3 {
+                for b in 0..3 {
+                    let nd = node(i + a, j + b);
+                    dofs.extend([2 * nd, 2 * nd + 1]);
+                }
+            }
+            cells.push(dofs);
+        }
+    }
+    let p = SparsityPattern::from_cells(2 * nn * nn, &cells).unwrap();
+    let local = |c: usize| {
+        let m = p.cell_dofs(c).len();
+        let x = c as f64 * 0.37;
+        let k = DMatrix::from_fn(m, m, |i, j| {
+            (x + i as f64 * 1.3 - j as f64 * 0.7).sin() / 3.0
+        });
+        let f = DVector::from_fn(m, |i, _| (x * 1.1 + i as f64).cos() / 7.0);
+        Ok::<_, Infallible>((k, f))
+    };
+    let (mut v1, mut f1) = (vec![0.0; p.nnz()], vec![0.0; p.n_dofs()]);
+    let (mut v2, mut f2) = (vec![1.0; p.nnz()], vec![1.0; p.n_dofs()]);
+    assemble(&p, &mut v1, &mut f1, Execution::Serial, local).unwrap();
+    assemble(&p, &mut v2, &mut f2, Execution::Parallel, local).unwrap();
+    assert!(v1.iter().zip(&v2).all(|(a, b)| a.to_bits() == b.to_bits()));
+    assert!(f1.iter().zip(&f2).all(|(a, b)| a.to_bits() == b.to_bits()));
+    let mut r2 = vec![0.0; p.n_dofs()];
+    assemble_vector(&p, &mut r2, Execution::Parallel, |c| {
+        local(c).map(|(_, f)| f)
+    })
+    .unwrap();
+    assert!(f1.iter().zip(&r2).all(|(a, b)| a.to_bits() == b.to_bits()));
+}
+
+#[test]
+fn assembly_reports_lowest_failing_cell_and_bad_shapes() {
+    let cells: Vec<Vec<usize>> = (0..500).map(|e| vec![e, e + 1]).collect();
+    let p = SparsityPattern::from_cells(501, &cells).unwrap();
+    let (mut v, mut f) = (vec![0.0; p.nnz()], vec![0.0; 501]);
+    for exec in [Execution::Serial, Execution::Parallel] {
+        let err = assemble(&p, &mut v, &mut f, exec, |c| {
+            if c == 317 || c == 420 {
+                Err(format!("inverted cell {c}"))
+            } else {
+                Ok((DMatrix::identity(2, 2), DVector::zeros(2)))
+            }
+        })
+        .unwrap_err();
+        assert_eq!(
+            err,
+            AssemblyError::Cell {
+                cell: 317,
+                source: "inverted cell 317".to_string()
+            }
+        );
+        let err = assemble(&p, &mut v, &mut f, exec, |c| {
+            Ok::<_, Infallible>((
+                DMatrix::identity(2 + usize::from(c == 9), 2),
+                DVector::zeros(2),
+            ))
+        })
+        .unwrap_err();
+        assert!(
+            matches!(err, AssemblyError::Shape { cell: 9, .. }),
+            "{err:?}"
+        );
+    }
+}
+
+#[test]
+fn singular_and_non_finite_matrices_are_errors_not_panics() {
+    let cells: Vec<Vec<usize>> = (0..5).map(|e| vec![e, e + 1]).collect();
+    let p = SparsityPattern::from_cells(6, &cells).unwrap();
+    let spring = |values: &mut Vec<f64>, skip: Option<usize>| {
+        let mut f = vec![0.0; 6];
+        assemble(&p, values, &mut f, Execution::Serial, |c| {
+            let s = if Some(c) == skip { 0.0 } else { 1.0 };
+            Ok::<_, Infallible>((
+                DMatrix::from_row_slice(2, 2, &[s, -s, -s, s]),
+                DVector::zeros(2),
+            ))
+        })
+        .unwrap();
+    };
+    let mut solver = LinearSolver::new(&p, Method::Lu, SolverOptions::default()).unwrap();
+    // Free-floating chain of springs: rank deficient (rigid translation), no zero row.
+    let mut values = vec![0.0; p.nnz()];
+    spring(&mut values, None);
+    let err = solver.factorize(&values).unwrap_err();
+    println!("{err}");
+    assert!(
+        matches!(err, SolverError::Singular { dof: Some(_), .. }),
+        "{err:?}"
+    );
+    assert!(!solver.is_factorized());
+    assert_eq!(
+        solver.solve_in_place(&mut [0.0; 6]),
+        Err(SolverError::NotFactorized)
+    );
+    // Supported at DOF 0 but spring 5 missing: DOF 5 has an identically zero column.
+    spring(&mut values, Some(4));
+    values[p.diag_slot(0)] += 1.0;
+    let err = solver.factorize(&values).unwrap_err();
+    assert_eq!(
+        err,
+        SolverError::Singular {
+            dof: Some(5),
+            detail: "column 5 is identically zero".into()
+        }
+    );
+    // NaN entry, named by position.
+    spring(&mut values, None);
+    values[p.slot(3, 2).unwrap()] = f64::NAN;
+    let err = solver.factorize(&values).unwrap_err();
+    assert!(
+        matches!(err, SolverError::NonFiniteMatrix { row: 3, col: 2, .. }),
+        "{err:?}"
+    );
+    // Cholesky of an indefinite matrix names the DOF with the non-positive pivot: supported
+    // chain (SPD) with DOF 3 decoupled and given a negative diagonal (DOFs 4, 5 are then held
+    // by an extra diagonal at 5). Whatever the fill-reducing order, the failing pivot is DOF 3,
+    // which checks the mapping from the permuted elimination step back to the DOF.
+    let mut solver = LinearSolver::new(&p, Method::Cholesky, SolverOptions::default()).unwrap();
+    spring(&mut values, None);
+    values[p.diag_slot(0)] += 1.0;
+    solver.factorize(&values).unwrap();
+    for (r, c) in [(2, 3), (3, 2), (3, 4), (4, 3)] {
+        values[p.slot(r, c).unwrap()] = 0.0;
+    }
+    values[p.diag_slot(2)] -= 1.0;
+    values[p.diag_slot(4)] -= 1.0;
+    values[p.diag_slot(5)] += 1.0;
+    values[p.diag_slot(3)] = -5.0;
+    let err = solver.factorize(&values).unwrap_err();
+    println!("{err}");
+    assert!(
+        matches!(err, SolverError::NotPositiveDefinite { dof: 3, .. }),
+        "{err:?}"
+    );
+    // Non-finite right-hand side.
+    let mut solver = LinearSolver::new(&p, Method::Lu, SolverOptions::default()).unwrap();
+    spring(&mut values, None);
+    values[p.diag_slot(0)] += 1.0;
+    solver.factorize(&values).unwrap();
+    let mut b = [0.0, 1.0, f64::INFINITY, 0.0, 0.0, 0.0];
+    assert!(matches!(
+        solver.solve_in_place(&mut b),
+        Err(SolverError::NonFiniteRhs { rhs: 0, row: 2, .. })
+    ));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Newton driver on a chain of nonlinear springs.
+
+/// `n` springs in series, DOF 0 fixed, load `λ P` at the last DOF (or, with `displacement`,
+/// the last DOF prescribed to `λ δ`). Spring `s` has force `f = k_s (a atan e + β e + c e³)` in
+/// its elongation `e = u_{s+1} − u_s`, `k_s = 1 + 0.1 s`. With `a = 1, c = 0` it softens, with a
+/// limit load `k_0 π/2 = π/2` when `β = 0`; with `a = 0, c > 0` it stiffens and a large load
+/// step overshoots. An elongation beyond `e_limit` is reported as a recoverable error (like a
+/// return map refusing a too large strain increment). History: the largest elongation of each
+/// spring (explicit trial and committed copies) — it does not change the forces but tests
+/// commit/restore.
+struct SpringChain {
+    n: usize,
+    a: f64,
+    beta: f64,
+    c: f64,
+    e_limit: f64,
+    load: f64,
+    displacement: Option<f64>,
+    pattern: SparsityPattern,
+    committed_max: Vec<f64>,
+    trial_max: Vec<f64>,
+    commits: usize,
+    restores: usize,
+}
+
+impl SpringChain {
+    fn new(n: usize, beta: f64, load: f64, displacement: Option<f64>) -> Self {
+        let cells: Vec<Vec<usize>> = (0..n).map(|s| vec![s, s + 1]).collect();
+        Self {
+            n,
+            a: 1.0,
+            beta,
+            c: 0.0,
+            e_limit: f64::INFINITY,
+            load,
+            displacement,
+            pattern: SparsityPattern::from_cells(n + 1, &cells).unwrap(),
+            committed_max: vec![0.0; n],
+            trial_max: vec![0.0; n],
+            commits: 0,
+            restores: 0,
+        }
+    }
+    fn k(s: usize) -> f64 {
+        1.0 + 0.1 * s as f64
+    }
+    fn eval(
+        &mut self,
+        u: &[f64],
+        lam: f64,
+        r: &mut [f64],
+        values: Option<&mut [f64]>,
+    ) -> Result<(), ProblemError> {
+        let (a, beta, c) = (self.a, self.beta, self.c);
+        if let Some(s) = (0..self.n).find(|&s| (u[s + 1] - u[s]).abs() > self.e_limit) {
+            return Err(ProblemError::Recoverable(format!(
+                "spring {s} overstretched: e = {:.3}",
+                u[s + 1] - u[s]
+            )));
+        }
+        let local = |s: usize| {
+            let e = u[s + 1] - u[s];
+            let f = Self::k(s) * (a * e.atan() + beta * e + c * e * e * e);
+            let kt = Self::k(s) * (a / (1.0 + e * e) + beta + 3.0 * c * e * e);
+            Ok::<_, Infallible>((
+                DMatrix::from_row_slice(2, 2, &[kt, -kt, -kt, kt]),
+                DVector::from_row_slice(&[-f, f]),
+            ))
+        };
+        match values {
+            Some(v) => assemble(&self.pattern, v, r, Execution::Parallel, local).unwrap(),
+            None => assemble_vector(&self.pattern, r, Execution::Parallel, |s| {
+                local(s).map(|(_, f)| f)
+            })
+            .unwrap(),
+        }
+        if self.displacement.is_none() {
+            r[self.n] -= lam * self.load;
+        }
+        for s in 0..self.n {
+            self.trial_max[s] = self.committed_max[s].max(u[s + 1] - u[s]);
+        }
+        Ok(())
+    }
+}
+
+impl NonlinearProblem for SpringChain {
+    fn n_dofs(&self) -> usize {
+        self.n + 1
+    }
+    fn residual(&mut self, u: &[f64], lam: f64, r: &mut [f64]) -> Result<(), ProblemError> {
+        self.eval(u, lam, r, None)
+    }
+    fn tangent(&mut self, u: &[f64], lam: f64, values: &mut [f64]) -> Result<(), ProblemError> {
+        let mut r = vec![0.0; self.n + 1];
+        self.eval(u, lam, &mut r, Some(values))
+    }
+    fn residual_and_tangent(
+        &mut self,
+        u: &[f64],
+        lam: f64,
+        r: &mut [f64],
+        values: &mut [f64],
+    ) -> Result<(), ProblemError> {
+        self.eval(u, lam, r, Some(values))
+    }
+    fn essential(&self, lam: f64) -> Vec<(usize, f64)> {
+        match self.displacement {
+            Some(d) => vec![(0, 0.0), (self.n, lam * d)],
+            None => vec![(0, 0.0)],
+        }
+    }
+    fn force_norm(&self, lam: f64) -> f64 {
+        lam.abs() * self.load
+    }
+    fn commit(&mut self, _u: &[f64], _lam: f64) {
+        self.committed_max.clone_from(&self.trial_max);
+        self.commits += 1;
+    }
+    fn restore(&mut self) {
+        self.trial_max.clone_from(&self.committed_max);
+        self.restores += 1;
+    }
+}
+
+/// Observed order `ln(r_{k+1}/r_k) / ln(r_k/r_{k−1})` of the last triple above the round-off
+/// floor.
+fn last_rate(res: &[f64], floor: f64) -> Option<f64> {
+    let r: Vec<f64> = res.iter().copied().filter(|&x| x > floor).collect();
+    (r.len() >= 3).then(|| {
+        let k = r.len() - 2;
+        (r[k + 1] / r[k]).ln() / (r[k] / r[k - 1]).ln()
+    })
+}
+
+#[test]
+fn newton_converges_quadratically_under_load_and_displacement_control() {
+    for displacement in [None, Some(12.0)] {
+        let mut prob = SpringChain::new(10, 0.05, 2.0, displacement);
+        let pattern = prob.pattern.clone();
+        let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+        let newton = NewtonSolver {
+            options: NewtonOptions {
+                residual_rtol: 1e-12,
+                ..Default::default()
+            },
+            stepping: LoadStepping {
+                initial_step: 0.25,
+                ..Default::default()
+            },
+        };
+        let mut seen = 0;
+        let report = newton
+            .run_with_progress(&mut prob, &pattern, &mut solver, &[0.0; 11], |_| seen += 1)
+            .unwrap();
+        assert_eq!(report.load, 1.0);
+        assert_eq!(seen, report.converged_steps().count());
+        assert_eq!(prob.commits, seen);
+        // Equilibrium: every spring carries the same force (the end load in load control).
+        let u = &report.u;
+        let forces: Vec<f64> = (0..10)
+            .map(|s| {
+                let e = u[s + 1] - u[s];
+                SpringChain::k(s) * (e.atan() + 0.05 * e)
+            })
+            .collect();
+        let fref = displacement.map_or(2.0, |_| forces[0]);
+        for f in &forces {
+            assert!((f - fref).abs() <= 1e-10 * fref, "{forces:?}");
+        }
+        let mut rates = Vec::new();
+        for st in report.converged_steps() {
+            // Residuals below ~1e-13 of the step's reference are round-off (ε times the
+            // internal forces, O(1) here), where the order can no longer be observed.
+            let floor = 1e-13 * st.residual_norms[0].max(2.0 * st.load);
+            if let Some(p) = last_rate(&st.residual_norms, floor) {
+                rates.push(p);
+            }
+            println!(
+                "{displacement:?} λ={:.4} it={} r={:?}",
+                st.load,
+                st.iterations,
+                st.residual_norms
+                    .iter()
+                    .map(|r| format!("{r:.2e}"))
+                    .collect::<Vec<_>>()
+            );
+        }
+        println!("observed rates {rates:.3?}");
+        assert!(!rates.is_empty());
+        assert!(rates.iter().all(|&p| p >= 1.8), "{rates:?}");
+    }
+}
+
+#[test]
+fn step_cutting_recovers_from_a_too_large_step() {
+    // Stiffening springs f = k (e + e³), end load 20: the full step's linear predictor
+    // stretches the first spring to e ≈ 19, beyond e_limit = 4 (recoverable error); the root is
+    // e ≈ 2.6. Halved steps get there, then the step grows again after easy steps.
+    let mut prob = SpringChain::new(10, 1.0, 20.0, None);
+    prob.a = 0.0;
+    prob.c = 1.0;
+    prob.e_limit = 4.0;
+    let pattern = prob.pattern.clone();
+    let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+    let newton = NewtonSolver {
+        options: NewtonOptions::default(),
+        stepping: LoadStepping {
+            initial_step: 1.0,
+            ..Default::default()
+        },
+    };
+    let report = newton
+        .run(&mut prob, &pattern, &mut solver, &[0.0; 11])
+        .unwrap();
+    let failed = report.attempts.iter().filter(|s| !s.converged).count();
+    println!(
+        "{} attempts, {failed} failed: {:?}",
+        report.attempts.len(),
+        report
+            .attempts
+            .iter()
+            .map(|s| (s.load, s.converged, s.iterations))
+            .collect::<Vec<_>>()
+    );
+    assert!(!report.attempts[0].converged, "the full step should fail");
+    assert!(matches!(
+        report.attempts[0].failure,
+        Some(FailureReason::Problem(ProblemError::Recoverable(_)))
+    ));
+    // After the cuts the step grew again: some converged step is larger than the first one.
+    let sizes: Vec<f64> = report.converged_steps().map(|s| s.step_size).collect();
+    assert!(sizes.iter().any(|&h| h > sizes[0]), "{sizes:?}");
+    assert_eq!(report.load, 1.0);
+    assert_eq!(prob.restores, failed);
+    assert_eq!(prob.commits, report.converged_steps().count());
+    // History committed only from converged states: the largest elongation equals the final one
+    // (monotonic loading), not an overshooting trial iterate.
+    for s in 0..10 {
+        let e = report.u[s + 1] - report.u[s];
+        assert!(
+            (prob.committed_max[s] - e).abs() <= 1e-12 * e.abs(),
+            "spring {s}"
+        );
+    }
+}
+
+#[test]
+fn failure_beyond_the_limit_load_reports_level_and_keeps_converged_steps() {
+    // β = 0: the chain cannot carry more than π/2; the load 2λ fails at λ = π/4.
+    let mut prob = SpringChain::new(10, 0.0, 2.0, None);
+    let pattern = prob.pattern.clone();
+    let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+    let newton = NewtonSolver {
+        options: NewtonOptions::default(),
+        stepping: LoadStepping {
+            initial_step: 0.1,
+            min_step: 1e-4,
+            ..Default::default()
+        },
+    };
+    let fail = newton
+        .run(&mut prob, &pattern, &mut solver, &[0.0; 11])
+        .unwrap_err();
+    let msg = fail.to_string();
+    println!("{msg}");
+    let limit = std::f64::consts::FRAC_PI_4;
+    assert!(fail.converged_load < limit && fail.converged_load > limit - 1e-3);
+    assert!(fail.attempted_load > fail.converged_load);
+    assert!(fail.step_size < 2e-4);
+    assert!(!fail.last_residuals.is_empty());
+    assert!(msg.contains("Newton stopped at load factor") && msg.contains("residual norms"));
+    assert_eq!(fail.report.load, fail.converged_load);
+    let steps: Vec<_> = fail.report.converged_steps().collect();
+    assert!(steps.len() >= 7);
+    assert_eq!(steps.last().unwrap().load, fail.converged_load);
+    assert_eq!(prob.commits, steps.len());
+    // The kept state is the converged one at that load.
+    let e0 = fail.report.u[1] - fail.report.u[0];
+    assert!((e0.atan() - 2.0 * fail.converged_load).abs() < 1e-9);
+}
+
+#[test]
+fn converged_hook_sees_factorised_tangent_for_sensitivity_solves() {
+    // d u / d λ at a converged state solves K u' = f_ext (= ∂r/∂λ with a sign): check it against
+    // a finite difference of two converged states.
+    struct Hooked(SpringChain, Vec<(f64, Vec<f64>, Vec<f64>)>);
+    impl NonlinearProblem for Hooked {
+        fn n_dofs(&self) -> usize {
+            self.0.n_dofs()
+        }
+        fn residual(&mut self, u: &[f64], l: f64, r: &mut [f64]) -> Result<(), ProblemError> {
+            self.0.residual(u, l, r)
+        }
+        fn tangent(&mut self, u: &[f64], l: f64, v: &mut [f64]) -> Result<(), ProblemError> {
+            self.0.tangent(u, l, v)
+        }
+        fn essential(&self, l: f64) -> Vec<(usize, f64)> {
+            self.0.essential(l)
+        }
+        fn force_norm(&self, l: f64) -> f64 {
+            self.0.force_norm(l)
+        }
+        fn on_converged(&mut self, s: &ConvergedStep<'_>) -> Result<(), ProblemError> {
+            let n = s.u.len();
+            let mut rhs = vec![0.0; 2 * n];
+            rhs[n - 1] = self.0.load; // column 0: ∂u/∂λ
+            rhs[2 * n - 1] = 1.0; // column 1: ∂u/∂P / λ
+            s.essential.zero_constrained(&mut rhs[..n]);
+            s.solver.solve_columns_in_place(&mut rhs, 2).unwrap();
+            self.1.push((s.load, s.u.to_vec(), rhs[..n].to_vec()));
+            Ok(())
+        }
+        fn commit(&mut self, u: &[f64], l: f64) {
+            self.0.commit(u, l)
+        }
+        fn restore(&mut self) {
+            self.0.restore()
+        }
+    }
+    let mut prob = Hooked(SpringChain::new(6, 0.05, 2.0, None), Vec::new());
+    let pattern = prob.0.pattern.clone();
+    let mut solver =
+        LinearSolver::new(&pattern, Method::Cholesky, SolverOptions::default()).unwrap();
+    let newton = NewtonSolver {
+        options: NewtonOptions {
+            residual_rtol: 1e-13,
+            ..Default::default()
+        },
+        stepping: LoadStepping {
+            initial_step: 0.01,
+            max_step: 0.01,
+            end: 0.5,
+            ..Default::default()
+        },
+    };
+    newton
+        .run(&mut prob, &pattern, &mut solver, &[0.0; 7])
+        .unwrap();
+    let h = &prob.1;
+    let (a, b, c) = (&h[h.len() - 3], &h[h.len() - 2], &h[h.len() - 1]);
+    for i in 0..7 {
+        // Central difference over Δλ = 0.01: truncation O(Δλ² u''') ≈ 1e-4 relative here.
+        let fd = (c.1[i] - a.1[i]) / (c.0 - a.0);
+        assert!(
+            (fd - b.2[i]).abs() <= 1e-3 * b.2[6].abs(),
+            "{i}: {fd} vs {}",
+            b.2[i]
+        );
+    }
+}
+
+#[test]
+fn cholesky_names_the_failing_dof_on_a_large_supernodal_sized_system() {
+    // 25×25 nodes × 3 DOFs with 3×3-node cells: large and dense enough for faer's supernodal
+    // Cholesky (the small test above runs the simplicial kernel; faer numbers the failing pivot
+    // differently in the two, 1-based vs 0-based).
+    let nn = 25;
+    let mut cells = Vec::new();
+    for i in 0..nn - 2 {
+        for j in 0..nn - 2 {
+            let mut dofs = Vec::new();
+            for a in 0..3 {
+                for b in 0..3 {
+                    let nd = (i + a) * nn + j + b;
+                    dofs.extend([3 * nd, 3 * nd + 1, 3 * nd + 2]);
+                }
+            }
+            cells.push(dofs);
+        }
+    }
+    let p = SparsityPattern::from_cells(3 * nn * nn, &cells).unwrap();
+    let mut rng = Rng(3);
+    let values = random_values(&p, &mut rng, true, 1.0);
+    let mut solver = LinearSolver::new(&p, Method::Cholesky, SolverOptions::default()).unwrap();
+    solver.factorize(&values).unwrap();
+    // Decouple DOF k (the rest is a principal submatrix of an SPD matrix, still SPD) and make
+    // its diagonal negative.
+    for k in [0, 1000, 3 * nn * nn - 1] {
+        let mut v = values.clone();
+        for (j, w) in
+            (0..p.n_dofs()).flat_map(|j| (p.col_ptr()[j]..p.col_ptr()[j + 1]).map(move |q| (j, q)))
+        {
+            let i = p.row_idx()[w];
+            if (i == k || j == k) && i != j {
+                v[w] = 0.0;
+            }
+        }
+        v[p.diag_slot(k)] = -1.0;
+        let err = solver.factorize(&v).unwrap_err();
+        assert!(
+            matches!(err, SolverError::NotPositiveDefinite { dof, .. } if dof == k),
+            "{k}: {err:?}"
+        );
+    }
+}
