@@ -303,7 +303,7 @@ fn rigid_rotation_with_start_of_step_gradient_gives_spurious_strain() {
 // ---------------------------------------------------------------------------------------------
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 64, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 64, failure_persistence: None, rng_seed: proptest::test_runner::RngSeed::Fixed(0x4b1), ..ProptestConfig::default() })]
 
     /// `r` and `½r` are orthogonal with determinant 1 for random `Δω` (from random `L`, so a
     /// strain part rides along and must not matter). Entries are of unit scale, products of
@@ -752,7 +752,7 @@ fn whole_step_chain_three_ways() {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 32, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 32, failure_persistence: None, rng_seed: proptest::test_runner::RngSeed::Fixed(0x4b2), ..ProptestConfig::default() })]
 
     /// The whole-step chain for random steps (finite rotations of 10°–60°, stretches to 10 %).
     #[test]

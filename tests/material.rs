@@ -447,8 +447,59 @@ fn arb_strain() -> impl Strategy<Value = Vec5<f64>> {
     proptest::array::uniform5(-4e-3..4e-3f64).prop_map(Vec5::from)
 }
 
+/// Fixed seed: CI runs the same cases every time (reproducible). To explore, set
+/// `SHELLDSA_PROPTEST_SEED` (and `PROPTEST_CASES`); cases that ever failed are replayed from
+/// `material.proptest-regressions` first.
+fn config() -> ProptestConfig {
+    let seed = std::env::var("SHELLDSA_PROPTEST_SEED")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(0x5e11_d5a);
+    let cases = std::env::var("PROPTEST_CASES")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(128);
+    ProptestConfig {
+        cases,
+        rng_seed: proptest::test_runner::RngSeed::Fixed(seed),
+        ..ProptestConfig::default()
+    }
+}
+
+/// FD check on a random state: the best of a step study. A random state may lie arbitrarily close
+/// to the yield surface (the kink of σ(Δε)), where the truncation error of any fixed step grows;
+/// the round-off grows as the step shrinks. The study h ∈ {1e-6, 1e-7, 1e-8} (absolute, on
+/// strains of ~1e-3) takes the step with the smallest error, as a user would, and the 1e-6
+/// relative tolerance then applies to it. Its absolute floor must cover the round-off of the
+/// smallest step: ε·|σ|/h ≈ 2.2e-16 · 1e3 / 1e-8 ≈ 2e-5, i.e. ~1.5e-10 of max|D^ep| ≈ 1.5e5
+/// at the stiffest random material. Components below 1e-3 of the largest are therefore held to
+/// 1e-6 · 1e-3 = 1e-9 of max|D^ep| (≥ 7× that round-off). With the deterministic floor 1e-4, one
+/// case in 50,000 (seed 9) failed at 1.1e-6 on a component 8.6e-5 of the largest: round-off.
+fn best_fd(
+    f: &StressOfStrain,
+    x: &[f64],
+    hand: &DMatrix<f64>,
+) -> shelldsa::verification::DerivativeReport {
+    let random_state_fd = Tolerance {
+        rel: 1e-6,
+        floor: 1e-3,
+    };
+    [1e-6, 1e-7, 1e-8]
+        .iter()
+        .map(|&h| {
+            let opts = CheckOptions {
+                step: StepSize::Absolute(h),
+                fd: random_state_fd,
+                ..dep_options()
+            };
+            check(f, "D^ep random", x, hand, opts)
+        })
+        .min_by(|a, b| a.vs_fd.max_error().total_cmp(&b.vs_fd.max_error()))
+        .unwrap()
+}
+
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 128, ..ProptestConfig::default() })]
+    #![proptest_config(config())]
 
     /// Random material, random two-step history, random increment: converged plastic points lie on
     /// the yield surface, and D^ep equals the dual-number and FD Jacobians (item 5 for items 1–2).
@@ -463,9 +514,9 @@ proptest! {
         }
         let dep = consistent_tangent(&m, &out);
         let hand = DMatrix::from_fn(5, 5, |i, j| dep[(i, j)]);
-        let r = check(&StressOfStrain { m, n }, "D^ep random", e3.as_slice(), &hand, dep_options());
-        // The dual comparison holds everywhere; the FD comparison leaves out flipped columns
-        // (reported by the check), and the rare random state sitting within 1e-9 of the surface.
+        let r = best_fd(&StressOfStrain { m, n }, e3.as_slice(), &hand);
+        // The dual comparison holds everywhere; the FD comparison leaves out columns whose ±h
+        // perturbation flips the elastic/plastic status (reported by the check).
         prop_assert!(r.vs_dual.passed(), "{}", r);
         prop_assert!(r.vs_fd.passed(), "{}", r);
     }

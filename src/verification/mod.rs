@@ -193,10 +193,17 @@ pub struct Tolerance {
 }
 
 impl Tolerance {
-    /// Relative tolerance `rel` with the default floor `1e-6`: components smaller than a millionth
-    /// of the largest are round-off-sized and are held to an absolute bound instead.
+    /// Relative tolerance `rel` with the floor `max(1e-6, 100 ε / rel)`.
+    ///
+    /// Components smaller than a millionth of the largest are round-off-sized and are held to
+    /// an absolute bound instead. Entries computed from sums and differences of terms as large as
+    /// the largest carry an absolute round-off of a few ε·max. So the absolute bound
+    /// `rel · floor · max` is never set below `100 ε · max`: for `rel = 1e-10` the floor is 2.2e-4.
     pub fn rel(rel: f64) -> Self {
-        Tolerance { rel, floor: 1e-6 }
+        Tolerance {
+            rel,
+            floor: (100.0 * f64::EPSILON / rel).max(1e-6),
+        }
     }
 }
 
