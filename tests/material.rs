@@ -454,7 +454,7 @@ fn config() -> ProptestConfig {
     let seed = std::env::var("SHELLDSA_PROPTEST_SEED")
         .ok()
         .and_then(|s| s.parse().ok())
-        .unwrap_or(0x5e11_d5a);
+        .unwrap_or(0x05e1_1d5a);
     let cases = std::env::var("PROPTEST_CASES")
         .ok()
         .and_then(|s| s.parse().ok())
