@@ -14,6 +14,7 @@
 
 use super::rotation::{director_derivatives, rotate_director};
 use super::ShellError;
+use crate::kinematics::HwIncrement;
 use crate::kinematics::{
     frame_update, frame_update_dot, global_stress, global_stress_dot, hughes_winget,
     hughes_winget_dot, local_strain_increment, local_strain_increment_dot, mid_step_gradient,
@@ -115,6 +116,26 @@ pub struct PointInput<'a, T> {
     pub history: &'a PointHistory<T>,
 }
 
+/// Intermediate kinematics of a point evaluation, kept for the tangent (and the DSA), so that
+/// neither recomputes the chain of §3.
+#[derive(Clone, Copy, Debug)]
+pub struct PointKinematics<T> {
+    /// `(Jⁿ)⁻¹`.
+    pub jn_inv: M3<T>,
+    /// `H = G (Jⁿ)⁻¹ = ∂Δz/∂ⁿx`.
+    pub h: M3<T>,
+    /// Hughes–Winget increment from `L = H (I + ½H)⁻¹`.
+    pub inc: HwIncrement<T>,
+    /// `(ⁿ⁺¹J)⁻¹`.
+    pub j1_inv: M3<T>,
+    /// `det ⁿ⁺¹J`.
+    pub det1: T,
+    /// Global stress `ⁿ⁺¹σᵍ`.
+    pub sigma_g: M3<T>,
+    /// `P = w det(J) σᵍ J⁻ᵀ`.
+    pub p: M3<T>,
+}
+
 /// Result of a point evaluation.
 #[derive(Clone, Debug)]
 pub struct PointResult<T> {
@@ -124,6 +145,8 @@ pub struct PointResult<T> {
     pub history: PointHistory<T>,
     /// Outcome of the return map.
     pub return_map: ReturnMap<T>,
+    /// Intermediate kinematics.
+    pub kinematics: PointKinematics<T>,
 }
 
 /// Configuration matrices at step n: `Jⁿ`.
@@ -189,13 +212,10 @@ pub fn point_residual<T: Real>(
     }
     let mut du = Vec::with_capacity(n);
     let mut dd = Vec::with_capacity(n);
-    let mut d_new = Vec::with_capacity(n);
     for (i, p) in inp.particles.iter().enumerate() {
         let q = &dofs[DOFS_PER_PARTICLE * i..DOFS_PER_PARTICLE * (i + 1)];
         du.push(V3::new(q[0], q[1], q[2]));
-        let d = rotate_director(&p.d, &p.e[0], &p.e[1], [q[3], q[4]]);
-        dd.push(d - p.d);
-        d_new.push(d);
+        dd.push(rotate_director(&p.d, &p.e[0], &p.e[1], [q[3], q[4]]) - p.d);
     }
     let jn = step_start_jacobian(inp);
     let g = increment_gradient(inp, &du, &dd);
@@ -234,6 +254,15 @@ pub fn point_residual<T: Real>(
             material: rm.state,
         },
         return_map: rm,
+        kinematics: PointKinematics {
+            jn_inv,
+            h,
+            inc,
+            j1_inv,
+            det1,
+            sigma_g,
+            p,
+        },
     })
 }
 
@@ -265,31 +294,29 @@ pub fn point_tangent(
 ) -> Result<DMatrix<f64>, ShellError> {
     let n = inp.shape.len();
     let nd = DOFS_PER_PARTICLE * n;
-    let mut du = Vec::with_capacity(n);
-    let mut dd = Vec::with_capacity(n);
-    let mut dirs = Vec::with_capacity(n);
-    for (i, p) in inp.particles.iter().enumerate() {
-        let q = &dofs[DOFS_PER_PARTICLE * i..DOFS_PER_PARTICLE * (i + 1)];
-        du.push(V3::new(q[0], q[1], q[2]));
-        let dr = director_derivatives(&p.d, &p.e[0], &p.e[1], [q[3], q[4]]);
-        dd.push(dr.d - p.d);
-        dirs.push(dr);
-    }
-    let jn = step_start_jacobian(inp);
-    let g = increment_gradient(inp, &du, &dd);
-    let (_, jn_inv) = invert(&jn, "Jⁿ (step-start configuration)")?;
-    let h = g * jn_inv;
-    let l = mid_step_gradient(&h)?;
-    let inc = hughes_winget(&l)?;
+    let dirs: Vec<_> = inp
+        .particles
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let q = &dofs[DOFS_PER_PARTICLE * i..DOFS_PER_PARTICLE * (i + 1)];
+            director_derivatives(&p.d, &p.e[0], &p.e[1], [q[3], q[4]])
+        })
+        .collect();
+    let PointKinematics {
+        jn_inv,
+        h,
+        inc,
+        j1_inv,
+        det1,
+        sigma_g,
+        p,
+    } = res.kinematics;
     let q_n = inp.history.frame;
     let dep = consistent_tangent(inp.material, &res.return_map);
     let q1 = res.history.frame;
     let sigma_l = stress_from_vec5(&res.history.material.stress);
-    let sigma_g = global_stress(&q1, &sigma_l);
-    let j1 = jn + g;
-    let (det1, j1_inv) = invert(&j1, "ⁿ⁺¹J (end-of-step configuration)")?;
     let w = inp.weight;
-    let p = sigma_g * j1_inv.transpose() * (det1 * w);
     let half_t = inp.thickness * 0.5;
     let z = half_t * inp.zeta;
     let m_of = |pm: &M3<f64>, sh: &ShapeData| {
