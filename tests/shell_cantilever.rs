@@ -13,92 +13,35 @@
 //! strip every particle has the same lamina vectors, so the rotation DOFs transform linearly and
 //! exactly (docs/shell-formulation.md §8.1).
 
-use nalgebra::{DMatrix, DVector, Vector3};
-use shelldsa::geometry::{Rectangle, Surface};
-use shelldsa::material::MaterialParams;
-use shelldsa::meshfree::quadrature::{gauss_legendre, CellQuadrature};
+mod common;
+
+use nalgebra::DMatrix;
 use shelldsa::meshfree::transform::{edge_particles, Edge, Transformation};
-use shelldsa::meshfree::{regular_grid, Basis, ParamBox, ShapeFunctions, ShapeValues};
-use shelldsa::shell::model::{Discretisation, ShellModel};
+use shelldsa::meshfree::{regular_grid, Basis, ParamBox, ShapeFunctions};
 
 const L: f64 = 12.0;
 const E: f64 = 1.2e6;
 
 /// Tip deflection for `n_u × n_v` particles, `sub` cell subdivisions, `ppc` Gauss points per
-/// cell direction.
+/// cell direction: one linear solve `K q = f` from the unloaded state.
 fn tip_deflection(n_u: usize, n_v: usize, support: f64, sub: usize, ppc: usize) -> f64 {
-    let rect = Rectangle::new(
-        Vector3::zeros(),
-        Vector3::new(L, 0.0, 0.0),
-        Vector3::new(0.0, 1.0, 0.0),
-    )
-    .unwrap();
-    let surface = Surface::Rectangle(rect);
-    let grid = regular_grid(ParamBox::unit(), n_u, n_v);
-    let supports = grid.supports(support);
-    let cq = CellQuadrature::for_particle_grid(&grid, sub, ppc).unwrap();
-    let quadrature: Vec<([f64; 2], f64)> = cq.iter().map(|(p, w, _)| (p, w)).collect();
-    let g2 = gauss_legendre(2).unwrap();
-    let thickness_rule: Vec<(f64, f64)> = g2
-        .nodes
-        .iter()
-        .copied()
-        .zip(g2.weights.iter().copied())
-        .collect();
-    // Elastic: a yield stress far above any stress of the linear solution.
-    let material = MaterialParams::new(E, 0.0, 1e30, 0.0, 1.0).unwrap();
-    let disc = Discretisation {
-        particle_uv: grid.positions.clone(),
-        supports: supports.clone(),
-        basis: Basis::Quadratic,
-        quadrature,
-        thickness_rule,
+    let s = common::strip(&common::StripSpec {
+        length: L,
         thickness: 0.1,
-    };
-    let model = ShellModel::new(&surface, disc, material).unwrap();
-    let n = model.n_dofs();
-    let c = model.contributions(&vec![0.0; n], true).unwrap();
-    let k = model.dense_tangent(&c);
-
-    // Tip load P = 1 in z over the edge u = 1 (width 1 in v): f_I = ∫ Ψ_I(1, v) p dv.
-    let sf = ShapeFunctions::new(grid.positions.clone(), supports, Basis::Quadratic).unwrap();
-    let mut f = vec![0.0; n];
-    let (gn, gw) = gauss_legendre(6).unwrap().mapped(0.0, 1.0);
-    let mut sv = ShapeValues::new();
-    let edge_cells = n_v - 1;
-    for cell in 0..edge_cells {
-        let (a, b) = (
-            cell as f64 / edge_cells as f64,
-            (cell + 1) as f64 / edge_cells as f64,
-        );
-        for (&x, &w) in gn.iter().zip(&gw) {
-            let v = a + (b - a) * x;
-            sf.evaluate([1.0, v], &mut sv).unwrap();
-            for (i, psi, _) in sv.iter() {
-                f[5 * i + 2] += psi * w * (b - a);
-            }
-        }
-    }
-
-    // Clamp u = 0 through the transformation: K̃ = Λ⁻ᵀ K Λ⁻¹, f̃ = Λ⁻ᵀ f, nodal values zero.
-    let clamped = edge_particles(&grid.positions, &ParamBox::unit(), Edge::UMin, 1e-12);
-    let t = Transformation::new(&sf, &clamped).unwrap();
-    let mut kt = t.transform_matrix_dense(&k, 5).unwrap();
-    let mut ft = DVector::from_vec(t.transform_vector(&f, 5).unwrap());
-    for d in t.constrained_dofs(5) {
-        kt.row_mut(d).fill(0.0);
-        kt.column_mut(d).fill(0.0);
-        kt[(d, d)] = 1.0;
-        ft[d] = 0.0;
-    }
-    let nodal = kt
-        .lu()
-        .solve(&ft)
-        .expect("clamped stiffness must be regular");
-    let q = t.to_generalised(nodal.as_slice(), 5).unwrap();
-    // Deflection at the middle of the tip edge.
-    sf.evaluate([1.0, 0.5], &mut sv).unwrap();
-    sv.iter().map(|(i, psi, _)| psi * q[5 * i + 2]).sum()
+        young: E,
+        n_u,
+        n_v,
+        support,
+        sub,
+        ppc,
+    });
+    let c = s
+        .model
+        .contributions(&vec![0.0; s.model.n_dofs()], true)
+        .unwrap();
+    let minus_f: Vec<f64> = s.tip_load.iter().map(|v| -v).collect();
+    let q = s.clamped_solve(&s.model.dense_tangent(&c), &minus_f);
+    s.field(|i| q[5 * i + 2], [1.0, 0.5])
 }
 
 #[test]
