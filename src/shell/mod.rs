@@ -8,6 +8,7 @@
 
 pub mod model;
 pub mod point;
+pub mod problem;
 pub mod rotation;
 
 use crate::kinematics::KinematicsError;

@@ -83,6 +83,8 @@ pub struct ShellModel {
     pub material: MaterialParams<f64>,
     /// Committed histories, `points.len() × thickness_rule.len()`, point-major.
     pub history: Vec<PointHistory<f64>>,
+    /// The RK shape functions of the particles (for loads, essential conditions and output).
+    pub shape_functions: ShapeFunctions,
 }
 
 /// Lamina vectors `e1, e2 ⟂ d`: `e1` along the projection of `t` (a surface tangent).
@@ -168,6 +170,7 @@ impl ShellModel {
             thickness,
             material,
             history,
+            shape_functions: sf,
         })
     }
 

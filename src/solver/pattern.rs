@@ -111,6 +111,56 @@ impl SparsityPattern {
         })
     }
 
+    /// Pattern of the given structural nonzeros `(row, col)` (duplicates allowed) plus the full
+    /// diagonal, with no cells: for matrices formed by products rather than cell assembly (the
+    /// transformed tangent `Λ⁻ᵀ K Λ⁻¹` of the meshfree transformation method). Fill values
+    /// through [`Self::slot`].
+    pub fn from_entries(n_dofs: usize, entries: &[(usize, usize)]) -> Result<Self, SolverError> {
+        if let Some((local, &(r, c))) = entries
+            .iter()
+            .enumerate()
+            .find(|(_, &(r, c))| r >= n_dofs || c >= n_dofs)
+        {
+            return Err(SolverError::DofOutOfRange {
+                cell: 0,
+                local,
+                dof: r.max(c),
+                n_dofs,
+            });
+        }
+        let mut cols: Vec<Vec<usize>> = (0..n_dofs).map(|j| vec![j]).collect();
+        for &(r, c) in entries {
+            cols[c].push(r);
+        }
+        let mut col_ptr = Vec::with_capacity(n_dofs + 1);
+        col_ptr.push(0usize);
+        let mut row_idx = Vec::new();
+        for col in &mut cols {
+            col.sort_unstable();
+            col.dedup();
+            row_idx.extend_from_slice(col);
+            col_ptr.push(row_idx.len());
+        }
+        let diag = (0..n_dofs)
+            .map(|j| {
+                col_ptr[j]
+                    + row_idx[col_ptr[j]..col_ptr[j + 1]]
+                        .binary_search(&j)
+                        .expect("diagonal inserted")
+            })
+            .collect();
+        let symbolic = SymbolicSparseColMat::new_checked(n_dofs, n_dofs, col_ptr, None, row_idx);
+        Ok(Self {
+            n: n_dofs,
+            symbolic,
+            cell_ptr: vec![0],
+            cell_dofs: Vec::new(),
+            slot_ptr: vec![0],
+            slots: Vec::new(),
+            diag,
+        })
+    }
+
     /// Number of DOFs (rows = columns).
     pub fn n_dofs(&self) -> usize {
         self.n
