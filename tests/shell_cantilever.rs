@@ -27,13 +27,15 @@ const E: f64 = 1.2e6;
 fn tip_deflection(n_u: usize, n_v: usize, support: f64, sub: usize, ppc: usize) -> f64 {
     let s = common::strip(&common::StripSpec {
         length: L,
-        thickness: 0.1,
-        young: E,
-        n_u,
-        n_v,
-        support,
-        sub,
-        ppc,
+        model: common::ModelSpec {
+            thickness: 0.1,
+            young: E,
+            n_u,
+            n_v,
+            support,
+            sub,
+            ppc,
+        },
     });
     let c = s
         .model
@@ -108,13 +110,15 @@ fn sparse_newton_driver_reproduces_the_dense_linear_solution() {
     let p = 1e-4;
     let s = common::strip(&common::StripSpec {
         length: L,
-        thickness: 0.1,
-        young: E,
-        n_u: 25,
-        n_v: 3,
-        support: 3.0,
-        sub: 2,
-        ppc: 4,
+        model: common::ModelSpec {
+            thickness: 0.1,
+            young: E,
+            n_u: 25,
+            n_v: 3,
+            support: 3.0,
+            sub: 2,
+            ppc: 4,
+        },
     });
     let clamped = edge_particles(&s.model.particle_uv, &ParamBox::unit(), Edge::UMin, 1e-12);
     let fixed: Vec<(usize, usize)> = clamped

@@ -76,13 +76,15 @@ fn large_deflection_cantilever_converges_to_the_elastica_in_few_newton_iteration
 
     let strip = common::strip(&common::StripSpec {
         length: L,
-        thickness: T,
-        young: E,
-        n_u: 25,
-        n_v: 3,
-        support: 3.0,
-        sub: 2,
-        ppc: 4,
+        model: common::ModelSpec {
+            thickness: T,
+            young: E,
+            n_u: 25,
+            n_v: 3,
+            support: 3.0,
+            sub: 2,
+            ppc: 4,
+        },
     });
     let mut model = strip.model.clone();
     let n = model.n_dofs();

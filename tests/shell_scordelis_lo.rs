@@ -26,13 +26,12 @@
 //! also admits spurious modes in other cases, and how it interacts with the patch test, is an
 //! open question recorded in docs/shell-formulation.md §8.
 
-use nalgebra::{DVector, Vector3};
+mod common;
+
+use nalgebra::Vector3;
 use shelldsa::geometry::{CylinderSector, Surface};
-use shelldsa::material::MaterialParams;
-use shelldsa::meshfree::quadrature::{gauss_legendre, CellQuadrature};
 use shelldsa::meshfree::transform::{edge_particles, Edge, Transformation};
-use shelldsa::meshfree::{regular_grid, Basis, ParamBox, ShapeFunctions, ShapeValues};
-use shelldsa::shell::model::{Discretisation, ShellModel};
+use shelldsa::meshfree::ParamBox;
 
 /// Vertical displacement at the middle of the free edge θ = +40°, with `n × n` particles.
 fn free_edge_deflection(n: usize, support: f64, sub: usize, ppc: usize) -> f64 {
@@ -46,25 +45,16 @@ fn free_edge_deflection(n: usize, support: f64, sub: usize, ppc: usize) -> f64 {
     )
     .unwrap();
     let surface = Surface::CylinderSector(cyl);
-    let grid = regular_grid(ParamBox::unit(), n, n);
-    let supports = grid.supports(support);
-    let cq = CellQuadrature::for_particle_grid(&grid, sub, ppc).unwrap();
-    let g2 = gauss_legendre(2).unwrap();
-    let disc = Discretisation {
-        particle_uv: grid.positions.clone(),
-        supports: supports.clone(),
-        basis: Basis::Quadratic,
-        quadrature: cq.iter().map(|(p, w, _)| (p, w)).collect(),
-        thickness_rule: g2
-            .nodes
-            .iter()
-            .copied()
-            .zip(g2.weights.iter().copied())
-            .collect(),
+    let spec = common::ModelSpec {
         thickness: 0.25,
+        young: 4.32e8,
+        n_u: n,
+        n_v: n,
+        support,
+        sub,
+        ppc,
     };
-    let material = MaterialParams::new(4.32e8, 0.0, 1e30, 0.0, 1.0).unwrap();
-    let model = ShellModel::new(&surface, disc, material).unwrap();
+    let model = common::elastic_model(&surface, &spec);
     let nd = model.n_dofs();
     let c = model.contributions(&vec![0.0; nd], true).unwrap();
     let k = model.dense_tangent(&c);
@@ -79,30 +69,18 @@ fn free_edge_deflection(n: usize, support: f64, sub: usize, ppc: usize) -> f64 {
     }
 
     // Diaphragms at v = 0 and v = 1: nodal u_y = u_z = 0; one nodal u_x = 0.
-    let sf = ShapeFunctions::new(grid.positions.clone(), supports, Basis::Quadratic).unwrap();
-    let mut ends = edge_particles(&grid.positions, &ParamBox::unit(), Edge::VMin, 1e-12);
+    let uv = &model.particle_uv;
+    let mut ends = edge_particles(uv, &ParamBox::unit(), Edge::VMin, 1e-12);
     let first_end = ends.clone();
-    ends.extend(edge_particles(
-        &grid.positions,
-        &ParamBox::unit(),
-        Edge::VMax,
-        1e-12,
-    ));
-    let t = Transformation::new(&sf, &ends).unwrap();
+    ends.extend(edge_particles(uv, &ParamBox::unit(), Edge::VMax, 1e-12));
+    let t = Transformation::new(&model.shape_functions, &ends).unwrap();
     let mut fixed: Vec<usize> = ends.iter().flat_map(|&i| [5 * i + 1, 5 * i + 2]).collect();
     fixed.push(5 * first_end[first_end.len() / 2]);
-    let mut kt = t.transform_matrix_dense(&k, 5).unwrap();
-    let mut ft = DVector::from_vec(t.transform_vector(&f, 5).unwrap());
-    for &d in &fixed {
-        kt.row_mut(d).fill(0.0);
-        kt.column_mut(d).fill(0.0);
-        kt[(d, d)] = 1.0;
-        ft[d] = 0.0;
-    }
-    let nodal = kt.lu().solve(&ft).expect("supported roof must be regular");
-    let q = t.to_generalised(nodal.as_slice(), 5).unwrap();
-    let mut sv = ShapeValues::new();
-    sf.evaluate([1.0, 0.5], &mut sv).unwrap();
+    // K q = f, i.e. K Δq = −r with r = −f.
+    let minus_f: Vec<f64> = f.iter().map(|v| -v).collect();
+    let q = common::solve_with_fixed(&t, &k, &minus_f, &fixed);
+    let mut sv = shelldsa::meshfree::ShapeValues::new();
+    model.shape_functions.evaluate([1.0, 0.5], &mut sv).unwrap();
     sv.iter().map(|(i, psi, _)| psi * q[5 * i + 2]).sum()
 }
 

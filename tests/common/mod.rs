@@ -21,12 +21,12 @@ pub struct Strip {
     pub tip_load: Vec<f64>,
 }
 
-/// Strip data: length, thickness, Young's modulus; `n_u × n_v` particles (quadratic basis,
-/// support `support` spacings); cells aligned with the particle grid subdivided `sub` times with
-/// `ppc × ppc` Gauss points.
+/// Discretisation of an elastic test shell on the unit parameter square: `n_u × n_v` particles
+/// (quadratic basis, support `support` spacings), cells aligned with the particle grid subdivided
+/// `sub` times with `ppc × ppc` Gauss points, 2 Gauss points through the thickness, ν = 0 and a
+/// yield stress of 1e30 (elastic).
 #[derive(Clone, Copy)]
-pub struct StripSpec {
-    pub length: f64,
+pub struct ModelSpec {
     pub thickness: f64,
     pub young: f64,
     pub n_u: usize,
@@ -36,31 +36,14 @@ pub struct StripSpec {
     pub ppc: usize,
 }
 
-/// Build the strip: 2 Gauss points through the thickness, elastic material (yield stress 1e30).
-pub fn strip(spec: &StripSpec) -> Strip {
-    let StripSpec {
-        length,
-        thickness,
-        young,
-        n_u,
-        n_v,
-        support,
-        sub,
-        ppc,
-    } = *spec;
-    let rect = Rectangle::new(
-        Vector3::zeros(),
-        Vector3::new(length, 0.0, 0.0),
-        Vector3::new(0.0, 1.0, 0.0),
-    )
-    .unwrap();
-    let grid = regular_grid(ParamBox::unit(), n_u, n_v);
-    let supports = grid.supports(support);
-    let cq = CellQuadrature::for_particle_grid(&grid, sub, ppc).unwrap();
+/// The elastic shell model of `spec` on `surface`.
+pub fn elastic_model(surface: &Surface<f64>, spec: &ModelSpec) -> ShellModel {
+    let grid = regular_grid(ParamBox::unit(), spec.n_u, spec.n_v);
+    let cq = CellQuadrature::for_particle_grid(&grid, spec.sub, spec.ppc).unwrap();
     let g2 = gauss_legendre(2).unwrap();
     let disc = Discretisation {
-        particle_uv: grid.positions.clone(),
-        supports: supports.clone(),
+        supports: grid.supports(spec.support),
+        particle_uv: grid.positions,
         basis: Basis::Quadratic,
         quadrature: cq.iter().map(|(p, w, _)| (p, w)).collect(),
         thickness_rule: g2
@@ -69,11 +52,53 @@ pub fn strip(spec: &StripSpec) -> Strip {
             .copied()
             .zip(g2.weights.iter().copied())
             .collect(),
-        thickness,
+        thickness: spec.thickness,
     };
-    let material = MaterialParams::new(young, 0.0, 1e30, 0.0, 1.0).unwrap();
-    let model = ShellModel::new(&Surface::Rectangle(rect), disc, material).unwrap();
-    let shape = ShapeFunctions::new(grid.positions.clone(), supports, Basis::Quadratic).unwrap();
+    let material = MaterialParams::new(spec.young, 0.0, 1e30, 0.0, 1.0).unwrap();
+    ShellModel::new(surface, disc, material).unwrap()
+}
+
+/// Solve `K Δq = −r` in the transformed (nodal) space of `t`, `K̃ = Λ⁻ᵀ K Λ⁻¹`, `r̃ = Λ⁻ᵀ r`,
+/// with the nodal DOFs `fixed` held at zero; returns the generalised `Δq`.
+pub fn solve_with_fixed(
+    t: &Transformation,
+    k: &DMatrix<f64>,
+    r: &[f64],
+    fixed: &[usize],
+) -> Vec<f64> {
+    let mut rt = DVector::from_vec(t.transform_vector(r, 5).unwrap());
+    let mut kt = t.transform_matrix_dense(k, 5).unwrap();
+    for &d in fixed {
+        rt[d] = 0.0;
+        kt.row_mut(d).fill(0.0);
+        kt.column_mut(d).fill(0.0);
+        kt[(d, d)] = 1.0;
+    }
+    let du = kt
+        .lu()
+        .solve(&(-rt))
+        .expect("supported tangent must be regular");
+    t.to_generalised(du.as_slice(), 5).unwrap()
+}
+
+/// Strip of length `length` and width 1 with the discretisation `model`.
+#[derive(Clone, Copy)]
+pub struct StripSpec {
+    pub length: f64,
+    pub model: ModelSpec,
+}
+
+/// Build the strip.
+pub fn strip(spec: &StripSpec) -> Strip {
+    let rect = Rectangle::new(
+        Vector3::zeros(),
+        Vector3::new(spec.length, 0.0, 0.0),
+        Vector3::new(0.0, 1.0, 0.0),
+    )
+    .unwrap();
+    let model = elastic_model(&Surface::Rectangle(rect), &spec.model);
+    let shape = model.shape_functions.clone();
+    let n_v = spec.model.n_v;
 
     // f_I = ∫ Ψ_I(1, v) dv over the tip edge, 6 Gauss points per particle interval.
     let mut tip_load = vec![0.0; model.n_dofs()];
@@ -89,7 +114,7 @@ pub fn strip(spec: &StripSpec) -> Strip {
             }
         }
     }
-    let clamped = edge_particles(&grid.positions, &ParamBox::unit(), Edge::UMin, 1e-12);
+    let clamped = edge_particles(&model.particle_uv, &ParamBox::unit(), Edge::UMin, 1e-12);
     let clamp = Transformation::new(&shape, &clamped).unwrap();
     Strip {
         model,
@@ -109,22 +134,9 @@ impl Strip {
         rt.iter().map(|v| v * v).sum::<f64>().sqrt()
     }
 
-    /// Solve `K Δq = −r` with the clamped DOFs eliminated in the transformed (nodal) space,
-    /// `K̃ = Λ⁻ᵀ K Λ⁻¹`, `r̃ = Λ⁻ᵀ r`, clamped nodal values held at zero; returns `Δq`.
+    /// Solve `K Δq = −r` with every nodal DOF of the clamped particles held at zero.
     pub fn clamped_solve(&self, k: &DMatrix<f64>, r: &[f64]) -> Vec<f64> {
-        let mut rt = DVector::from_vec(self.clamp.transform_vector(r, 5).unwrap());
-        let mut kt = self.clamp.transform_matrix_dense(k, 5).unwrap();
-        for d in self.clamp.constrained_dofs(5) {
-            rt[d] = 0.0;
-            kt.row_mut(d).fill(0.0);
-            kt.column_mut(d).fill(0.0);
-            kt[(d, d)] = 1.0;
-        }
-        let du = kt
-            .lu()
-            .solve(&(-rt))
-            .expect("clamped tangent must be regular");
-        self.clamp.to_generalised(du.as_slice(), 5).unwrap()
+        solve_with_fixed(&self.clamp, k, r, &self.clamp.constrained_dofs(5))
     }
 
     /// Value of component `c` of the RK approximation of the coefficients `q` at `(u, v)`.
