@@ -53,9 +53,15 @@ impl Fixture {
         let sd = Surface::SphereZone(sphere).eval(0.4, 0.3);
         let surface = SurfacePoint::from_derivs(&sd);
         let shape: Vec<ShapeData> = (0..9)
-            .map(|_| ShapeData {
-                psi: 0.11 + r(0.05),
-                dpsi: [r(0.8), r(0.8)],
+            .map(|_| {
+                let dpsi = [r(0.8), r(0.8)];
+                // Test gradients differ from the trial ones (a variationally consistent
+                // correction), so the Petrov–Galerkin rows are checked too.
+                ShapeData {
+                    psi: 0.11 + r(0.05),
+                    dpsi,
+                    dpsi_test: [dpsi[0] + r(0.05), dpsi[1] + r(0.05)],
+                }
             })
             .collect();
         let particles = (0..9)

@@ -147,7 +147,7 @@ impl ShellModel {
                     neighbours: sv.neighbours().to_vec(),
                     shape: sv
                         .iter()
-                        .map(|(_, psi, dpsi)| ShapeData { psi, dpsi })
+                        .map(|(_, psi, dpsi)| ShapeData::new(psi, dpsi))
                         .collect(),
                 })
             })

@@ -78,12 +78,30 @@ pub struct ParticleState<T> {
 }
 
 /// One neighbour's shape-function data at the point (on the parameter domain: design-free).
+///
+/// Trial and test gradients are kept apart: the kinematics use the RK gradients `Ψ_I,α`
+/// (which keep the reproducing conditions); the virtual work uses test gradients, which a
+/// variationally consistent integration may correct so that the discrete divergence theorem
+/// holds at the quadrature points (a Petrov–Galerkin form; without correction both are equal).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ShapeData {
     /// `Ψ_I`.
     pub psi: f64,
-    /// `Ψ_I,1`, `Ψ_I,2`.
+    /// Trial gradients `Ψ_I,1`, `Ψ_I,2`.
     pub dpsi: [f64; 2],
+    /// Test gradients (equal to `dpsi` unless corrected).
+    pub dpsi_test: [f64; 2],
+}
+
+impl ShapeData {
+    /// Shape data with equal trial and test gradients.
+    pub fn new(psi: f64, dpsi: [f64; 2]) -> Self {
+        ShapeData {
+            psi,
+            dpsi,
+            dpsi_test: dpsi,
+        }
+    }
 }
 
 /// History at the point: lamina frame and material state (stress in the lamina frame).
@@ -239,7 +257,7 @@ pub fn point_residual<T: Real>(
     let z = half_t * inp.zeta;
     let mut residual = Vec::with_capacity(DOFS_PER_PARTICLE * n);
     for (i, sh) in inp.shape.iter().enumerate() {
-        let f = p.column(0) * T::cst(sh.dpsi[0]) + p.column(1) * T::cst(sh.dpsi[1]);
+        let f = p.column(0) * T::cst(sh.dpsi_test[0]) + p.column(1) * T::cst(sh.dpsi_test[1]);
         let m = f * z + p.column(2) * (half_t * sh.psi);
         let pi = &inp.particles[i];
         let q = &dofs[DOFS_PER_PARTICLE * i..DOFS_PER_PARTICLE * (i + 1)];
@@ -320,7 +338,7 @@ pub fn point_tangent(
     let half_t = inp.thickness * 0.5;
     let z = half_t * inp.zeta;
     let m_of = |pm: &M3<f64>, sh: &ShapeData| {
-        let f = pm.column(0) * sh.dpsi[0] + pm.column(1) * sh.dpsi[1];
+        let f = pm.column(0) * sh.dpsi_test[0] + pm.column(1) * sh.dpsi_test[1];
         (f, f * z + pm.column(2) * (half_t * sh.psi))
     };
     let mut k = DMatrix::zeros(nd, nd);
