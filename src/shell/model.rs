@@ -186,6 +186,50 @@ impl ShellModel {
             .collect()
     }
 
+    /// The committed states of the neighbours of in-plane point `k` and their local DOF
+    /// increments (5 per neighbour), gathered from the global generalised increment `dofs`, in
+    /// scalar `T` (the states are lifted as constants). This is the one place where the global
+    /// DOFs map to a point's local ones: loads, output and the DSA gather through it too.
+    pub fn gather_local<T: Real>(&self, k: usize, dofs: &[T]) -> (Vec<ParticleState<T>>, Vec<T>) {
+        let p = &self.points[k];
+        let parts = p
+            .neighbours
+            .iter()
+            .map(|&i| {
+                let q = &self.particles[i];
+                ParticleState {
+                    u: q.u.map(T::cst),
+                    d: q.d.map(T::cst),
+                    d0: q.d0.map(T::cst),
+                    e: q.e.map(|v| v.map(T::cst)),
+                }
+            })
+            .collect();
+        let x = self.local_dofs(p).iter().map(|&i| dofs[i]).collect();
+        (parts, x)
+    }
+
+    /// Add a local vector of in-plane point `k` (5 per neighbour, as from
+    /// [`ShellModel::gather_local`]) into the global generalised vector `global`: the transpose
+    /// of the gather.
+    pub fn scatter_local<T: Real>(&self, k: usize, local: &[T], global: &mut [T]) {
+        for (&j, l) in self.points[k]
+            .neighbours
+            .iter()
+            .zip(local.chunks_exact(DOFS_PER_PARTICLE))
+        {
+            self.scatter_particle(j, l, global);
+        }
+    }
+
+    /// Add the 5 local components `local` of shape-function particle `j` (an index into
+    /// [`ShellModel::shape_functions`]) into the global generalised vector.
+    pub fn scatter_particle<T: Real>(&self, j: usize, local: &[T], global: &mut [T]) {
+        for (c, v) in local.iter().enumerate().take(DOFS_PER_PARTICLE) {
+            global[DOFS_PER_PARTICLE * j + c] += *v;
+        }
+    }
+
     /// Contribution of in-plane point `k` for the global DOF increment `dofs`.
     pub fn local(
         &self,
@@ -195,9 +239,7 @@ impl ShellModel {
     ) -> Result<LocalContribution, ShellError> {
         let p = &self.points[k];
         let idx = self.local_dofs(p);
-        let x: Vec<f64> = idx.iter().map(|&i| dofs[i]).collect();
-        let parts: Vec<ParticleState<f64>> =
-            p.neighbours.iter().map(|&i| self.particles[i]).collect();
+        let (parts, x) = self.gather_local(k, dofs);
         let nl = self.thickness_rule.len();
         let mut residual = vec![0.0; idx.len()];
         let mut k_loc = tangent.then(|| DMatrix::zeros(idx.len(), idx.len()));
@@ -285,21 +327,7 @@ impl ShellModel {
         let nl = self.thickness_rule.len();
         let m = self.material.lift::<T>();
         for (k, p) in self.points.iter().enumerate() {
-            let idx = self.local_dofs(p);
-            let x: Vec<T> = idx.iter().map(|&i| dofs[i]).collect();
-            let parts: Vec<ParticleState<T>> = p
-                .neighbours
-                .iter()
-                .map(|&i| {
-                    let q = &self.particles[i];
-                    ParticleState {
-                        u: q.u.map(T::cst),
-                        d: q.d.map(T::cst),
-                        d0: q.d0.map(T::cst),
-                        e: q.e.map(|v| v.map(T::cst)),
-                    }
-                })
-                .collect();
+            let (parts, x) = self.gather_local(k, dofs);
             let s = SurfacePoint {
                 x_a: p.surface.x_a.map(|v| v.map(T::cst)),
                 n: p.surface.n.map(T::cst),
@@ -322,9 +350,7 @@ impl ShellModel {
                     history: &h,
                 };
                 let res = point_residual(&inp, &x)?;
-                for (&i, v) in idx.iter().zip(&res.residual) {
-                    f[i] += *v;
-                }
+                self.scatter_local(k, &res.residual, &mut f);
             }
         }
         Ok(f)
