@@ -49,6 +49,19 @@ pub struct LocalContribution {
     pub plastic_layers: usize,
 }
 
+/// The committed mid-surface at one parameter point ([`ShellModel::sample`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MidSurfaceSample {
+    /// Initial position `x̄⁰`.
+    pub x0: Vector3<f64>,
+    /// Initial unit normal `n⁰`.
+    pub n0: Vector3<f64>,
+    /// Displacement `ū`.
+    pub displacement: Vector3<f64>,
+    /// Director `d` (RK-interpolated, not normalised).
+    pub director: Vector3<f64>,
+}
+
 /// Discretisation of a shell patch: particles, RK functions, quadrature, thickness.
 #[derive(Clone, Debug)]
 pub struct Discretisation {
@@ -196,7 +209,7 @@ impl ShellModel {
             .neighbours
             .iter()
             .map(|&i| {
-                let q = &self.particles[i];
+                let q = &self.particle_state(i);
                 ParticleState {
                     u: q.u.map(T::cst),
                     d: q.d.map(T::cst),
@@ -220,6 +233,41 @@ impl ShellModel {
         {
             self.scatter_particle(j, l, global);
         }
+    }
+
+    /// Committed state of shape-function particle `j` (an index into
+    /// [`ShellModel::shape_functions`]).
+    pub fn particle_state(&self, j: usize) -> ParticleState<f64> {
+        self.particles[j]
+    }
+
+    /// The committed mid-surface at parameter coordinates `uv`: initial position and normal,
+    /// RK-interpolated displacement `Σ Ψ_J ū_J` and director `n⁰ + Σ Ψ_J (d_J − d⁰_J)`
+    /// (not normalised), for output and monitors.
+    pub fn sample(
+        &self,
+        surface: &Surface<f64>,
+        uv: [f64; 2],
+    ) -> Result<MidSurfaceSample, ShellError> {
+        let sd = surface.eval(uv[0], uv[1]);
+        let n0 = sd
+            .normal()
+            .map_err(|e| ShellError::InvalidInput(format!("sample at {uv:?}: {e}")))?;
+        let mut sv = ShapeValues::new();
+        self.shape_functions.evaluate(uv, &mut sv).map_err(mf)?;
+        let mut u = Vector3::zeros();
+        let mut d = n0;
+        for (j, psi, _) in sv.iter() {
+            let p = self.particle_state(j);
+            u += p.u * psi;
+            d += (p.d - p.d0) * psi;
+        }
+        Ok(MidSurfaceSample {
+            x0: sd.x,
+            n0,
+            displacement: u,
+            director: d,
+        })
     }
 
     /// Add the 5 local components `local` of shape-function particle `j` (an index into
