@@ -1,12 +1,15 @@
 //! The `shelldsa` command line.
 
+use crate::io::shell_build::{self, RunStatus};
+use crate::io::shell_case::ShellCase;
+use crate::io::shell_output::StepSummary;
 use crate::io::{read_case, Case, MaterialPathCase};
 use crate::material::STATE_LABELS;
 use crate::scalar::Dual;
 use crate::verification::Tolerance;
 use clap::{Parser, Subcommand};
 use serde_json::json;
-use std::io::Write;
+use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -38,7 +41,9 @@ enum Command {
     },
 }
 
-/// Exit status: 0 success, 1 bad input or I/O failure, 2 derivative check outside tolerance.
+/// Exit status: 0 success, 1 bad input, set-up or I/O failure, 2 derivative check outside
+/// tolerance, 3 shell analysis stopped before the final load factor (the converged steps are
+/// written).
 pub fn main_with_args<I: IntoIterator<Item = String>>(args: I) -> i32 {
     let cli = match Cli::try_parse_from(args) {
         Ok(c) => c,
@@ -50,6 +55,15 @@ pub fn main_with_args<I: IntoIterator<Item = String>>(args: I) -> i32 {
     let result = match cli.command {
         Command::Check { case } => read_case(&case).map(|c| {
             println!("{}: ok ({})", case.display(), describe(&c));
+            if let Case::Shell(s) = &c {
+                let missing = shell_build::unsupported(s);
+                if !missing.is_empty() {
+                    println!("note: this build cannot run the case yet:");
+                    for m in &missing {
+                        println!("  {m}");
+                    }
+                }
+            }
             0
         }),
         Command::Run { case, out, quiet } => read_case(&case).map(|c| run(&c, &out, quiet)),
@@ -70,6 +84,18 @@ fn describe(c: &Case) -> String {
             m.path.n_steps(),
             m.design_name
         ),
+        Case::Shell(s) => format!(
+            "shell on a {} surface, {} × {} particles, {} basis, {} boundary condition(s), {} \
+             load(s), {} monitor(s), load factor to {}",
+            s.surface.kind(),
+            s.particles.counts[0],
+            s.particles.counts[1],
+            s.kernel.basis,
+            s.boundary.len(),
+            s.loads.len(),
+            s.monitors.len(),
+            s.steps.final_load
+        ),
     }
 }
 
@@ -89,6 +115,99 @@ fn run(case: &Case, out: &Path, quiet: bool) -> i32 {
                 1
             }
         },
+        Case::Shell(c) => run_shell(c, out, quiet),
+    }
+}
+
+/// One progress line of a converged shell step.
+fn step_line(c: &ShellCase, s: &StepSummary) -> String {
+    let mut line = format!(
+        "step {:>4}  λ = {:<12.6e} it {:>2}  |r| {:.3e}",
+        s.step,
+        s.load_factor,
+        s.iterations,
+        s.residual_norms.last().copied().unwrap_or(f64::NAN)
+    );
+    for (m, d) in c.monitors.iter().zip(&s.monitors) {
+        line.push_str(&format!(
+            "  {} = ({:.5e}, {:.5e}, {:.5e})",
+            m.name, d[0], d[1], d[2]
+        ));
+    }
+    line
+}
+
+fn run_shell(c: &ShellCase, out: &Path, quiet: bool) -> i32 {
+    let start = Instant::now();
+    let mut built = match shell_build::build(c) {
+        Ok(b) => b,
+        Err(e) => {
+            eprintln!("error: {}: {e}", c.path.display());
+            return 1;
+        }
+    };
+    println!(
+        "{}: {} particles, {} unknowns, {} quadrature points × {} layers (built in {:.2} s)",
+        c.title,
+        built.n_particles,
+        crate::solver::NonlinearProblem::n_dofs(&built.problem),
+        shell_build::problem_model(&built.problem).points.len(),
+        shell_build::problem_model(&built.problem)
+            .thickness_rule
+            .len(),
+        start.elapsed().as_secs_f64()
+    );
+    let bar = (!quiet && std::io::stdout().is_terminal()).then(|| {
+        let b = indicatif::ProgressBar::new(1000);
+        if let Ok(style) = indicatif::ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:40}] load factor {msg}",
+        ) {
+            b.set_style(style.progress_chars("=> "));
+        }
+        b
+    });
+    let final_load = c.steps.final_load;
+    let result = shell_build::run(c, &mut built, out, start, |s| {
+        let line = step_line(c, s);
+        match &bar {
+            Some(b) => {
+                b.println(line);
+                b.set_position((1000.0 * s.load_factor / final_load).round() as u64);
+                b.set_message(format!("{:.4e} / {final_load:e}", s.load_factor));
+            }
+            None if !quiet => println!("{line}"),
+            None => {}
+        }
+    });
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
+    match result {
+        Ok(summary) => {
+            let last = summary.steps.last();
+            if quiet {
+                if let Some(s) = last {
+                    println!("{}", step_line(c, s));
+                }
+            }
+            println!(
+                "{}: {} converged step(s) in {} attempt(s), load factor {:e}, {:.2} s; results in {}",
+                summary.status.label(),
+                summary.steps.len(),
+                summary.attempts,
+                last.map_or(0.0, |s| s.load_factor),
+                summary.wall_time_s,
+                out.display()
+            );
+            match summary.status {
+                RunStatus::Complete => 0,
+                RunStatus::Failed(_) => 3,
+            }
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            1
+        }
     }
 }
 

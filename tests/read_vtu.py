@@ -3,6 +3,16 @@
 Python standard library's XML parser (PVD) and compares everything with DIR/expected.json.
 
 Usage: python3 tests/read_vtu.py DIR
+       python3 tests/read_vtu.py --dump FILE...
+
+The second form (used by tests/shell_output.rs, which makes its own assertions) reads each FILE
+and prints one JSON object to stdout: for a .vtu, meshio's view
+  {"points": [[x, y, z], ...], "cells": [{"type": t, "connectivity": [[...], ...]}, ...],
+   "point_data": {name: [[c0, c1, ...], ...]}, "cell_data": {name: [[c0, ...], ...]}}
+(one row per point or cell, cell blocks concatenated); for a .pvd, the standard library's XML
+view {"entries": [{"time": t, "file": f}, ...]}, every referenced file also read by meshio.
+The result is {FILE: view, ...}. Every float is a JSON *string* holding Python's repr of it
+(the shortest text that round-trips), so the reader on the other side can parse it exactly.
 
 expected.json:
   {"vtu": [{"file": "grid.vtu",
@@ -116,7 +126,54 @@ def check_pvd(d, spec):
     print(f"read_vtu.py: {what}: {len(sets)} time steps, times and files as expected, all readable")
 
 
+def rows(arr, n):
+    arr = np.asarray(arr, dtype=np.float64)
+    return [[repr(float(x)) for x in row] for row in arr.reshape(n, -1)]
+
+
+def dump_vtu(path):
+    mesh = meshio.read(path)
+    n_points = len(mesh.points)
+    cells = [{"type": b.type, "connectivity": np.asarray(b.data).tolist()} for b in mesh.cells]
+    n_cells = sum(len(b.data) for b in mesh.cells)
+    point_data = {k: rows(v, n_points) for k, v in mesh.point_data.items()}
+    cell_data = {
+        k: rows(np.concatenate([np.asarray(b).reshape(len(b), -1) for b in v]), n_cells)
+        for k, v in mesh.cell_data.items()
+    }
+    return {
+        "points": rows(mesh.points, n_points),
+        "cells": cells,
+        "point_data": point_data,
+        "cell_data": cell_data,
+    }
+
+
+def dump_pvd(path):
+    root = ET.parse(path).getroot()
+    if root.tag != "VTKFile" or root.get("type") != "Collection":
+        fail(f"{path}: root is <{root.tag} type={root.get('type')!r}>, expected a VTKFile Collection")
+    entries = []
+    for ds in root.findall("./Collection/DataSet"):
+        target = os.path.join(os.path.dirname(path), ds.get("file"))
+        if not os.path.isfile(target):
+            fail(f"{path}: entry refers to missing {target}")
+        meshio.read(target)  # every referenced file must be readable
+        entries.append({"time": repr(float(ds.get("timestep"))), "file": ds.get("file")})
+    return {"entries": entries}
+
+
+def dump(paths):
+    out = {}
+    for p in paths:
+        out[p] = dump_pvd(p) if p.endswith(".pvd") else dump_vtu(p)
+    json.dump(out, sys.stdout)
+
+
 def main():
+    if len(sys.argv) >= 3 and sys.argv[1] == "--dump":
+        dump(sys.argv[2:])
+        return
     if len(sys.argv) != 2:
         print(__doc__)
         sys.exit(2)

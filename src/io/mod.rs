@@ -1,11 +1,16 @@
 //! Case files in, results out. Nothing numerical here.
 //!
-//! A case file is TOML; its `[problem] kind` selects the problem type. Implemented so far:
-//! `kind = "material-path"`, the three-way design-sensitivity check of a material point driven
-//! along a strain path (see `verification/material-point-path/case.toml` for an annotated
-//! example).
+//! A case file is TOML; its `[problem] kind` selects the problem type:
+//! - `kind = "material-path"`: the three-way design-sensitivity check of a material point driven
+//!   along a strain path (see `verification/material-point-path/case.toml` for an annotated
+//!   example);
+//! - `kind = "shell"`: a whole shell problem ([`shell_case`]; format in `docs/case-format.md`),
+//!   assembled by [`shell_build`] and written by [`shell_output`].
 
 pub mod plot;
+pub mod shell_build;
+pub mod shell_case;
+pub mod shell_output;
 pub mod vtu;
 
 use crate::material::{MaterialError, MaterialParams, Vec5};
@@ -32,6 +37,15 @@ pub enum CaseError {
         path: PathBuf,
         /// Parser message.
         message: String,
+    },
+    /// The `[surface]` table describes no valid surface (the geometry error names the field,
+    /// its value and what was expected).
+    #[error("case file {path}: `surface`: {source}")]
+    Surface {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: crate::geometry::GeometryError,
     },
     /// A value outside its admissible range.
     #[error("case file {path}: `{key}` = {value} is invalid: expected {expected}")]
@@ -185,11 +199,13 @@ pub struct MaterialPathCase {
 #[derive(Debug, Clone)]
 pub enum Case {
     /// `kind = "material-path"`.
-    MaterialPath(MaterialPathCase),
+    MaterialPath(Box<MaterialPathCase>),
+    /// `kind = "shell"`.
+    Shell(Box<shell_case::ShellCase>),
 }
 
 /// Problem kinds this build understands.
-pub const KINDS: &[&str] = &["material-path"];
+pub const KINDS: &[&str] = &["material-path", "shell"];
 
 /// Read and validate a case file.
 pub fn read_case(path: &Path) -> Result<Case, CaseError> {
@@ -228,6 +244,7 @@ pub fn parse_case(text: &str, path: &Path) -> Result<Case, CaseError> {
             let f: MaterialPathFile = toml::from_str(text).map_err(parse_err)?;
             material_path_case(f, path)
         }
+        Some("shell") => shell_case::parse_shell_case(text, path).map(|c| Case::Shell(Box::new(c))),
         Some(other) => Err(invalid(
             "problem.kind",
             format!("{other:?}"),
@@ -241,14 +258,9 @@ pub fn parse_case(text: &str, path: &Path) -> Result<Case, CaseError> {
     }
 }
 
-fn material_path_case(f: MaterialPathFile, path: &Path) -> Result<Case, CaseError> {
-    let invalid = |key: &str, value: String, expected: &str| CaseError::Invalid {
-        path: path.into(),
-        key: key.into(),
-        value,
-        expected: expected.into(),
-    };
-    let m = f.material;
+/// Validated material parameters of a `[material]` table (shared by every problem kind); an
+/// error names `material.<parameter>`, its value and the admissible range.
+fn material_from_spec(m: &MaterialSpec, path: &Path) -> Result<MaterialParams<f64>, CaseError> {
     let material = MaterialParams {
         young: m.young,
         poisson: m.poisson,
@@ -257,14 +269,35 @@ fn material_path_case(f: MaterialPathFile, path: &Path) -> Result<Case, CaseErro
         hardening: m.hardening,
         beta: m.beta,
     };
+    let invalid = |key: String, value: String, expected: String| CaseError::Invalid {
+        path: path.into(),
+        key,
+        value,
+        expected,
+    };
     material.validate().map_err(|e| match e {
         MaterialError::InvalidParameter {
             name,
             value,
             expected,
-        } => invalid(&format!("material.{name}"), value.to_string(), expected),
-        other => invalid("material", String::new(), &other.to_string()),
+        } => invalid(
+            format!("material.{name}"),
+            value.to_string(),
+            expected.to_string(),
+        ),
+        other => invalid("material".into(), String::new(), other.to_string()),
     })?;
+    Ok(material)
+}
+
+fn material_path_case(f: MaterialPathFile, path: &Path) -> Result<Case, CaseError> {
+    let invalid = |key: &str, value: String, expected: &str| CaseError::Invalid {
+        path: path.into(),
+        key: key.into(),
+        value,
+        expected: expected.into(),
+    };
+    let material = material_from_spec(&f.material, path)?;
     let r = f.design.material_rate;
     let material_rate = MaterialParams {
         young: r.young,
@@ -365,7 +398,7 @@ fn material_path_case(f: MaterialPathFile, path: &Path) -> Result<Case, CaseErro
     mp.material = material;
     mp.material_rate = material_rate;
     mp.tau = f.design.tau;
-    Ok(Case::MaterialPath(MaterialPathCase {
+    Ok(Case::MaterialPath(Box::new(MaterialPathCase {
         title: f
             .problem
             .title
@@ -374,7 +407,7 @@ fn material_path_case(f: MaterialPathFile, path: &Path) -> Result<Case, CaseErro
         path: mp,
         fd_step: h,
         check: f.check.unwrap_or_default(),
-    }))
+    })))
 }
 
 #[cfg(test)]
@@ -406,7 +439,9 @@ rate = [1e-4, 0.0, 0.0, 0.0, 0.0]
 
     #[test]
     fn good_case_parses() {
-        let Case::MaterialPath(c) = parse_case(GOOD, Path::new("case.toml")).unwrap();
+        let Case::MaterialPath(c) = parse_case(GOOD, Path::new("case.toml")).unwrap() else {
+            panic!("a material-path case")
+        };
         assert_eq!(c.path.n_steps(), 3);
         assert_eq!(c.path.material_rate.young, 21000.0);
         assert_eq!(c.path.material.shear_factor, 5.0 / 6.0);
@@ -425,9 +460,9 @@ rate = [1e-4, 0.0, 0.0, 0.0, 0.0]
         assert!(e.contains("material.sigma0") && e.contains("-1"), "{e}");
         let e = err(&GOOD.replace("steps = 3", "steps = 0"));
         assert!(e.contains("path.segment[0].steps"), "{e}");
-        let e = err(&GOOD.replace("kind = \"material-path\"", "kind = \"shell\""));
+        let e = err(&GOOD.replace("kind = \"material-path\"", "kind = \"plate\""));
         assert!(
-            e.contains("problem.kind") && e.contains("shell") && e.contains("material-path"),
+            e.contains("problem.kind") && e.contains("plate") && e.contains("material-path"),
             "{e}"
         );
         // Unknown key (a typo) is named by the TOML layer.

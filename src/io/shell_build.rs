@@ -1,0 +1,527 @@
+//! From a checked [`ShellCase`] to a running shell analysis: particles, supports, quadrature,
+//! model, boundary conditions, loads, the Newton driver, and the run loop that writes results
+//! after every converged step ([`crate::io::shell_output`]).
+//!
+//! The file has two halves:
+//! - **stable**: particle grid, cell quadrature, the [`Discretisation`], driver options and the
+//!   run loop. They use APIs that are settled (meshfree, quadrature, solver, model output).
+//! - **the problem seam** (section "API seam" below): [`unsupported`], [`connect`], [`driver`]
+//!   and [`problem_model`]. Only these know how boundary conditions, symmetry planes and loads
+//!   reach [`ShellProblem`], and which driver options exist. Today `ShellProblem` imposes
+//!   essential conditions on particles by the transformation method, with nodal values fixed at
+//!   zero, and takes one dead load vector; what that cannot express is listed by
+//!   [`unsupported`] (and rejected by [`connect`]) with the key of the case file, so a case
+//!   using it fails before any computation, naming what is missing.
+
+use super::shell_case::{
+    edge_name, Boundary, CellLayout, Component, Load, Location, PredictorKind, ShellCase,
+};
+use super::shell_output::{OutputError, OutputGrid, ShellOutput, StepSummary};
+use crate::meshfree::quadrature::{CellQuadrature, QuadratureError};
+use crate::meshfree::transform::{edge_particles, Edge};
+use crate::meshfree::{jittered_grid, ParticleGrid};
+use crate::shell::load::{ExternalLoad, PointForce};
+use crate::shell::model::{Discretisation, ShellModel};
+use crate::shell::point::DOFS_PER_PARTICLE;
+use crate::shell::problem::ShellProblem;
+use crate::solver::{
+    ConvergedStep, LinearSolver, LoadStepping, Method, NewtonOptions, NewtonSolver,
+    NonlinearProblem, ProblemError, SolverError, SolverOptions, SparsityPattern, StepRecord,
+};
+use serde_json::json;
+use std::path::Path;
+use std::time::Instant;
+use thiserror::Error;
+
+/// Errors assembling or running a shell case. Each names the case-file key concerned.
+#[derive(Debug, Error)]
+pub enum BuildError {
+    /// The case is valid but the model cannot be built from it (e.g. too few particles in a
+    /// support).
+    #[error("`{key}`: {message}")]
+    Model {
+        /// Case-file key most directly responsible.
+        key: String,
+        /// What failed.
+        message: String,
+    },
+    /// A feature of the case that the shell problem cannot express yet.
+    #[error("`{key}`: {what} is not available in this build: {needs}")]
+    Unsupported {
+        /// Case-file key.
+        key: String,
+        /// The feature.
+        what: String,
+        /// What is missing.
+        needs: String,
+    },
+    /// Sparse solver set-up.
+    #[error("linear solver: {0}")]
+    Solver(#[from] SolverError),
+    /// Writing results.
+    #[error(transparent)]
+    Output(#[from] OutputError),
+}
+
+fn model_err(key: &str, e: impl std::fmt::Display) -> BuildError {
+    BuildError::Model {
+        key: key.into(),
+        message: e.to_string(),
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Stable half.
+
+/// The particle grid of the case on the surface's parameter box.
+pub fn particle_grid(case: &ShellCase) -> ParticleGrid {
+    let p = &case.particles;
+    // Ranges were checked with the case (counts >= 2, jitter in [0, 0.5)), so this cannot panic.
+    jittered_grid(case.param_box, p.counts[0], p.counts[1], p.jitter, p.seed)
+}
+
+/// The background-cell quadrature of the case.
+pub fn cell_quadrature(
+    case: &ShellCase,
+    grid: &ParticleGrid,
+) -> Result<CellQuadrature, BuildError> {
+    let i = &case.integration;
+    let e = |e: QuadratureError| model_err("integration", e);
+    match i.cells {
+        CellLayout::PerParticleSpacing { subdivide } => {
+            CellQuadrature::for_particle_grid(grid, subdivide, i.gauss).map_err(e)
+        }
+        CellLayout::Counts([nu, nv]) => {
+            CellQuadrature::new(case.param_box, nu, nv, i.gauss).map_err(e)
+        }
+    }
+}
+
+/// The discretisation (particles, supports, basis, quadrature, thickness rule).
+pub fn discretisation(
+    case: &ShellCase,
+    grid: &ParticleGrid,
+    cq: &CellQuadrature,
+) -> Result<Discretisation, BuildError> {
+    let rule = case
+        .integration
+        .thickness_rule
+        .rule()
+        .map_err(|e| model_err("integration.thickness_points", e))?;
+    Ok(Discretisation {
+        particle_uv: grid.positions.clone(),
+        supports: grid.supports(case.kernel.support),
+        basis: case.kernel.basis,
+        quadrature: cq.iter().map(|(p, w, _)| (p, w)).collect(),
+        thickness_rule: rule
+            .nodes
+            .iter()
+            .copied()
+            .zip(rule.weights.iter().copied())
+            .collect(),
+        thickness: case.thickness,
+    })
+}
+
+/// Load stepping and Newton tolerances of `[steps]` (everything but the predictor, which
+/// [`driver`] maps).
+pub fn newton_settings(case: &ShellCase) -> (NewtonOptions, LoadStepping) {
+    let s = &case.steps;
+    (
+        NewtonOptions {
+            residual_rtol: s.residual_rtol,
+            residual_atol: s.residual_atol,
+            energy_rtol: s.energy_rtol,
+            energy_atol: s.energy_atol,
+            max_iterations: s.max_iterations,
+            ..NewtonOptions::default()
+        },
+        LoadStepping {
+            start: 0.0,
+            end: s.final_load,
+            initial_step: s.initial_step,
+            min_step: s.min_step,
+            max_step: s.max_step,
+            cut_factor: s.cut_factor,
+            grow_factor: s.grow_factor,
+            ..LoadStepping::default()
+        },
+    )
+}
+
+/// Particles on `edge` of the parameter box (within 1e-9 of the box size: grid particles on
+/// an edge sit on it to round-off, interior ones are at least a fraction of a spacing away).
+fn particles_on(case: &ShellCase, uv: &[[f64; 2]], edge: Edge) -> Vec<usize> {
+    let b = &case.param_box;
+    let size = (b.hi[0] - b.lo[0]).max(b.hi[1] - b.lo[1]);
+    edge_particles(uv, b, edge, 1e-9 * size)
+}
+
+/// The particle at parameter point `at` (same tolerance as [`particles_on`]), if any.
+fn particle_at(case: &ShellCase, uv: &[[f64; 2]], at: [f64; 2]) -> Option<usize> {
+    let b = &case.param_box;
+    let size = (b.hi[0] - b.lo[0]).max(b.hi[1] - b.lo[1]);
+    uv.iter()
+        .position(|p| (p[0] - at[0]).abs() <= 1e-9 * size && (p[1] - at[1]).abs() <= 1e-9 * size)
+}
+
+// ---------------------------------------------------------------------------------------------
+// API seam: the only code that knows how conditions and loads reach `ShellProblem`, and which
+// options the driver has. To connect the rewritten problem (symmetry images, Lagrange-multiplier
+// constraints, `Vec<Box<dyn ExternalLoad>>`) and the driver's predictor, change these four
+// functions and remove the entries of `unsupported` that become possible.
+
+/// Features of `case` the current [`ShellProblem`] and driver cannot express, each as the
+/// error [`connect`] or [`driver`] would return. Empty when the case can run.
+pub fn unsupported(case: &ShellCase) -> Vec<BuildError> {
+    let grid = particle_grid(case);
+    let uv = &grid.positions;
+    let mut out = Vec::new();
+    let un = |key: String, what: &str, needs: &str| BuildError::Unsupported {
+        key,
+        what: what.into(),
+        needs: needs.into(),
+    };
+    for (k, b) in case.boundary.iter().enumerate() {
+        let key = format!("boundary[{k}]");
+        match b {
+            Boundary::Symmetry { edge, .. } => out.push(un(
+                format!("{key}.kind"),
+                &format!("a symmetry plane on edge {}", edge_name(*edge)),
+                "image particles (ShellModel symmetry planes) are not in the shell problem yet",
+            )),
+            Boundary::Prescribed { .. } => out.push(un(
+                format!("{key}.kind"),
+                "a prescribed (non-zero) displacement",
+                "ShellProblem holds constrained nodal values at zero only",
+            )),
+            Boundary::Fixed {
+                location: Location::Point(at),
+                ..
+            } if particle_at(case, uv, *at).is_none() => out.push(un(
+                format!("{key}.at"),
+                &format!(
+                    "a point condition at (u, v) = ({}, {}) between particles",
+                    at[0], at[1]
+                ),
+                "the transformation method constrains particles only: put `at` on a particle \
+                 of the grid",
+            )),
+            _ => {}
+        }
+    }
+    for (k, l) in case.loads.iter().enumerate() {
+        let what = match l {
+            Load::PointForce { .. } => continue,
+            Load::Pressure { .. } => "a follower pressure",
+            Load::Gravity { .. } => "a gravity (per-area) load",
+            Load::Moment { .. } => "an edge moment",
+        };
+        out.push(un(
+            format!("load[{k}].kind"),
+            what,
+            "shell::load has only PointForce in this build",
+        ));
+    }
+    if case.steps.predictor == Some(PredictorKind::Secant) {
+        out.push(un(
+            "steps.predictor".into(),
+            "the secant predictor",
+            "the Newton driver has no predictor option in this build",
+        ));
+    }
+    out
+}
+
+/// Build the model and the shell problem: surface, discretisation, essential conditions and
+/// loads. Rejects what [`unsupported`] lists.
+pub fn connect(case: &ShellCase, disc: Discretisation) -> Result<ShellProblem, BuildError> {
+    if let Some(e) = unsupported(case).into_iter().next() {
+        return Err(e);
+    }
+    let uv = disc.particle_uv.clone();
+    let model = ShellModel::new(&case.surface, disc, case.material)
+        .map_err(|e| model_err("kernel.support", e))?;
+
+    // Essential conditions: (particle, component) nodal values held at zero.
+    let mut fixed: Vec<(usize, usize)> = Vec::new();
+    let mut hold = |parts: &[usize], comps: &[Component]| {
+        for &p in parts {
+            fixed.extend(comps.iter().map(|c| (p, c.index())));
+        }
+    };
+    for b in &case.boundary {
+        match b {
+            Boundary::Clamped { edge } => hold(&particles_on(case, &uv, *edge), &Component::ALL),
+            Boundary::SimplySupported { edge } => hold(
+                &particles_on(case, &uv, *edge),
+                &[Component::Ux, Component::Uy, Component::Uz],
+            ),
+            Boundary::Fixed {
+                location,
+                components,
+            } => {
+                let parts = match location {
+                    Location::Edge(e) => particles_on(case, &uv, *e),
+                    Location::Point(at) => particle_at(case, &uv, *at).into_iter().collect(),
+                };
+                hold(&parts, components)
+            }
+            Boundary::Symmetry { .. } | Boundary::Prescribed { .. } => {
+                unreachable!("rejected by `unsupported`")
+            }
+        }
+    }
+    fixed.sort_unstable();
+    fixed.dedup();
+    let mut constrained: Vec<usize> = fixed.iter().map(|&(p, _)| p).collect();
+    constrained.dedup();
+
+    // Loads at load factor 1.
+    let mut f = vec![0.0; model.n_dofs()];
+    let zero = vec![0.0; model.n_dofs()];
+    for (k, l) in case.loads.iter().enumerate() {
+        let load: Box<dyn ExternalLoad> = match l {
+            Load::PointForce { at, force } => Box::new(PointForce {
+                uv: *at,
+                force: *force,
+            }),
+            _ => unreachable!("rejected by `unsupported`"),
+        };
+        load.add_force(&model, &zero, 1.0, &mut f)
+            .map_err(|e| model_err(&format!("load[{k}]"), e))?;
+    }
+    debug_assert_eq!(f.len(), DOFS_PER_PARTICLE * uv.len());
+    ShellProblem::new(model, &constrained, &fixed, f).map_err(|e| model_err("boundary", e))
+}
+
+/// The Newton driver of `[steps]`.
+pub fn driver(case: &ShellCase) -> Result<NewtonSolver, BuildError> {
+    if case.steps.predictor == Some(PredictorKind::Secant) {
+        return Err(BuildError::Unsupported {
+            key: "steps.predictor".into(),
+            what: "the secant predictor".into(),
+            needs: "the Newton driver has no predictor option in this build".into(),
+        });
+    }
+    let (options, stepping) = newton_settings(case);
+    Ok(NewtonSolver { options, stepping })
+}
+
+/// The committed shell model inside the problem.
+pub fn problem_model(p: &ShellProblem) -> &ShellModel {
+    &p.model
+}
+
+/// The sparse pattern of the problem's tangent.
+pub fn problem_pattern(p: &ShellProblem) -> &SparsityPattern {
+    p.pattern()
+}
+
+// ---------------------------------------------------------------------------------------------
+// Run.
+
+/// A shell case ready to run.
+#[derive(Debug)]
+pub struct BuiltShell {
+    /// The problem (model inside).
+    pub problem: ShellProblem,
+    /// The background cells (the output grid's cells).
+    pub quadrature: CellQuadrature,
+    /// The driver.
+    pub newton: NewtonSolver,
+    /// Number of particles.
+    pub n_particles: usize,
+}
+
+/// Build everything for `case` (no output written).
+pub fn build(case: &ShellCase) -> Result<BuiltShell, BuildError> {
+    let grid = particle_grid(case);
+    let cq = cell_quadrature(case, &grid)?;
+    let disc = discretisation(case, &grid, &cq)?;
+    let newton = driver(case)?;
+    let problem = connect(case, disc)?;
+    Ok(BuiltShell {
+        problem,
+        quadrature: cq,
+        newton,
+        n_particles: grid.len(),
+    })
+}
+
+/// How a run ended.
+#[derive(Clone, Debug, PartialEq)]
+pub enum RunStatus {
+    /// Reached the final load factor.
+    Complete,
+    /// Stopped before it (the reason); every converged step was written.
+    Failed(String),
+}
+
+impl RunStatus {
+    /// `"complete"` or `"failed: <reason>"` (as in results.json).
+    pub fn label(&self) -> String {
+        match self {
+            RunStatus::Complete => "complete".into(),
+            RunStatus::Failed(r) => format!("failed: {r}"),
+        }
+    }
+}
+
+/// The result of [`run`].
+#[derive(Clone, Debug)]
+pub struct RunSummary {
+    /// How it ended.
+    pub status: RunStatus,
+    /// The converged steps.
+    pub steps: Vec<StepSummary>,
+    /// Step attempts (converged or cut).
+    pub attempts: usize,
+    /// Wall time of the whole run, model building included.
+    pub wall_time_s: f64,
+}
+
+/// The problem as the driver sees it, plus a hook after every commit: `on_commit` sees the
+/// committed problem and the step's record (from [`NonlinearProblem::on_converged`]). An error
+/// of the hook stops the run at the next evaluation (as a fatal problem error).
+struct Observed<'a, P, F, E> {
+    inner: &'a mut P,
+    record: Option<StepRecord>,
+    error: Option<E>,
+    on_commit: F,
+}
+
+impl<P, F, E: std::fmt::Display> Observed<'_, P, F, E> {
+    fn check(&self) -> Result<(), ProblemError> {
+        match &self.error {
+            Some(e) => Err(ProblemError::Fatal(format!("writing results: {e}"))),
+            None => Ok(()),
+        }
+    }
+}
+
+impl<P, F, E> NonlinearProblem for Observed<'_, P, F, E>
+where
+    P: NonlinearProblem,
+    F: FnMut(&P, &StepRecord) -> Result<(), E>,
+    E: std::fmt::Display,
+{
+    fn n_dofs(&self) -> usize {
+        self.inner.n_dofs()
+    }
+    fn residual(&mut self, u: &[f64], load: f64, r: &mut [f64]) -> Result<(), ProblemError> {
+        self.check()?;
+        self.inner.residual(u, load, r)
+    }
+    fn tangent(&mut self, u: &[f64], load: f64, values: &mut [f64]) -> Result<(), ProblemError> {
+        self.check()?;
+        self.inner.tangent(u, load, values)
+    }
+    fn residual_and_tangent(
+        &mut self,
+        u: &[f64],
+        load: f64,
+        r: &mut [f64],
+        values: &mut [f64],
+    ) -> Result<(), ProblemError> {
+        self.check()?;
+        self.inner.residual_and_tangent(u, load, r, values)
+    }
+    fn essential(&self, load: f64) -> Vec<(usize, f64)> {
+        self.inner.essential(load)
+    }
+    fn force_norm(&self, load: f64) -> f64 {
+        self.inner.force_norm(load)
+    }
+    fn on_converged(&mut self, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
+        self.inner.on_converged(step)?;
+        self.record = Some(step.record.clone());
+        Ok(())
+    }
+    fn commit(&mut self, u: &[f64], load: f64) {
+        self.inner.commit(u, load);
+        if let Some(rec) = self.record.take() {
+            if self.error.is_none() {
+                if let Err(e) = (self.on_commit)(self.inner, &rec) {
+                    self.error = Some(e);
+                }
+            }
+        }
+    }
+    fn restore(&mut self) {
+        self.record = None;
+        self.inner.restore();
+    }
+}
+
+/// Run a built case: write the initial state, drive Newton to the final load factor writing
+/// results after every converged step (`progress` sees each step's summary), then the final
+/// results.json and plot. A Newton failure is a [`RunStatus::Failed`] (results kept), not an
+/// error; errors are output failures.
+pub fn run(
+    case: &ShellCase,
+    built: &mut BuiltShell,
+    out: &Path,
+    start: Instant,
+    mut progress: impl FnMut(&StepSummary),
+) -> Result<RunSummary, BuildError> {
+    let grid = OutputGrid::new(&built.quadrature, case.output.subdivide)?;
+    let mut output = ShellOutput::new(
+        out,
+        &case.path.display().to_string(),
+        &case.title,
+        &case.monitors,
+        case.output,
+        grid,
+        case.steps.final_load,
+        start,
+    )?;
+    let n = built.problem.n_dofs();
+    output.set_info("n_particles", json!(built.n_particles));
+    output.set_info("n_unknowns", json!(n));
+    output.set_info("final_load", json!(case.steps.final_load));
+    output.initial(problem_model(&built.problem), &case.surface)?;
+
+    let pattern = problem_pattern(&built.problem).clone();
+    let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default())?;
+    let surface = &case.surface;
+    let mut obs = Observed {
+        inner: &mut built.problem,
+        record: None,
+        error: None,
+        on_commit: |p: &ShellProblem, rec: &StepRecord| {
+            let s = output.converged(problem_model(p), surface, rec)?;
+            progress(s);
+            Ok::<(), OutputError>(())
+        },
+    };
+    let result =
+        built
+            .newton
+            .run_with_progress(&mut obs, &pattern, &mut solver, &vec![0.0; n], |_| {});
+    let hook_error = obs.error.take();
+    drop(obs);
+    let (status, attempts) = match result {
+        Ok(report) => (RunStatus::Complete, report.attempts),
+        Err(f) => (RunStatus::Failed(f.to_string()), f.report.attempts.clone()),
+    };
+    let model = problem_model(&built.problem);
+    if let Some(e) = hook_error {
+        // Writing a step's results failed and stopped the run: that is the error to report.
+        // Leave a final status in results.json if the disk still takes it.
+        let _ = output.finish(
+            model,
+            &case.surface,
+            &format!("failed: writing results: {e}"),
+            &attempts,
+        );
+        return Err(BuildError::Output(e));
+    }
+    output.finish(model, &case.surface, &status.label(), &attempts)?;
+    Ok(RunSummary {
+        status,
+        steps: output.steps().to_vec(),
+        attempts: attempts.len(),
+        wall_time_s: start.elapsed().as_secs_f64(),
+    })
+}

@@ -1,0 +1,693 @@
+//! Shell results: a VTU of the mid-surface per converged step with a PVD collection,
+//! `results.json` rewritten after every converged step, and a load–displacement plot of the
+//! monitors at the end.
+//!
+//! # The VTU of a step
+//!
+//! The mid-surface is drawn on a structured grid of the parameter domain whose quads are the
+//! integration (background) cells, each optionally split `subdivide × subdivide` times. Points
+//! are the **initial** positions `x̄⁰(ξ)` (exact, from the CAD surface); the deformed shape is
+//! ParaView's "Warp by vector" with the point array `displacement` (scale 1).
+//!
+//! Point data (at every grid node, from [`ShellModel::sample`]):
+//! - `displacement`: `ū(ξ) = Σ Ψ_I ū_I` (3);
+//! - `director`: the unit current director `d/|d|`, `d = n⁰ + Σ Ψ_I (d_I − d_I⁰)` (3);
+//! - `director_rotation`: the rotation vector `θ a` taking the initial normal `n⁰` to `d/|d|`
+//!   by the shortest rotation: `a = n⁰ × d̂ / |n⁰ × d̂|`, `θ = atan2(|n⁰ × d̂|, n⁰ · d̂)` (3).
+//!   It has no drilling component (the director carries none).
+//!
+//! Cell data (per visualisation quad, the values of its integration cell):
+//! - `N` = `[N11, N22, N12]`, `M` = `[M11, M22, M12]`, `Q` = `[Q1, Q2]`: stress resultants per
+//!   unit length, integrated through the thickness from the committed layer stresses
+//!   (`N = Σ_l w_l (t/2) σ_l`, `M = Σ_l w_l (t/2) (ζ_l t/2) σ_l`, `Q_α = Σ_l w_l (t/2) σ_α3,l`).
+//!   Each layer stress is first resolved (eq 26 twice, `σᶜ = Qᶜ Qᵀ σˡ Q Qᶜᵀ`) in one frame per
+//!   point, the **initial lamina frame carried by the director**: the initial frame `Q⁰` (rows
+//!   `e1 = x̄⁰,1/|x̄⁰,1|`, `e2 = n⁰ × e1`, `n⁰`) rotated by the shortest rotation taking `n⁰` to
+//!   the current director `d/|d|`. It is the initial lamina frame in the undeformed state and
+//!   follows the shell through large rotations, so that `N11` stays the membrane force along
+//!   the (rotated) first parametric direction, `Q1` the shear force on that section, and so
+//!   on; the layers' own frames differ from it only by their in-plane (drilling) rotation.
+//!   `M` is positive when the stress grows towards the director (`ζ = +1`). `t` is the initial
+//!   thickness (the shell model has no thickness change);
+//! - `eps_p_top`, `eps_p_mid`, `eps_p_bottom`: equivalent plastic strain `ē^p` (eq 15) of the
+//!   layer nearest `ζ = +1`, the layers nearest `ζ = 0` (averaged if two are equally near, as
+//!   for an even Gauss rule), and the layer nearest `ζ = −1`;
+//! - `von_mises_top`, `von_mises_bottom`: the von Mises stress of the top and bottom layers
+//!   (including the transverse shears, [`crate::material::von_mises`]).
+//!
+//! Every cell value is the area-weighted mean over the cell's quadrature points (weights
+//! `w_k |x̄⁰,1 × x̄⁰,2|`, the initial area element).
+//!
+//! # results.json
+//!
+//! `{"case", "title", "wall_time_s", "status", "steps": [...]}`. While running, `status` is
+//! `"running"` and `steps` lists the converged steps; at the end it is `"complete"` or
+//! `"failed: <reason>"` and `steps` lists every step attempt in order (converged or cut), each
+//! `{"step", "load_factor", "iterations", "residual_norms", "converged", "monitors"}`, with
+//! `"monitors": {NAME: {"displacement": [ux, uy, uz]}}` for converged steps and `null` (plus
+//! `"failure"`) for rejected ones. The file is written to `results.json.tmp` and renamed, so a
+//! reader never sees half a file.
+
+use super::shell_case::{Monitor, OutputSpec};
+use super::vtu::{PvdCollection, VtuError, VtuMesh, VtuWriter};
+use crate::geometry::Surface;
+use crate::kinematics::{global_stress, local_stress, stress_from_vec5};
+use crate::material::von_mises;
+use crate::meshfree::quadrature::CellQuadrature;
+use crate::meshfree::ParamBox;
+use crate::shell::model::ShellModel;
+use crate::shell::ShellError;
+use crate::solver::StepRecord;
+use nalgebra::{Matrix3, Rotation3, Vector3};
+use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+use thiserror::Error;
+
+/// Errors writing shell results.
+#[derive(Debug, Error)]
+pub enum OutputError {
+    /// A VTU or PVD file.
+    #[error(transparent)]
+    Vtu(#[from] VtuError),
+    /// Another file.
+    #[error("cannot write {path}: {source}")]
+    Io {
+        /// File or directory.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// JSON serialisation.
+    #[error("results.json: {0}")]
+    Json(#[from] serde_json::Error),
+    /// The plot.
+    #[error("{0}")]
+    Plot(String),
+    /// Sampling the model.
+    #[error("sampling the shell: {0}")]
+    Model(#[from] ShellError),
+    /// The output grid does not match the model's quadrature.
+    #[error("output grid: {0}")]
+    Grid(String),
+}
+
+fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError + '_ {
+    move |source| OutputError::Io {
+        path: path.to_owned(),
+        source,
+    }
+}
+
+/// The visualisation grid: the integration cells of a [`CellQuadrature`], each split
+/// `subdivide × subdivide` times, and which cell every quadrature point of the model lies in.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OutputGrid {
+    param_box: ParamBox,
+    n_cells: [usize; 2],
+    subdivide: usize,
+    point_cell: Vec<usize>,
+}
+
+impl OutputGrid {
+    /// The grid of `cq`'s cells, split `subdivide ≥ 1` times per direction. The model using it
+    /// must have been built on `cq`'s points, in `cq`'s order ([`OutputGrid::check_model`]).
+    pub fn new(cq: &CellQuadrature, subdivide: usize) -> Result<Self, OutputError> {
+        if subdivide == 0 {
+            return Err(OutputError::Grid("subdivide = 0: expected >= 1".into()));
+        }
+        Ok(OutputGrid {
+            param_box: cq.param_box(),
+            n_cells: cq.n_cells(),
+            subdivide,
+            point_cell: cq.cells().to_vec(),
+        })
+    }
+
+    /// Check that the model's in-plane quadrature points are this grid's (same count; each
+    /// point inside the box of the cell it is assigned to, within round-off).
+    pub fn check_model(&self, model: &ShellModel) -> Result<(), OutputError> {
+        if model.points.len() != self.point_cell.len() {
+            return Err(OutputError::Grid(format!(
+                "the model has {} quadrature points, the cell quadrature {}",
+                model.points.len(),
+                self.point_cell.len()
+            )));
+        }
+        let b = &self.param_box;
+        let h = [
+            (b.hi[0] - b.lo[0]) / self.n_cells[0] as f64,
+            (b.hi[1] - b.lo[1]) / self.n_cells[1] as f64,
+        ];
+        for (k, (p, &c)) in model.points.iter().zip(&self.point_cell).enumerate() {
+            let ij = [c % self.n_cells[0], c / self.n_cells[0]];
+            for a in 0..2 {
+                let lo = b.lo[a] + h[a] * ij[a] as f64;
+                // Round-off of the cell edges: 1e-12 of a cell.
+                let tol = 1e-12 * h[a];
+                if p.uv[a] < lo - tol || p.uv[a] > lo + h[a] + tol {
+                    return Err(OutputError::Grid(format!(
+                        "quadrature point {k} at {:?} is not in cell {c}",
+                        p.uv
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Grid nodes per direction: `n_cells · subdivide + 1`.
+    pub fn n_nodes(&self) -> [usize; 2] {
+        [
+            self.n_cells[0] * self.subdivide + 1,
+            self.n_cells[1] * self.subdivide + 1,
+        ]
+    }
+
+    /// Parameter coordinates of node `(i, j)` (`i` along u).
+    pub fn node_uv(&self, i: usize, j: usize) -> [f64; 2] {
+        let n = self.n_nodes();
+        let c = |k: usize, m: usize| {
+            let b = &self.param_box;
+            if m + 1 == n[k] {
+                b.hi[k]
+            } else {
+                b.lo[k] + (b.hi[k] - b.lo[k]) * m as f64 / (n[k] - 1) as f64
+            }
+        };
+        [c(0, i), c(1, j)]
+    }
+
+    /// Node parameter coordinates in VTU order (`i * n_v + j`, v fastest; see
+    /// [`VtuMesh::structured_grid`]).
+    pub fn nodes(&self) -> Vec<[f64; 2]> {
+        let n = self.n_nodes();
+        (0..n[0])
+            .flat_map(|i| (0..n[1]).map(move |j| (i, j)))
+            .map(|(i, j)| self.node_uv(i, j))
+            .collect()
+    }
+
+    /// Number of integration cells.
+    pub fn n_cells(&self) -> usize {
+        self.n_cells[0] * self.n_cells[1]
+    }
+
+    /// Integration cell (`i + n_u j`, as [`CellQuadrature::cells`]) of each visualisation quad,
+    /// in VTU order (quad `a * (n_v − 1) + b` at node `(a, b)`).
+    pub fn quad_cells(&self) -> Vec<usize> {
+        let n = self.n_nodes();
+        let s = self.subdivide;
+        (0..n[0] - 1)
+            .flat_map(|a| (0..n[1] - 1).map(move |b| (a / s) + self.n_cells[0] * (b / s)))
+            .collect()
+    }
+}
+
+/// Thickness-integrated results of one integration cell (see the module documentation).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CellResultants {
+    /// Membrane forces `[N11, N22, N12]` per unit length, initial lamina frame.
+    pub n: [f64; 3],
+    /// Moments `[M11, M22, M12]` per unit length.
+    pub m: [f64; 3],
+    /// Transverse shear forces `[Q1, Q2]` per unit length.
+    pub q: [f64; 2],
+    /// Equivalent plastic strain at the top, middle and bottom layers.
+    pub eps_p: [f64; 3],
+    /// Von Mises stress at the top and bottom layers.
+    pub von_mises: [f64; 2],
+}
+
+/// Layers nearest `ζ = +1`, nearest `ζ = 0` (all equally near), nearest `ζ = −1`.
+fn layer_choice(rule: &[(f64, f64)]) -> (usize, Vec<usize>, usize) {
+    let by = |f: &dyn Fn(f64) -> f64| {
+        (0..rule.len())
+            .min_by(|&a, &b| f(rule[a].0).total_cmp(&f(rule[b].0)))
+            .unwrap_or(0)
+    };
+    let top = by(&|z| -z);
+    let bottom = by(&|z| z);
+    let zmin = rule.iter().map(|r| r.0.abs()).fold(f64::INFINITY, f64::min);
+    let mid = (0..rule.len())
+        .filter(|&l| rule[l].0.abs() <= zmin + 1e-12)
+        .collect();
+    (top, mid, bottom)
+}
+
+/// The frame of the resultants at in-plane quadrature point `k` (rows = basis vectors): the
+/// initial lamina frame rotated by the shortest rotation from `n⁰` to the committed director
+/// `d = n⁰ + Σ Ψ_I (d_I − d_I⁰)` (see the module documentation).
+pub fn resultant_frame(model: &ShellModel, k: usize) -> Matrix3<f64> {
+    let p = &model.points[k];
+    let n0 = p.surface.n;
+    let mut d = n0;
+    for (&j, s) in p.neighbours.iter().zip(&p.shape) {
+        let q = model.particle_state(j);
+        d += (q.d - q.d0) * s.psi;
+    }
+    let r = Rotation3::from_scaled_axis(director_rotation(&n0, &d));
+    p.surface.initial_frame() * r.matrix().transpose()
+}
+
+/// Thickness-integrated results at in-plane quadrature point `k` of the committed state.
+pub fn point_resultants(model: &ShellModel, k: usize) -> CellResultants {
+    let nl = model.thickness_rule.len();
+    let half_t = model.thickness * 0.5;
+    let q0 = resultant_frame(model, k);
+    let mut r = CellResultants::default();
+    let (top, mid, bottom) = layer_choice(&model.thickness_rule);
+    for (l, &(zeta, wz)) in model.thickness_rule.iter().enumerate() {
+        let h = &model.history[k * nl + l];
+        let s0 = local_stress(
+            &q0,
+            &global_stress(&h.frame, &stress_from_vec5(&h.material.stress)),
+        );
+        let w = wz * half_t;
+        let wm = w * zeta * half_t;
+        let comps = [s0[(0, 0)], s0[(1, 1)], s0[(0, 1)]];
+        for (c, s) in comps.iter().enumerate() {
+            r.n[c] += w * s;
+            r.m[c] += wm * s;
+        }
+        r.q[0] += w * s0[(0, 2)];
+        r.q[1] += w * s0[(1, 2)];
+    }
+    let eps = |l: usize| model.history[k * nl + l].material.eps_p;
+    let vm = |l: usize| von_mises(&model.history[k * nl + l].material.stress);
+    r.eps_p = [
+        eps(top),
+        mid.iter().map(|&l| eps(l)).sum::<f64>() / mid.len().max(1) as f64,
+        eps(bottom),
+    ];
+    r.von_mises = [vm(top), vm(bottom)];
+    r
+}
+
+/// Per integration cell, the area-weighted mean of [`point_resultants`] over its quadrature
+/// points (weights `w_k |x̄⁰,1 × x̄⁰,2|`). A cell without points (impossible for a
+/// [`CellQuadrature`]) is an error.
+pub fn cell_resultants(
+    model: &ShellModel,
+    grid: &OutputGrid,
+) -> Result<Vec<CellResultants>, OutputError> {
+    grid.check_model(model)?;
+    let nc = grid.n_cells();
+    let mut sum = vec![CellResultants::default(); nc];
+    let mut area = vec![0.0; nc];
+    for (k, &c) in grid.point_cell.iter().enumerate() {
+        let p = &model.points[k];
+        let w = p.weight * p.surface.x_a[0].cross(&p.surface.x_a[1]).norm();
+        let r = point_resultants(model, k);
+        let s = &mut sum[c];
+        for i in 0..3 {
+            s.n[i] += w * r.n[i];
+            s.m[i] += w * r.m[i];
+            s.eps_p[i] += w * r.eps_p[i];
+        }
+        for i in 0..2 {
+            s.q[i] += w * r.q[i];
+            s.von_mises[i] += w * r.von_mises[i];
+        }
+        area[c] += w;
+    }
+    sum.into_iter()
+        .zip(area)
+        .enumerate()
+        .map(|(c, (s, a))| {
+            if a <= 0.0 {
+                return Err(OutputError::Grid(format!(
+                    "integration cell {c} has no quadrature point of positive weight"
+                )));
+            }
+            let d = |v: f64| v / a;
+            Ok(CellResultants {
+                n: s.n.map(d),
+                m: s.m.map(d),
+                q: s.q.map(d),
+                eps_p: s.eps_p.map(d),
+                von_mises: s.von_mises.map(d),
+            })
+        })
+        .collect()
+}
+
+/// The rotation vector taking the unit vector `n0` to the direction of `d` by the shortest
+/// rotation (zero when they are parallel; also zero, i.e. undefined, when antiparallel).
+pub fn director_rotation(n0: &Vector3<f64>, d: &Vector3<f64>) -> Vector3<f64> {
+    let dh = d.normalize();
+    let axis = n0.cross(&dh);
+    let s = axis.norm();
+    let c = n0.dot(&dh);
+    let theta = s.atan2(c);
+    if s > 0.0 {
+        axis * (theta / s)
+    } else {
+        Vector3::zeros()
+    }
+}
+
+/// The VTU of the committed state of `model` on `grid` (see the module documentation).
+pub fn shell_vtu(
+    model: &ShellModel,
+    surface: &Surface<f64>,
+    grid: &OutputGrid,
+) -> Result<VtuWriter, OutputError> {
+    let cells = cell_resultants(model, grid)?;
+    let nodes = grid.nodes();
+    let mut points = Vec::with_capacity(nodes.len());
+    let mut disp = Vec::with_capacity(nodes.len());
+    let mut dir = Vec::with_capacity(nodes.len());
+    let mut rot = Vec::with_capacity(nodes.len());
+    for &uv in &nodes {
+        let s = model.sample(surface, uv)?;
+        points.push(s.x0.into());
+        disp.push(s.displacement.into());
+        dir.push(s.director.normalize().into());
+        rot.push(director_rotation(&s.n0, &s.director).into());
+    }
+    let n = grid.n_nodes();
+    let mesh = VtuMesh::structured_grid(n[0], n[1], points)?;
+    let qc = grid.quad_cells();
+    let per = |f: &dyn Fn(&CellResultants) -> Vec<f64>| -> Vec<f64> {
+        qc.iter().flat_map(|&c| f(&cells[c])).collect()
+    };
+    Ok(VtuWriter::new(mesh)
+        .point_vector("displacement", &disp)
+        .point_vector("director", &dir)
+        .point_vector("director_rotation", &rot)
+        .cell_array("N", 3, &per(&|r| r.n.to_vec()))
+        .cell_array("M", 3, &per(&|r| r.m.to_vec()))
+        .cell_array("Q", 2, &per(&|r| r.q.to_vec()))
+        .cell_scalar("eps_p_top", &per(&|r| vec![r.eps_p[0]]))
+        .cell_scalar("eps_p_mid", &per(&|r| vec![r.eps_p[1]]))
+        .cell_scalar("eps_p_bottom", &per(&|r| vec![r.eps_p[2]]))
+        .cell_scalar("von_mises_top", &per(&|r| vec![r.von_mises[0]]))
+        .cell_scalar("von_mises_bottom", &per(&|r| vec![r.von_mises[1]])))
+}
+
+/// Displacement `ū(ξ)` of the committed state at each monitor.
+pub fn monitor_displacements(
+    model: &ShellModel,
+    surface: &Surface<f64>,
+    monitors: &[Monitor],
+) -> Result<Vec<[f64; 3]>, OutputError> {
+    monitors
+        .iter()
+        .map(|m| Ok(model.sample(surface, m.at)?.displacement.into()))
+        .collect()
+}
+
+/// What was recorded for one converged step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepSummary {
+    /// Converged step number (1-based).
+    pub step: usize,
+    /// Load factor reached.
+    pub load_factor: f64,
+    /// Newton iterations.
+    pub iterations: usize,
+    /// Residual norms of every evaluation.
+    pub residual_norms: Vec<f64>,
+    /// Monitor displacements, in the case's monitor order.
+    pub monitors: Vec<[f64; 3]>,
+    /// The VTU written for this step (relative to the output directory), if any.
+    pub vtu: Option<String>,
+}
+
+/// Writes the results of a shell run into one directory: `shell.pvd` with `steps/step_NNNN.vtu`
+/// (step 0 is the initial state), `results.json`, and `load_displacement.png`.
+#[derive(Debug)]
+pub struct ShellOutput {
+    dir: PathBuf,
+    case: String,
+    title: String,
+    monitors: Vec<Monitor>,
+    spec: OutputSpec,
+    grid: OutputGrid,
+    final_load: f64,
+    pvd: PvdCollection,
+    steps: Vec<StepSummary>,
+    start: Instant,
+    info: serde_json::Map<String, Value>,
+}
+
+/// File of the PVD collection inside the output directory.
+pub const PVD_FILE: &str = "shell.pvd";
+/// Results file inside the output directory.
+pub const RESULTS_FILE: &str = "results.json";
+/// Plot file inside the output directory.
+pub const PLOT_FILE: &str = "load_displacement.png";
+
+impl ShellOutput {
+    /// Output into `dir` (created if missing). `case` names the case (e.g. its file),
+    /// `final_load` is the load factor of the last step (always written to VTU), `start` the
+    /// start of the run (for `wall_time_s`).
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        dir: &Path,
+        case: &str,
+        title: &str,
+        monitors: &[Monitor],
+        spec: OutputSpec,
+        grid: OutputGrid,
+        final_load: f64,
+        start: Instant,
+    ) -> Result<Self, OutputError> {
+        std::fs::create_dir_all(dir).map_err(io_err(dir))?;
+        if spec.vtu {
+            let steps = dir.join("steps");
+            std::fs::create_dir_all(&steps).map_err(io_err(&steps))?;
+        }
+        Ok(ShellOutput {
+            dir: dir.to_owned(),
+            case: case.to_owned(),
+            title: title.to_owned(),
+            monitors: monitors.to_vec(),
+            spec,
+            grid,
+            final_load,
+            pvd: PvdCollection::new(dir.join(PVD_FILE)),
+            steps: Vec::new(),
+            start,
+            info: serde_json::Map::new(),
+        })
+    }
+
+    /// Extra top-level entries of results.json (model size, settings).
+    pub fn set_info(&mut self, key: &str, value: Value) {
+        self.info.insert(key.to_owned(), value);
+    }
+
+    /// The converged steps recorded so far.
+    pub fn steps(&self) -> &[StepSummary] {
+        &self.steps
+    }
+
+    /// The output directory.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    fn write_vtu(
+        &mut self,
+        model: &ShellModel,
+        surface: &Surface<f64>,
+        step: usize,
+        time: f64,
+    ) -> Result<String, OutputError> {
+        let rel = format!("steps/step_{step:04}.vtu");
+        shell_vtu(model, surface, &self.grid)?.write(&self.dir.join(&rel))?;
+        self.pvd.add_and_write(time, &rel)?;
+        Ok(rel)
+    }
+
+    /// The initial (unloaded) state as step 0 at load factor 0, and a first results.json.
+    pub fn initial(
+        &mut self,
+        model: &ShellModel,
+        surface: &Surface<f64>,
+    ) -> Result<(), OutputError> {
+        self.grid.check_model(model)?;
+        if self.spec.vtu {
+            self.write_vtu(model, surface, 0, 0.0)?;
+        }
+        self.write_results("running", None)
+    }
+
+    /// Record a converged (and committed) step: monitors, the VTU if due (every `every`-th
+    /// step and the last one), the PVD and results.json.
+    pub fn converged(
+        &mut self,
+        model: &ShellModel,
+        surface: &Surface<f64>,
+        record: &StepRecord,
+    ) -> Result<&StepSummary, OutputError> {
+        let step = self.steps.len() + 1;
+        let monitors = monitor_displacements(model, surface, &self.monitors)?;
+        let last = (self.final_load - record.load).abs() <= 1e-12 * self.final_load.abs().max(1.0);
+        let vtu = if self.spec.vtu && (step % self.spec.every == 0 || last) {
+            Some(self.write_vtu(model, surface, step, record.load)?)
+        } else {
+            None
+        };
+        self.steps.push(StepSummary {
+            step,
+            load_factor: record.load,
+            iterations: record.iterations,
+            residual_norms: record.residual_norms.clone(),
+            monitors,
+            vtu,
+        });
+        self.write_results("running", None)?;
+        Ok(self.steps.last().expect("just pushed"))
+    }
+
+    /// End of the run: the VTU of the last converged step if it was skipped by `every`, the
+    /// final results.json (`status` is `"complete"` or `"failed: ..."`; `attempts` every step
+    /// attempt of the driver, in order) and the plot.
+    pub fn finish(
+        &mut self,
+        model: &ShellModel,
+        surface: &Surface<f64>,
+        status: &str,
+        attempts: &[StepRecord],
+    ) -> Result<(), OutputError> {
+        if self.spec.vtu {
+            if let Some(k) = self.steps.len().checked_sub(1) {
+                if self.steps[k].vtu.is_none() {
+                    let (step, load) = (self.steps[k].step, self.steps[k].load_factor);
+                    self.steps[k].vtu = Some(self.write_vtu(model, surface, step, load)?);
+                }
+            }
+        }
+        self.write_results(status, Some(attempts))?;
+        if self.spec.plot && !self.monitors.is_empty() {
+            self.plot(&self.dir.join(PLOT_FILE))?;
+        }
+        Ok(())
+    }
+
+    fn monitors_json(&self, values: &[[f64; 3]]) -> Value {
+        let mut m = serde_json::Map::new();
+        for (mon, v) in self.monitors.iter().zip(values) {
+            m.insert(mon.name.clone(), json!({ "displacement": v }));
+        }
+        Value::Object(m)
+    }
+
+    fn step_json(&self, s: &StepSummary) -> Value {
+        json!({
+            "step": s.step,
+            "load_factor": s.load_factor,
+            "iterations": s.iterations,
+            "residual_norms": s.residual_norms,
+            "converged": true,
+            "monitors": self.monitors_json(&s.monitors),
+            "vtu": s.vtu,
+        })
+    }
+
+    /// The results.json document.
+    pub fn results_json(&self, status: &str, attempts: Option<&[StepRecord]>) -> Value {
+        let steps: Vec<Value> = match attempts {
+            None => self.steps.iter().map(|s| self.step_json(s)).collect(),
+            Some(att) => {
+                let mut conv = self.steps.iter();
+                let mut out = Vec::with_capacity(att.len());
+                let mut n = 0;
+                for a in att {
+                    if a.converged {
+                        if let Some(s) = conv.next() {
+                            n = s.step;
+                            out.push(self.step_json(s));
+                            continue;
+                        }
+                    }
+                    out.push(json!({
+                        "step": n + 1,
+                        "load_factor": a.load,
+                        "step_size": a.step_size,
+                        "iterations": a.iterations,
+                        "residual_norms": a.residual_norms,
+                        "converged": false,
+                        "failure": a.failure.as_ref().map(|f| f.to_string()),
+                        "monitors": Value::Null,
+                    }));
+                }
+                out
+            }
+        };
+        let mut doc = serde_json::Map::new();
+        doc.insert("case".into(), json!(self.case));
+        doc.insert("title".into(), json!(self.title));
+        doc.insert(
+            "wall_time_s".into(),
+            json!(self.start.elapsed().as_secs_f64()),
+        );
+        doc.insert("status".into(), json!(status));
+        doc.insert(
+            "monitors".into(),
+            Value::Array(
+                self.monitors
+                    .iter()
+                    .map(|m| json!({"name": m.name, "at": m.at}))
+                    .collect(),
+            ),
+        );
+        for (k, v) in &self.info {
+            doc.insert(k.clone(), v.clone());
+        }
+        doc.insert("steps".into(), Value::Array(steps));
+        Value::Object(doc)
+    }
+
+    fn write_results(
+        &self,
+        status: &str,
+        attempts: Option<&[StepRecord]>,
+    ) -> Result<(), OutputError> {
+        let text = serde_json::to_string_pretty(&self.results_json(status, attempts))?;
+        let path = self.dir.join(RESULTS_FILE);
+        let tmp = self.dir.join(format!("{RESULTS_FILE}.tmp"));
+        std::fs::write(&tmp, text).map_err(io_err(&tmp))?;
+        std::fs::rename(&tmp, &path).map_err(io_err(&path))
+    }
+
+    /// Load factor against each monitor's displacement components, one panel per monitor,
+    /// starting from the unloaded state.
+    fn plot(&self, path: &Path) -> Result<(), OutputError> {
+        use super::plot::{figure, Panel, Scale, Series};
+        let titles: Vec<String> = self
+            .monitors
+            .iter()
+            .map(|m| {
+                format!(
+                    "{}: monitor {} at (u, v) = ({}, {})",
+                    self.title, m.name, m.at[0], m.at[1]
+                )
+            })
+            .collect();
+        let panels: Vec<Panel> = (0..self.monitors.len())
+            .map(|k| Panel {
+                title: &titles[k],
+                x_label: "displacement",
+                y_label: "load factor",
+                y_scale: Scale::Linear,
+                series: ["ux", "uy", "uz"]
+                    .iter()
+                    .enumerate()
+                    .map(|(c, label)| Series {
+                        label,
+                        points: std::iter::once((0.0, 0.0))
+                            .chain(self.steps.iter().map(|s| (s.monitors[k][c], s.load_factor)))
+                            .collect(),
+                        markers: false,
+                    })
+                    .collect(),
+            })
+            .collect();
+        let height = 360 * panels.len() as u32;
+        figure(path, 900, height, &panels).map_err(OutputError::Plot)
+    }
+}
