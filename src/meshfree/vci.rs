@@ -428,7 +428,7 @@ pub struct VciCorrection {
 fn solve_moments(a: &[[f64; 3]; 3], n: usize, r: [[f64; 3]; 2]) -> Option<[[f64; 3]; 2]> {
     let mut d = [0.0; 3];
     for k in 0..n {
-        if !(a[k][k] > 0.0) {
+        if a[k][k].is_nan() || a[k][k] <= 0.0 {
             return None;
         }
         d[k] = 1.0 / a[k][k].sqrt();
@@ -440,7 +440,7 @@ fn solve_moments(a: &[[f64; 3]; 3], n: usize, r: [[f64; 3]; 2]) -> Option<[[f64;
         for k in 0..j {
             s -= l[j][k] * l[j][k];
         }
-        if !(s > 0.0) {
+        if s.is_nan() || s <= 0.0 {
             return None;
         }
         let ljj = s.sqrt();
@@ -456,7 +456,7 @@ fn solve_moments(a: &[[f64; 3]; 3], n: usize, r: [[f64; 3]; 2]) -> Option<[[f64;
         }
     }
     let cond = (pmax / pmin) * (pmax / pmin);
-    if !(cond <= VCI_MAX_CONDITION) {
+    if cond.is_nan() || cond > VCI_MAX_CONDITION {
         return None;
     }
     let mut out = [[0.0; 3]; 2];
