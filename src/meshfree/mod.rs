@@ -44,6 +44,7 @@ pub mod quadrature;
 pub mod search;
 pub mod shape;
 pub mod transform;
+pub mod vci;
 
 pub use kernel::{covers, cubic_bspline, kernel_1d, tensor_kernel};
 pub use particles::{

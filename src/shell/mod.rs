@@ -6,6 +6,7 @@
 //! quadrature point, generic over the scalar, and its consistent tangent from hand-derived
 //! directional derivatives; the director rotation ([`rotation`]).
 
+pub mod integration;
 pub mod load;
 pub mod model;
 pub mod point;
