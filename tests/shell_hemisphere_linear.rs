@@ -15,9 +15,9 @@
 //! Discretisation: quadratic basis, supports 3 spacings, one background cell per particle
 //! interval with 2×2 or 3×3 Gauss points, 2 Gauss points through the thickness (elastic);
 //! one load step through the Newton driver with faer LU at P = 1e-6, where the response is
-//! linear to ~1e-8 (the geometric nonlinearity changes δ_A by −8.6 % at P = 10, Sze et al.'s
-//! first load level, and by about 1e-5 relative at P = 1e-3, as measured by δ_A − δ_B below);
-//! displacements are reported per unit load.
+//! linear to ~1e-8: the geometric nonlinearity changes δ_A by −8.6 % at P = 10 (Sze et al.'s
+//! first load level) and δ_A, δ_B (equal in linear theory) differed by 8e-6 at P = 1e-3, so it
+//! is first order in P. Displacements are reported per unit load.
 
 use nalgebra::Vector3;
 use shelldsa::geometry::{SphereZone, Surface};

@@ -72,6 +72,8 @@ pub struct ShellProblem {
     scales: Vec<f64>,
     fixed: Vec<usize>,
     pattern: SparsityPattern,
+    /// Quadrature points of each point cell of the pattern (cells `0..groups.len()`).
+    groups: Vec<Vec<usize>>,
     /// Per constraint row, per term: slots of `(row, dof)` and `(dof, row)`.
     constraint_slots: Vec<Vec<(usize, usize)>>,
     n_q: usize,
@@ -85,12 +87,28 @@ fn fatal<E: std::fmt::Display>(e: E) -> ProblemError {
     ProblemError::Fatal(e.to_string())
 }
 
-fn assembly_error(e: AssemblyError<ShellError>) -> ProblemError {
+/// A point evaluation failure, naming the point.
+#[derive(Debug)]
+struct PointError {
+    point: usize,
+    uv: [f64; 2],
+    source: ShellError,
+}
+
+impl std::fmt::Display for PointError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "quadrature point {} at (u, v) = {:?}: {}",
+            self.point, self.uv, self.source
+        )
+    }
+}
+
+fn assembly_error(e: AssemblyError<PointError>) -> ProblemError {
     match e {
         // An inverted cell or a failed return map: a smaller step may succeed.
-        AssemblyError::Cell { cell, source } => {
-            ProblemError::Recoverable(format!("quadrature point {cell}: {source}"))
-        }
+        AssemblyError::Cell { source, .. } => ProblemError::Recoverable(source.to_string()),
         other => fatal(other),
     }
 }
@@ -205,9 +223,25 @@ impl ShellProblem {
         let n = n_q + rows.len();
 
         // Pattern: point cells, constraint cells, then any follower-load entries they miss.
-        let mut cells: Vec<Vec<usize>> = (0..model.points.len())
-            .map(|k| model.point_dofs(k))
-            .collect();
+        // Points with the same DOF list (the Gauss points of one background cell when the
+        // supports end on cell lines, as on a regular grid) share a pattern cell: their
+        // matrices are summed before the scatter, which cuts the slot map and the scatter by
+        // the number of points per cell.
+        let mut groups: Vec<Vec<usize>> = Vec::new();
+        let mut cells: Vec<Vec<usize>> = Vec::new();
+        let mut index: std::collections::HashMap<Vec<usize>, usize> =
+            std::collections::HashMap::new();
+        for k in 0..model.points.len() {
+            let dofs = model.point_dofs(k);
+            match index.get(&dofs) {
+                Some(&g) => groups[g].push(k),
+                None => {
+                    index.insert(dofs.clone(), cells.len());
+                    groups.push(vec![k]);
+                    cells.push(dofs);
+                }
+            }
+        }
         for (c, r) in rows.iter().enumerate() {
             let mut cell = vec![n_q + c];
             cell.extend(r.terms.iter().map(|t| t.0));
@@ -268,6 +302,7 @@ impl ShellProblem {
             scales,
             fixed,
             pattern,
+            groups,
             constraint_slots,
             n_q,
             committed: vec![0.0; n],
@@ -363,15 +398,42 @@ impl ShellProblem {
         let model = &self.model;
         let pattern = &self.pattern;
         let np = model.points.len();
+        let groups = &self.groups;
         let hist: Vec<OnceLock<Vec<PointHistory<f64>>>> =
             (0..np).map(|_| OnceLock::new()).collect();
         let tangent = values.is_some();
-        let point = |c: usize| -> Result<(Option<DMatrix<f64>>, DVector<f64>), ShellError> {
-            if c < np {
-                let lc = model.local(c, &q, tangent)?;
-                // Each point is evaluated once per assembly.
-                let _ = hist[c].set(lc.history);
-                Ok((lc.tangent, DVector::from_vec(lc.residual)))
+        let point = |c: usize| -> Result<(Option<DMatrix<f64>>, DVector<f64>), PointError> {
+            if let Some(group) = groups.get(c) {
+                // The points of one cell in a fixed order (deterministic sums).
+                let mut sum: Option<(Option<DMatrix<f64>>, DVector<f64>)> = None;
+                for &k in group {
+                    let lc = model.local(k, &q, tangent).map_err(|e| PointError {
+                        point: k,
+                        uv: model.points[k].uv,
+                        source: e,
+                    })?;
+                    // Each point is evaluated once per assembly.
+                    let _ = hist[k].set(lc.history);
+                    let f = DVector::from_vec(lc.residual);
+                    sum = Some(match sum {
+                        None => (lc.tangent, f),
+                        Some((km, fs)) => {
+                            let km = match (km, lc.tangent) {
+                                (Some(mut a), Some(b)) => {
+                                    a += &b;
+                                    Some(a)
+                                }
+                                _ => None,
+                            };
+                            (km, fs + f)
+                        }
+                    });
+                }
+                sum.ok_or_else(|| PointError {
+                    point: np,
+                    uv: [f64::NAN; 2],
+                    source: ShellError::InvalidInput(format!("point cell {c} is empty")),
+                })
             } else {
                 // Constraint and load cells: structure only, values added below.
                 let m = pattern.cell_dofs(c).len();
@@ -382,8 +444,10 @@ impl ShellProblem {
             Some(vals) => {
                 assemble(pattern, vals, r, self.execution, |c| {
                     let (k, f) = point(c)?;
-                    let k = k.ok_or_else(|| {
-                        ShellError::InvalidInput("tangent not computed".to_string())
+                    let k = k.ok_or_else(|| PointError {
+                        point: np,
+                        uv: [f64::NAN; 2],
+                        source: ShellError::InvalidInput("tangent not computed".to_string()),
                     })?;
                     Ok((k, f))
                 })
