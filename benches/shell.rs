@@ -35,6 +35,7 @@ fn hemisphere() -> ShellModel {
             .zip(lob.weights.iter().copied())
             .collect(),
         thickness: 0.04,
+        symmetry: Vec::new(),
     };
     let material = MaterialParams::new(6.825e7, 0.3, 2.43e5, 3.0e5, 1.0).unwrap();
     ShellModel::new(&Surface::SphereZone(sphere), disc, material).unwrap()

@@ -93,14 +93,15 @@ fn the_dense_reference_and_its_inverse_exist() {
     assert!(l.try_inverse().is_some());
 }
 
-/// The library path: [`ShellProblem`] (essential conditions by the transformation method, the
-/// transformed tangent in a sparse pattern built once) driven by the Newton solver with faer LU.
-/// At a tip load of 1e-4 the response is linear to (δ/L)² ≈ 2e-9, so one load step must reproduce
-/// the dense linear solve of `tip_deflection` (25 × 3 particles) to 1e-7 relative.
+/// The library path: [`ShellProblem`] (the clamp as exact linear constraints with Lagrange
+/// multipliers: every nodal value `Σ_I Ψ_I(ξ_J) q_I` of the particles J on u = 0 held, the same
+/// conditions as the transformation method of the dense reference; the tangent assembled
+/// straight into a sparse pattern built once) driven by the Newton solver with faer LU. At a tip
+/// load of 1e-4 the response is linear to (δ/L)² ≈ 2e-9, so one load step must reproduce the
+/// dense linear solve of `tip_deflection` (25 × 3 particles) to 1e-7 relative.
 #[test]
 fn sparse_newton_driver_reproduces_the_dense_linear_solution() {
-    use shelldsa::meshfree::transform::{edge_particles, Edge};
-    use shelldsa::meshfree::ParamBox;
+    use shelldsa::shell::constraints::{edge_constraints, EdgeCondition};
     use shelldsa::shell::problem::ShellProblem;
     use shelldsa::solver::{
         LinearSolver, LoadStepping, Method, NewtonOptions, NewtonSolver, SolverOptions,
@@ -120,13 +121,19 @@ fn sparse_newton_driver_reproduces_the_dense_linear_solution() {
             ppc: 4,
         },
     });
-    let clamped = edge_particles(&s.model.particle_uv, &ParamBox::unit(), Edge::UMin, 1e-12);
-    let fixed: Vec<(usize, usize)> = clamped
-        .iter()
-        .flat_map(|&i| (0..5).map(move |c| (i, c)))
-        .collect();
+    let clamp = edge_constraints(&s.model, Edge::UMin, &EdgeCondition::Clamped).unwrap();
+    assert_eq!(
+        clamp.len(),
+        3 * 5,
+        "3 particles on the clamped edge, 5 rows each"
+    );
     let load: Vec<f64> = s.tip_load.iter().map(|v| v * p).collect();
-    let mut problem = ShellProblem::new(s.model.clone(), &clamped, &fixed, load).unwrap();
+    let mut problem = ShellProblem::new(
+        s.model.clone(),
+        vec![Box::new(common::GeneralisedLoad(load))],
+        clamp,
+    )
+    .unwrap();
     let pattern = problem.pattern().clone();
     let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
     let newton = NewtonSolver {
@@ -139,18 +146,32 @@ fn sparse_newton_driver_reproduces_the_dense_linear_solution() {
             ..LoadStepping::default()
         },
     };
-    let n = problem.model.n_dofs();
+    let u0 = problem.state().to_vec();
     let report = newton
-        .run_with_progress(&mut problem, &pattern, &mut solver, &vec![0.0; n], |r| {
+        .run_with_progress(&mut problem, &pattern, &mut solver, &u0, |r| {
             println!("residual norms {:?}", r.residual_norms);
         })
         .expect("one linear step");
     let its: Vec<usize> = report.converged_steps().map(|r| r.iterations).collect();
-    let w = s.field(|i| problem.model.particles[i].u[2], [1.0, 0.5]) / p;
+    let w = problem.model.displacement_at([1.0, 0.5]).unwrap()[2] / p;
     println!("sparse driver: iterations {its:?}, δ/P = {w:.8} (dense linear {dense:.8})");
     assert_eq!(its.len(), 1, "a linear response converges in one load step");
     assert!(
         (w / dense - 1.0).abs() < 1e-7,
         "sparse {w} vs dense {dense}"
     );
+    // Force balance: the internal force of any state sums to zero over the particles (RK
+    // functions reproduce constants), so the z-reactions of the clamp (each row's coefficients
+    // Ψ_I(ξ_J) sum to 1) must balance the tip load P: Σ R_z = −P, up to the converged residual
+    // (rtol 1e-10 of the load); 1e-8 relative leaves round-off room.
+    let reactions = problem.reactions();
+    let rz: f64 = problem
+        .constraints()
+        .iter()
+        .zip(&reactions)
+        .filter(|(c, _)| c.label.ends_with("along (0, 0, 1)"))
+        .map(|(_, r)| r)
+        .sum();
+    println!("clamp reactions: Σ R_z = {rz:.6e} (tip load {p:e})");
+    assert!((rz + p).abs() < 1e-8 * p, "Σ R_z = {rz}, expected −{p}");
 }

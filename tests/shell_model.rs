@@ -47,6 +47,7 @@ fn model() -> ShellModel {
         quadrature: quad,
         thickness_rule: thick,
         thickness: 0.1,
+        symmetry: Vec::new(),
     };
     ShellModel::new(&surface, disc, material).unwrap()
 }

@@ -589,9 +589,18 @@ fn independent_linear_tip_deflection() -> f64 {
         quadrature: cq.iter().map(|(p, w, _)| (p, w)).collect(),
         thickness_rule: g2.nodes.iter().copied().zip(g2.weights.clone()).collect(),
         thickness: 0.1,
+        symmetry: Vec::new(),
     };
     let material = MaterialParams::new(1.2e6, 0.0, 1e30, 0.0, 1.0).unwrap();
-    let m = ShellModel::new(&surface, disc, material).unwrap();
+    let mut m = ShellModel::new(&surface, disc, material).unwrap();
+    // The case file takes the default integration (second-order VCI): the same here.
+    let rule = shelldsa::shell::integration::boundary_rule(&m, ParamBox::unit()).unwrap();
+    shelldsa::shell::integration::apply_vci(
+        &mut m,
+        shelldsa::meshfree::vci::VciOrder::Second,
+        &rule,
+    )
+    .unwrap();
     let n = m.n_dofs();
     let c = m.contributions(&vec![0.0; n], true).unwrap();
     let k = m.dense_tangent(&c);

@@ -150,6 +150,7 @@ fn model_sub(problem: &Problem, n: usize, sub: usize, ppc: usize, seed: u64) -> 
             .zip(g2.weights.iter().copied())
             .collect(),
         thickness: THICKNESS,
+        symmetry: Vec::new(),
     };
     ShellModel::new(&problem.surface, disc, material(problem.poisson)).unwrap()
 }

@@ -14,20 +14,25 @@
 //!   using it fails before any computation, naming what is missing.
 
 use super::shell_case::{
-    edge_name, Boundary, CellLayout, Component, Load, Location, PredictorKind, ShellCase,
+    Boundary, CellLayout, Component, Load, Location, PredictorKind, ShellCase,
 };
 use super::shell_output::{OutputError, OutputGrid, ShellOutput, StepSummary};
 use crate::meshfree::quadrature::{CellQuadrature, QuadratureError};
-use crate::meshfree::transform::{edge_particles, Edge};
+use crate::meshfree::vci::VciOrder;
 use crate::meshfree::{jittered_grid, ParticleGrid};
+use crate::shell::constraints::{
+    edge_constraints, ConstraintError, EdgeCondition, LinearConstraint,
+};
+use crate::shell::integration::{apply_vci, boundary_rule};
 use crate::shell::load::{ExternalLoad, PointForce};
 use crate::shell::model::{Discretisation, ShellModel};
-use crate::shell::point::DOFS_PER_PARTICLE;
 use crate::shell::problem::ShellProblem;
+use crate::shell::symmetry::SymmetryPlane;
 use crate::solver::{
     ConvergedStep, LinearSolver, LoadStepping, Method, NewtonOptions, NewtonSolver,
     NonlinearProblem, ProblemError, SolverError, SolverOptions, SparsityPattern, StepRecord,
 };
+use nalgebra::Vector3;
 use serde_json::json;
 use std::path::Path;
 use std::time::Instant;
@@ -120,6 +125,7 @@ pub fn discretisation(
             .zip(rule.weights.iter().copied())
             .collect(),
         thickness: case.thickness,
+        symmetry: Vec::new(),
     })
 }
 
@@ -149,22 +155,6 @@ pub fn newton_settings(case: &ShellCase) -> (NewtonOptions, LoadStepping) {
     )
 }
 
-/// Particles on `edge` of the parameter box (within 1e-9 of the box size: grid particles on
-/// an edge sit on it to round-off, interior ones are at least a fraction of a spacing away).
-fn particles_on(case: &ShellCase, uv: &[[f64; 2]], edge: Edge) -> Vec<usize> {
-    let b = &case.param_box;
-    let size = (b.hi[0] - b.lo[0]).max(b.hi[1] - b.lo[1]);
-    edge_particles(uv, b, edge, 1e-9 * size)
-}
-
-/// The particle at parameter point `at` (same tolerance as [`particles_on`]), if any.
-fn particle_at(case: &ShellCase, uv: &[[f64; 2]], at: [f64; 2]) -> Option<usize> {
-    let b = &case.param_box;
-    let size = (b.hi[0] - b.lo[0]).max(b.hi[1] - b.lo[1]);
-    uv.iter()
-        .position(|p| (p[0] - at[0]).abs() <= 1e-9 * size && (p[1] - at[1]).abs() <= 1e-9 * size)
-}
-
 // ---------------------------------------------------------------------------------------------
 // API seam: the only code that knows how conditions and loads reach `ShellProblem`, and which
 // options the driver has. To connect the rewritten problem (symmetry images, Lagrange-multiplier
@@ -174,42 +164,12 @@ fn particle_at(case: &ShellCase, uv: &[[f64; 2]], at: [f64; 2]) -> Option<usize>
 /// Features of `case` the current [`ShellProblem`] and driver cannot express, each as the
 /// error [`connect`] or [`driver`] would return. Empty when the case can run.
 pub fn unsupported(case: &ShellCase) -> Vec<BuildError> {
-    let grid = particle_grid(case);
-    let uv = &grid.positions;
     let mut out = Vec::new();
     let un = |key: String, what: &str, needs: &str| BuildError::Unsupported {
         key,
         what: what.into(),
         needs: needs.into(),
     };
-    for (k, b) in case.boundary.iter().enumerate() {
-        let key = format!("boundary[{k}]");
-        match b {
-            Boundary::Symmetry { edge, .. } => out.push(un(
-                format!("{key}.kind"),
-                &format!("a symmetry plane on edge {}", edge_name(*edge)),
-                "image particles (ShellModel symmetry planes) are not in the shell problem yet",
-            )),
-            Boundary::Prescribed { .. } => out.push(un(
-                format!("{key}.kind"),
-                "a prescribed (non-zero) displacement",
-                "ShellProblem holds constrained nodal values at zero only",
-            )),
-            Boundary::Fixed {
-                location: Location::Point(at),
-                ..
-            } if particle_at(case, uv, *at).is_none() => out.push(un(
-                format!("{key}.at"),
-                &format!(
-                    "a point condition at (u, v) = ({}, {}) between particles",
-                    at[0], at[1]
-                ),
-                "the transformation method constrains particles only: put `at` on a particle \
-                 of the grid",
-            )),
-            _ => {}
-        }
-    }
     for (k, l) in case.loads.iter().enumerate() {
         let what = match l {
             Load::PointForce { .. } => continue,
@@ -233,66 +193,126 @@ pub fn unsupported(case: &ShellCase) -> Vec<BuildError> {
     out
 }
 
-/// Build the model and the shell problem: surface, discretisation, essential conditions and
-/// loads. Rejects what [`unsupported`] lists.
-pub fn connect(case: &ShellCase, disc: Discretisation) -> Result<ShellProblem, BuildError> {
+/// The global axis of a displacement component, or the rotation index of a rotation one.
+fn component_target(c: Component) -> Result<Vector3<f64>, usize> {
+    match c {
+        Component::Ux => Ok(Vector3::x()),
+        Component::Uy => Ok(Vector3::y()),
+        Component::Uz => Ok(Vector3::z()),
+        Component::Rot1 => Err(0),
+        Component::Rot2 => Err(1),
+    }
+}
+
+/// The symmetry planes of the case (checked against the surface when the model is built).
+fn symmetry_planes(case: &ShellCase) -> Result<Vec<SymmetryPlane>, BuildError> {
+    case.boundary
+        .iter()
+        .enumerate()
+        .filter_map(|(k, b)| match b {
+            Boundary::Symmetry {
+                edge,
+                point,
+                normal,
+            } => Some(
+                SymmetryPlane::new(*edge, Vector3::from(*point), Vector3::from(*normal))
+                    .map_err(|e| model_err(&format!("boundary[{k}]"), e)),
+            ),
+            _ => None,
+        })
+        .collect()
+}
+
+/// Build the model and the shell problem: surface, discretisation (symmetry planes, VCI),
+/// essential conditions (exact linear constraints) and loads. Rejects what [`unsupported`]
+/// lists.
+pub fn connect(case: &ShellCase, mut disc: Discretisation) -> Result<ShellProblem, BuildError> {
     if let Some(e) = unsupported(case).into_iter().next() {
         return Err(e);
     }
-    let uv = disc.particle_uv.clone();
-    let model = ShellModel::new(&case.surface, disc, case.material)
+    disc.symmetry = symmetry_planes(case)?;
+    let mut model = ShellModel::new(&case.surface, disc, case.material)
         .map_err(|e| model_err("kernel.support", e))?;
+    if case.integration.vci != VciOrder::Off {
+        let rule =
+            boundary_rule(&model, case.param_box).map_err(|e| model_err("integration.vci", e))?;
+        apply_vci(&mut model, case.integration.vci, &rule)
+            .map_err(|e| model_err("integration.vci", e))?;
+    }
 
-    // Essential conditions: (particle, component) nodal values held at zero.
-    let mut fixed: Vec<(usize, usize)> = Vec::new();
-    let mut hold = |parts: &[usize], comps: &[Component]| {
-        for &p in parts {
-            fixed.extend(comps.iter().map(|c| (p, c.index())));
-        }
-    };
-    for b in &case.boundary {
+    let mut constraints: Vec<LinearConstraint> = Vec::new();
+    for (k, b) in case.boundary.iter().enumerate() {
+        let key = format!("boundary[{k}]");
+        let err = |e: ConstraintError| model_err(&key, e);
         match b {
-            Boundary::Clamped { edge } => hold(&particles_on(case, &uv, *edge), &Component::ALL),
-            Boundary::SimplySupported { edge } => hold(
-                &particles_on(case, &uv, *edge),
-                &[Component::Ux, Component::Uy, Component::Uz],
+            Boundary::Symmetry { .. } => {} // in the model (image particles)
+            Boundary::Clamped { edge } => constraints
+                .extend(edge_constraints(&model, *edge, &EdgeCondition::Clamped).map_err(err)?),
+            Boundary::SimplySupported { edge } => constraints.extend(
+                edge_constraints(&model, *edge, &EdgeCondition::SimplySupported).map_err(err)?,
             ),
             Boundary::Fixed {
                 location,
                 components,
             } => {
-                let parts = match location {
-                    Location::Edge(e) => particles_on(case, &uv, *e),
-                    Location::Point(at) => particle_at(case, &uv, *at).into_iter().collect(),
-                };
-                hold(&parts, components)
+                let (directions, rotations): (Vec<_>, Vec<_>) = components
+                    .iter()
+                    .map(|&c| component_target(c))
+                    .partition(Result::is_ok);
+                let directions: Vec<Vector3<f64>> =
+                    directions.into_iter().filter_map(Result::ok).collect();
+                let rotations: Vec<usize> = rotations.into_iter().filter_map(Result::err).collect();
+                match location {
+                    Location::Edge(e) => constraints.extend(
+                        edge_constraints(
+                            &model,
+                            *e,
+                            &EdgeCondition::Fixed {
+                                directions,
+                                rotations,
+                            },
+                        )
+                        .map_err(err)?,
+                    ),
+                    Location::Point(at) => {
+                        for d in directions {
+                            constraints.push(
+                                LinearConstraint::displacement(&model, *at, d, 0.0).map_err(err)?,
+                            );
+                        }
+                        for r in rotations {
+                            constraints.push(
+                                LinearConstraint::rotation(&model, *at, r, 0.0).map_err(err)?,
+                            );
+                        }
+                    }
+                }
             }
-            Boundary::Symmetry { .. } | Boundary::Prescribed { .. } => {
-                unreachable!("rejected by `unsupported`")
-            }
+            Boundary::Prescribed {
+                at,
+                component,
+                value,
+            } => match component_target(*component) {
+                Ok(d) => constraints
+                    .push(LinearConstraint::displacement(&model, *at, d, *value).map_err(err)?),
+                Err(r) => constraints
+                    .push(LinearConstraint::rotation(&model, *at, r, *value).map_err(err)?),
+            },
         }
     }
-    fixed.sort_unstable();
-    fixed.dedup();
-    let mut constrained: Vec<usize> = fixed.iter().map(|&(p, _)| p).collect();
-    constrained.dedup();
 
     // Loads at load factor 1.
-    let mut f = vec![0.0; model.n_dofs()];
-    let zero = vec![0.0; model.n_dofs()];
-    for (k, l) in case.loads.iter().enumerate() {
-        let load: Box<dyn ExternalLoad> = match l {
+    let mut loads: Vec<Box<dyn ExternalLoad>> = Vec::new();
+    for l in &case.loads {
+        loads.push(match l {
             Load::PointForce { at, force } => Box::new(PointForce {
                 uv: *at,
                 force: *force,
             }),
             _ => unreachable!("rejected by `unsupported`"),
-        };
-        load.add_force(&model, &zero, 1.0, &mut f)
-            .map_err(|e| model_err(&format!("load[{k}]"), e))?;
+        });
     }
-    debug_assert_eq!(f.len(), DOFS_PER_PARTICLE * uv.len());
-    ShellProblem::new(model, &constrained, &fixed, f).map_err(|e| model_err("boundary", e))
+    ShellProblem::new(model, loads, constraints).map_err(|e| model_err("boundary", e))
 }
 
 /// The Newton driver of `[steps]`.

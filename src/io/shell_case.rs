@@ -14,6 +14,7 @@ use crate::geometry::{Surface, SurfaceSpec};
 use crate::material::MaterialParams;
 use crate::meshfree::quadrature::{ThicknessRule, MAX_GAUSS_POINTS, MAX_LOBATTO_POINTS};
 use crate::meshfree::transform::Edge;
+use crate::meshfree::vci::VciOrder;
 use crate::meshfree::{Basis, ParamBox};
 use nalgebra::Vector3;
 use serde::Deserialize;
@@ -79,6 +80,8 @@ struct IntegrationFile {
     gauss: i64,
     thickness_points: i64,
     thickness_rule: String,
+    #[serde(default)]
+    vci: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -224,6 +227,8 @@ pub struct IntegrationSpec {
     pub gauss: usize,
     /// Through-thickness rule.
     pub thickness_rule: ThicknessRule,
+    /// Variationally consistent correction of the test gradients (docs/integration.md).
+    pub vci: VciOrder,
 }
 
 /// A displacement or rotation component of a particle's 5 DOFs.
@@ -681,10 +686,23 @@ impl Checker<'_> {
                 ))
             }
         };
+        let vci = match i.vci.as_deref().unwrap_or("second") {
+            "off" => VciOrder::Off,
+            "first" => VciOrder::First,
+            "second" => VciOrder::Second,
+            other => {
+                return Err(self.err(
+                    "integration.vci",
+                    format!("{other:?}"),
+                    "\"off\", \"first\" or \"second\" (default \"second\")",
+                ))
+            }
+        };
         let integration = IntegrationSpec {
             cells,
             gauss,
             thickness_rule,
+            vci,
         };
 
         let material = material_from_spec(&f.material, self.path)?;

@@ -6,12 +6,14 @@
 //! quadrature point, generic over the scalar, and its consistent tangent from hand-derived
 //! directional derivatives; the director rotation ([`rotation`]).
 
+pub mod constraints;
 pub mod integration;
 pub mod load;
 pub mod model;
 pub mod point;
 pub mod problem;
 pub mod rotation;
+pub mod symmetry;
 
 use crate::kinematics::KinematicsError;
 use crate::material::MaterialError;
@@ -45,4 +47,10 @@ pub enum ShellError {
     /// Material failure.
     #[error(transparent)]
     Material(#[from] MaterialError),
+    /// Invalid symmetry plane.
+    #[error(transparent)]
+    Symmetry(#[from] symmetry::SymmetryError),
+    /// Invalid linear constraint.
+    #[error(transparent)]
+    Constraint(#[from] constraints::ConstraintError),
 }

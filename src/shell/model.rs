@@ -2,21 +2,28 @@
 //! histories, and the assembly of the point kernel ([`super::point`]) into the global internal
 //! force and consistent tangent.
 //!
-//! Global DOFs: 5 per particle, `[Δū_I (3), α_I (2)]`, particle-major. Assembly runs the
-//! quadrature points in parallel (rayon) and adds their contributions in point order, so serial
-//! and parallel runs give bit-identical results.
+//! Global DOFs: 5 per real particle, `[Δū_I (3), α_I (2)]`, particle-major. Symmetry planes add
+//! image particles ([`super::symmetry`]): shape-function particles without DOFs of their own,
+//! whose state and local DOFs are a fixed linear map of their source,
+//! `T_j = diag(Q_j, det(Q_j) I₂)`. [`ShellModel::gather_local`], [`ShellModel::scatter_local`] and
+//! [`ShellModel::scatter_particle`] are the one seam between global and point-local DOFs and
+//! apply these maps; a point's contribution is returned on the global DOFs of its distinct
+//! source particles (its *cell*). Assembly runs the quadrature points in parallel (rayon) and
+//! adds their contributions in point order, so serial and parallel runs give bit-identical
+//! results.
 
 use super::point::{
     point_residual, point_tangent, ParticleState, PointHistory, PointInput, ShapeData,
     SurfacePoint, DOFS_PER_PARTICLE,
 };
 use super::rotation::rotate_director;
+use super::symmetry::{SymmetryLayout, SymmetryPlane};
 use super::ShellError;
 use crate::geometry::Surface;
 use crate::material::{MaterialParams, MaterialState};
 use crate::meshfree::{Basis, MeshfreeError, ShapeFunctions, ShapeValues};
 use crate::scalar::Real;
-use nalgebra::{DMatrix, Vector3};
+use nalgebra::{DMatrix, Matrix3, Vector3};
 use rayon::prelude::*;
 
 /// An in-plane quadrature point with its shape functions and initial geometry.
@@ -28,16 +35,22 @@ pub struct QuadraturePoint {
     pub weight: f64,
     /// Initial geometry at the point.
     pub surface: SurfacePoint<f64>,
-    /// Neighbour particle indices.
+    /// Neighbour particle indices (shape-function particles: real, or image when
+    /// `≥ ShellModel::n_particles()`).
     pub neighbours: Vec<usize>,
     /// Their shape functions at the point.
     pub shape: Vec<ShapeData>,
+    /// The distinct real particles behind the neighbours (an image stands for its source), in
+    /// first-occurrence order: the point's global DOFs are 5 per source (its cell).
+    pub sources: Vec<usize>,
+    /// For each neighbour, its source's position in [`QuadraturePoint::sources`].
+    pub source_slot: Vec<usize>,
 }
 
-/// Local contribution of one in-plane point (all thickness layers).
+/// Contribution of one in-plane point (all thickness layers) on the global DOFs of its cell.
 #[derive(Clone, Debug)]
 pub struct LocalContribution {
-    /// Global DOF indices (5 per neighbour).
+    /// Global DOF indices (5 per source particle of the point, [`QuadraturePoint::sources`]).
     pub dofs: Vec<usize>,
     /// Internal force.
     pub residual: Vec<f64>,
@@ -77,14 +90,17 @@ pub struct Discretisation {
     pub thickness_rule: Vec<(f64, f64)>,
     /// Shell thickness.
     pub thickness: f64,
+    /// Symmetry planes (image particles, [`super::symmetry`]); empty for none.
+    pub symmetry: Vec<SymmetryPlane>,
 }
 
 /// The discrete shell.
 #[derive(Clone, Debug)]
 pub struct ShellModel {
-    /// Committed particle states.
+    /// Committed states of the real particles (the image states follow from them,
+    /// [`ShellModel::particle_state`]).
     pub particles: Vec<ParticleState<f64>>,
-    /// Particle parameter coordinates.
+    /// Real particle parameter coordinates.
     pub particle_uv: Vec<[f64; 2]>,
     /// In-plane quadrature points.
     pub points: Vec<QuadraturePoint>,
@@ -96,8 +112,22 @@ pub struct ShellModel {
     pub material: MaterialParams<f64>,
     /// Committed histories, `points.len() × thickness_rule.len()`, point-major.
     pub history: Vec<PointHistory<f64>>,
-    /// The RK shape functions of the particles (for loads, essential conditions and output).
+    /// The RK shape functions of the real and image particles (for loads, essential conditions
+    /// and output): shape-function particle `j < n_particles()` is real, `j ≥` is image
+    /// `j − n_particles()` of [`ShellModel::symmetry`].
     pub shape_functions: ShapeFunctions,
+    /// Symmetry planes, image particles and the real particles on the planes.
+    pub symmetry: SymmetryLayout,
+    /// Parameter domain `[[u0, u1], [v0, v1]]` of the surface.
+    pub domain: [[f64; 2]; 2],
+}
+
+/// The DOF map of a shape-function particle: `x_j = T_j q_source`, `T_j = diag(Q, det I₂)`.
+#[derive(Clone, Copy, Debug)]
+struct DofMap {
+    source: usize,
+    /// `(Q, det Q)` for an image; `None` for a real particle (`T = I`).
+    map: Option<(Matrix3<f64>, f64)>,
 }
 
 /// Lamina vectors `e1, e2 ⟂ d`: `e1` along the projection of `t` (a surface tangent).
@@ -121,6 +151,7 @@ impl ShellModel {
             quadrature,
             thickness_rule,
             thickness,
+            symmetry,
         } = disc;
         material.validate()?;
         if !(thickness > 0.0 && thickness.is_finite()) {
@@ -128,22 +159,52 @@ impl ShellModel {
                 "thickness = {thickness}: expected a finite value > 0"
             )));
         }
+        if supports.len() != particle_uv.len() {
+            return Err(ShellError::InvalidInput(format!(
+                "supports: {} entries for {} particles: expected one per particle",
+                supports.len(),
+                particle_uv.len()
+            )));
+        }
+        let domain = surface.domain();
+        for plane in &symmetry {
+            plane.validate(surface)?;
+        }
+        let layout = SymmetryLayout::new(&particle_uv, &supports, domain, symmetry)?;
         let particles = particle_uv
             .iter()
-            .map(|&[u, v]| {
+            .enumerate()
+            .map(|(i, &[u, v])| {
                 let sd = surface.eval(u, v);
                 let n = sd.normal().map_err(|e| {
                     ShellError::InvalidInput(format!("particle at ({u}, {v}): {e}"))
                 })?;
+                // On a symmetry edge e1 = n_s (which lies in the tangent plane there), so that
+                // the symmetric rotation is α1 and the forbidden one α2.
+                let t = layout.lamina_hint(i).unwrap_or(sd.xu);
                 Ok(ParticleState {
                     u: Vector3::zeros(),
                     d: n,
                     d0: n,
-                    e: lamina_vectors(&n, &sd.xu),
+                    e: lamina_vectors(&n, &t),
                 })
             })
             .collect::<Result<Vec<_>, ShellError>>()?;
-        let sf = ShapeFunctions::new(particle_uv.clone(), supports, basis).map_err(mf)?;
+        let n_real = particle_uv.len();
+        let mut sf_uv = particle_uv.clone();
+        let mut sf_sup = supports;
+        for im in &layout.images {
+            sf_uv.push(im.uv);
+            sf_sup.push(im.support);
+        }
+        let sf = ShapeFunctions::new(sf_uv, sf_sup, basis).map_err(mf)?;
+        let source_of = |j: usize| {
+            if j < n_real {
+                j
+            } else {
+                layout.images[j - n_real].source
+            }
+        };
         let points = quadrature
             .par_iter()
             .map(|&(uv, weight)| {
@@ -153,15 +214,32 @@ impl ShellModel {
                 sd.normal().map_err(|e| {
                     ShellError::InvalidInput(format!("quadrature point {uv:?}: {e}"))
                 })?;
+                let neighbours = sv.neighbours().to_vec();
+                let mut sources: Vec<usize> = Vec::with_capacity(neighbours.len());
+                let source_slot = neighbours
+                    .iter()
+                    .map(|&j| {
+                        let s = source_of(j);
+                        match sources.iter().position(|&x| x == s) {
+                            Some(k) => k,
+                            None => {
+                                sources.push(s);
+                                sources.len() - 1
+                            }
+                        }
+                    })
+                    .collect();
                 Ok(QuadraturePoint {
                     uv,
                     weight,
                     surface: SurfacePoint::from_derivs(&sd),
-                    neighbours: sv.neighbours().to_vec(),
+                    neighbours,
                     shape: sv
                         .iter()
                         .map(|(_, psi, dpsi)| ShapeData::new(psi, dpsi))
                         .collect(),
+                    sources,
+                    source_slot,
                 })
             })
             .collect::<Result<Vec<_>, ShellError>>()?;
@@ -184,19 +262,49 @@ impl ShellModel {
             material,
             history,
             shape_functions: sf,
+            symmetry: layout,
+            domain,
         })
     }
 
-    /// Number of global DOFs.
+    /// Number of global DOFs (5 per real particle).
     pub fn n_dofs(&self) -> usize {
         DOFS_PER_PARTICLE * self.particles.len()
     }
 
-    fn local_dofs(&self, p: &QuadraturePoint) -> Vec<usize> {
-        p.neighbours
+    /// Number of real particles (shape-function particles beyond are images).
+    pub fn n_particles(&self) -> usize {
+        self.particles.len()
+    }
+
+    /// Global DOFs of the cell of in-plane point `k` (5 per source particle).
+    pub fn point_dofs(&self, k: usize) -> Vec<usize> {
+        self.points[k]
+            .sources
             .iter()
             .flat_map(|&i| (0..DOFS_PER_PARTICLE).map(move |c| DOFS_PER_PARTICLE * i + c))
             .collect()
+    }
+
+    fn dof_map(&self, j: usize) -> DofMap {
+        let n = self.particles.len();
+        if j < n {
+            DofMap {
+                source: j,
+                map: None,
+            }
+        } else {
+            let im = &self.symmetry.images[j - n];
+            DofMap {
+                source: im.source,
+                map: Some((im.map, im.det)),
+            }
+        }
+    }
+
+    /// The real particle whose DOFs shape-function particle `j` uses (itself if real).
+    pub fn source_of(&self, j: usize) -> usize {
+        self.dof_map(j).source
     }
 
     /// The committed states of the neighbours of in-plane point `k` and their local DOF
@@ -218,7 +326,22 @@ impl ShellModel {
                 }
             })
             .collect();
-        let x = self.local_dofs(p).iter().map(|&i| dofs[i]).collect();
+        let mut x = Vec::with_capacity(DOFS_PER_PARTICLE * p.neighbours.len());
+        for &j in &p.neighbours {
+            let m = self.dof_map(j);
+            let q = &dofs[DOFS_PER_PARTICLE * m.source..DOFS_PER_PARTICLE * (m.source + 1)];
+            match m.map {
+                None => x.extend_from_slice(q),
+                Some((qm, det)) => {
+                    // x = T q: ū_img = Q ū, α_img = det(Q) α.
+                    for r in 0..3 {
+                        x.push(q[0] * qm[(r, 0)] + q[1] * qm[(r, 1)] + q[2] * qm[(r, 2)]);
+                    }
+                    x.push(q[3] * det);
+                    x.push(q[4] * det);
+                }
+            }
+        }
         (parts, x)
     }
 
@@ -236,9 +359,30 @@ impl ShellModel {
     }
 
     /// Committed state of shape-function particle `j` (an index into
-    /// [`ShellModel::shape_functions`]).
+    /// [`ShellModel::shape_functions`]): a real particle's own, or for an image the map `Q` of
+    /// its source's (`ū, d, d⁰, e` all mapped by `Q`), so images always follow their sources.
     pub fn particle_state(&self, j: usize) -> ParticleState<f64> {
-        self.particles[j]
+        let m = self.dof_map(j);
+        let p = self.particles[m.source];
+        match m.map {
+            None => p,
+            Some((q, _)) => ParticleState {
+                u: q * p.u,
+                d: q * p.d,
+                d0: q * p.d0,
+                e: [q * p.e[0], q * p.e[1]],
+            },
+        }
+    }
+
+    /// The committed RK-interpolated mid-surface displacement `Σ Ψ_J ū_J` at parameter
+    /// coordinates `uv` (no surface needed; [`ShellModel::sample`] adds the geometry).
+    pub fn displacement_at(&self, uv: [f64; 2]) -> Result<Vector3<f64>, ShellError> {
+        let mut sv = ShapeValues::new();
+        self.shape_functions.evaluate(uv, &mut sv).map_err(mf)?;
+        Ok(sv.iter().fold(Vector3::zeros(), |u, (j, psi, _)| {
+            u + self.particle_state(j).u * psi
+        }))
     }
 
     /// The committed mid-surface at parameter coordinates `uv`: initial position and normal,
@@ -270,12 +414,137 @@ impl ShellModel {
         })
     }
 
-    /// Add the 5 local components `local` of shape-function particle `j` (an index into
-    /// [`ShellModel::shape_functions`]) into the global generalised vector.
-    pub fn scatter_particle<T: Real>(&self, j: usize, local: &[T], global: &mut [T]) {
-        for (c, v) in local.iter().enumerate().take(DOFS_PER_PARTICLE) {
-            global[DOFS_PER_PARTICLE * j + c] += *v;
+    /// The RK interpolation `Σ Ψ_J (T_J q)_ū` at `uv` of the translational part of a generalised
+    /// vector `q` (an increment, a Newton correction, a design sensitivity), images mapped from
+    /// their sources.
+    pub fn interpolate_translation(
+        &self,
+        uv: [f64; 2],
+        q: &[f64],
+    ) -> Result<Vector3<f64>, ShellError> {
+        if q.len() != self.n_dofs() {
+            return Err(ShellError::Dimension {
+                expected: self.n_dofs(),
+                got: q.len(),
+            });
         }
+        let mut sv = ShapeValues::new();
+        self.shape_functions.evaluate(uv, &mut sv).map_err(mf)?;
+        let mut u = Vector3::zeros();
+        for (j, psi, _) in sv.iter() {
+            let m = self.dof_map(j);
+            let b = DOFS_PER_PARTICLE * m.source;
+            let v = Vector3::new(q[b], q[b + 1], q[b + 2]);
+            u += m.map.map_or(v, |(qm, _)| qm * v) * psi;
+        }
+        Ok(u)
+    }
+
+    /// Add the 5 local components `local` of shape-function particle `j` (an index into
+    /// [`ShellModel::shape_functions`]) into the global generalised vector: `Tᵀ local` on its
+    /// source's DOFs (`Qᵀ` on the forces, `det Q` on the moments of an image).
+    pub fn scatter_particle<T: Real>(&self, j: usize, local: &[T], global: &mut [T]) {
+        let m = self.dof_map(j);
+        let g = &mut global[DOFS_PER_PARTICLE * m.source..DOFS_PER_PARTICLE * (m.source + 1)];
+        match m.map {
+            None => {
+                for (gc, v) in g.iter_mut().zip(local.iter().take(DOFS_PER_PARTICLE)) {
+                    *gc += *v;
+                }
+            }
+            Some((q, det)) => {
+                for c in 0..3 {
+                    g[c] += local[0] * q[(0, c)] + local[1] * q[(1, c)] + local[2] * q[(2, c)];
+                }
+                g[3] += local[3] * det;
+                g[4] += local[4] * det;
+            }
+        }
+    }
+
+    /// Map a point's neighbour-local residual (5 per neighbour) and tangent to its cell
+    /// (5 per source): `r_c = Σ T_aᵀ r_a`, `K_c = Σ T_aᵀ K_ab T_b`. Only the images' rows and
+    /// columns are transformed (in place, `K T` then `Tᵀ K`), then entries of neighbours sharing a
+    /// source are summed. Without images nothing is done.
+    fn to_cell(
+        &self,
+        p: &QuadraturePoint,
+        mut residual: Vec<f64>,
+        tangent: Option<DMatrix<f64>>,
+    ) -> (Vec<f64>, Option<DMatrix<f64>>) {
+        const D: usize = DOFS_PER_PARTICLE;
+        let maps: Vec<(usize, Matrix3<f64>, f64)> = p
+            .neighbours
+            .iter()
+            .enumerate()
+            .filter_map(|(a, &j)| self.dof_map(j).map.map(|(q, det)| (a, q, det)))
+            .collect();
+        if maps.is_empty() {
+            return (residual, tangent);
+        }
+        let nl = residual.len();
+        let nc = D * p.sources.len();
+        // Tᵀ r on the images' blocks.
+        for &(a, q, det) in &maps {
+            let r = &mut residual[D * a..D * a + D];
+            let v = q.transpose() * Vector3::new(r[0], r[1], r[2]);
+            r[..3].copy_from_slice(v.as_slice());
+            r[3] *= det;
+            r[4] *= det;
+        }
+        let mut rc = vec![0.0; nc];
+        for (a, r) in residual.chunks_exact(D).enumerate() {
+            let s = D * p.source_slot[a];
+            for (x, v) in rc[s..s + D].iter_mut().zip(r) {
+                *x += v;
+            }
+        }
+        let kc = tangent.map(|mut k| {
+            // K T: columns of image b, (K T)[:, c] = Σ_r K[:, r] Q[r, c]; rotations × det.
+            for &(b, q, det) in &maps {
+                let c0 = D * b;
+                for row in 0..nl {
+                    let x = [k[(row, c0)], k[(row, c0 + 1)], k[(row, c0 + 2)]];
+                    for c in 0..3 {
+                        k[(row, c0 + c)] = x[0] * q[(0, c)] + x[1] * q[(1, c)] + x[2] * q[(2, c)];
+                    }
+                    k[(row, c0 + 3)] *= det;
+                    k[(row, c0 + 4)] *= det;
+                }
+            }
+            // Tᵀ K: rows of image a.
+            for &(a, q, det) in &maps {
+                let r0 = D * a;
+                for col in 0..nl {
+                    let x = [k[(r0, col)], k[(r0 + 1, col)], k[(r0 + 2, col)]];
+                    for c in 0..3 {
+                        k[(r0 + c, col)] = x[0] * q[(0, c)] + x[1] * q[(1, c)] + x[2] * q[(2, c)];
+                    }
+                    k[(r0 + 3, col)] *= det;
+                    k[(r0 + 4, col)] *= det;
+                }
+            }
+            if nc == nl {
+                // Distinct sources in neighbour order: the transformed matrix is the cell's.
+                return k;
+            }
+            let mut kc = DMatrix::zeros(nc, nc);
+            for b in 0..p.neighbours.len() {
+                let sb = D * p.source_slot[b];
+                for cb in 0..D {
+                    let src = k.column(D * b + cb);
+                    let mut dst = kc.column_mut(sb + cb);
+                    for a in 0..p.neighbours.len() {
+                        let sa = D * p.source_slot[a];
+                        for ca in 0..D {
+                            dst[sa + ca] += src[D * a + ca];
+                        }
+                    }
+                }
+            }
+            kc
+        });
+        (rc, kc)
     }
 
     /// Contribution of in-plane point `k` for the global DOF increment `dofs`.
@@ -286,11 +555,11 @@ impl ShellModel {
         tangent: bool,
     ) -> Result<LocalContribution, ShellError> {
         let p = &self.points[k];
-        let idx = self.local_dofs(p);
         let (parts, x) = self.gather_local(k, dofs);
         let nl = self.thickness_rule.len();
-        let mut residual = vec![0.0; idx.len()];
-        let mut k_loc = tangent.then(|| DMatrix::zeros(idx.len(), idx.len()));
+        let n_loc = x.len();
+        let mut residual = vec![0.0; n_loc];
+        let mut k_loc = tangent.then(|| DMatrix::zeros(n_loc, n_loc));
         let mut history = Vec::with_capacity(nl);
         let mut plastic_layers = 0;
         for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
@@ -314,8 +583,9 @@ impl ShellModel {
             plastic_layers += usize::from(res.return_map.plastic);
             history.push(res.history);
         }
+        let (residual, k_loc) = self.to_cell(p, residual, k_loc);
         Ok(LocalContribution {
-            dofs: idx,
+            dofs: self.point_dofs(k),
             residual,
             tangent: k_loc,
             history,
@@ -406,7 +676,14 @@ impl ShellModel {
 
     /// Commit a converged increment: particle coefficients and directors move, the lamina
     /// vectors of each particle rotate with its director, histories become the trial ones.
+    /// Images follow their sources ([`ShellModel::particle_state`]).
     pub fn commit(&mut self, dofs: &[f64], contributions: Vec<LocalContribution>) {
+        self.commit_histories(dofs, contributions.into_iter().map(|c| c.history).collect());
+    }
+
+    /// [`ShellModel::commit`] with the trial histories given per in-plane point (the layers of
+    /// point `k` in `histories[k]`).
+    pub fn commit_histories(&mut self, dofs: &[f64], histories: Vec<Vec<PointHistory<f64>>>) {
         for (i, p) in self.particles.iter_mut().enumerate() {
             let q = &dofs[DOFS_PER_PARTICLE * i..DOFS_PER_PARTICLE * (i + 1)];
             let alpha = [q[3], q[4]];
@@ -417,8 +694,8 @@ impl ShellModel {
             p.e = lamina_vectors(&d_new, &e0);
         }
         let nl = self.thickness_rule.len();
-        for (k, c) in contributions.into_iter().enumerate() {
-            for (l, h) in c.history.into_iter().enumerate() {
+        for (k, hs) in histories.into_iter().enumerate() {
+            for (l, h) in hs.into_iter().enumerate() {
                 self.history[k * nl + l] = h;
             }
         }

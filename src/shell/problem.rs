@@ -1,197 +1,521 @@
-//! The shell as a [`NonlinearProblem`] for the Newton driver: essential conditions through the
-//! transformation method, the transformed tangent `K̃ = Λ⁻ᵀ K Λ⁻¹` in a sparse pattern built once,
-//! committed and trial state.
+//! The shell as a [`NonlinearProblem`] for the Newton driver (docs/shell-formulation.md §6).
 //!
-//! Unknowns of the driver are the transformed (nodal) values `ũ = Λ d`, 5 per particle; the
-//! constrained particles' nodal values can be prescribed component by component. Within a step
-//! the model's increment is `d = Λ⁻¹ (ũ − ũ_committed)`.
+//! Unknowns: the generalised DOFs `q` of the real particles (5 each, accumulated over the
+//! steps; the model's increment within a step is `q − q_committed`), followed by one Lagrange
+//! multiplier `μ_c` per constraint row ([`super::constraints`]). With the row scales `k_c`:
+//!
+//! ```text
+//! r_q = f_int(q) − λ f_ext(q) + Σ_c k_c μ_c C_cᵀ        K = [ K_int − λ ∂f_ext/∂q   k Cᵀ ]
+//! r_c = k_c (C_c q − λ g_c)                               [ k C                   0   ]
+//! ```
+//!
+//! The scale `k_c` is a representative stiffness that makes the constraint residual force-like:
+//! `E t` (membrane stiffness per unit length: force per displacement) for displacement rows and
+//! `E t³/12` (bending stiffness: moment per rotation) for rotation rows. It leaves the solution
+//! unchanged and keeps the residual norm and the LU pivoting balanced. The physical multiplier
+//! is `k_c μ_c`; [`ShellProblem::reactions`] reports the force (or moment) the support exerts on
+//! the shell, `−k_c μ_c`, so that `f_int = λ f_ext + Σ_c reaction_c C_cᵀ` at equilibrium.
+//!
+//! Symmetry conditions of particles on a plane ([`super::symmetry`]) are eliminated as fixed
+//! generalised DOFs through [`NonlinearProblem::essential`] when possible (`α2`, and `ū·n_s`
+//! when `n_s` is a coordinate axis), and become multiplier rows otherwise
+//! ([`SymmetryTreatment`]).
+//!
+//! The sparse pattern is built once from the quadrature points' cells (their neighbours'
+//! source particles, through the image map), the constraint rows and the load-stiffness
+//! entries of follower loads; the tangent is assembled straight into the pattern's value slots
+//! by [`crate::solver::assemble`] (deterministic, parallel, memory bounded by its batches).
+//! A follower load must report the same `(row, column)` entries for every state (values may be
+//! zero): its entries at `q = 0` enter the pattern.
 
-use super::model::{LocalContribution, ShellModel};
-use super::point::DOFS_PER_PARTICLE;
+use super::constraints::{ConstraintError, LinearConstraint, RowKind};
+use super::load::ExternalLoad;
+use super::model::ShellModel;
+use super::point::{PointHistory, DOFS_PER_PARTICLE};
 use super::ShellError;
-use crate::meshfree::transform::{CsrMatrix, Transformation};
-use crate::solver::{NonlinearProblem, ProblemError, SolverError, SparsityPattern};
+use crate::solver::{
+    assemble, assemble_vector, AssemblyError, Execution, NonlinearProblem, ProblemError,
+    SparsityPattern,
+};
+use nalgebra::{DMatrix, DVector};
+use std::sync::OnceLock;
+
+/// How the symmetry conditions of the particles on a plane are imposed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum SymmetryTreatment {
+    /// `α2 = 0` (both rotations on two planes) eliminated as fixed generalised DOFs; `ū·n_s = 0`
+    /// eliminated when `n_s` is a coordinate axis, a multiplier row otherwise.
+    #[default]
+    Eliminate,
+    /// Every symmetry condition a multiplier row (for comparison).
+    Multipliers,
+}
+
+/// Options of [`ShellProblem`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct ProblemOptions {
+    /// Symmetry conditions.
+    pub symmetry: SymmetryTreatment,
+    /// Serial or parallel assembly (bit-identical results).
+    pub execution: Execution,
+}
+
+type Histories = Vec<Vec<PointHistory<f64>>>;
 
 /// The shell problem.
 #[derive(Debug)]
 pub struct ShellProblem {
     /// The discrete shell (committed state).
     pub model: ShellModel,
-    transform: Transformation,
-    /// External load at load factor 1, on the generalised DOFs.
-    pub load: Vec<f64>,
-    fixed: Vec<(usize, f64)>,
+    loads: Vec<Box<dyn ExternalLoad>>,
+    constraints: Vec<LinearConstraint>,
+    scales: Vec<f64>,
+    fixed: Vec<usize>,
     pattern: SparsityPattern,
+    /// Quadrature points of each point cell of the pattern (cells `0..groups.len()`).
+    groups: Vec<Vec<usize>>,
+    /// Per constraint row, per term: slots of `(row, dof)` and `(dof, row)`.
+    constraint_slots: Vec<Vec<(usize, usize)>>,
+    n_q: usize,
     committed: Vec<f64>,
-    cache: Option<(Vec<f64>, Vec<LocalContribution>)>,
+    cache: Option<(Vec<f64>, Histories)>,
+    load_norm: f64,
+    execution: Execution,
 }
 
 fn fatal<E: std::fmt::Display>(e: E) -> ProblemError {
     ProblemError::Fatal(e.to_string())
 }
 
+/// A point evaluation failure, naming the point.
+#[derive(Debug)]
+struct PointError {
+    point: usize,
+    uv: [f64; 2],
+    source: ShellError,
+}
+
+impl std::fmt::Display for PointError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "quadrature point {} at (u, v) = {:?}: {}",
+            self.point, self.uv, self.source
+        )
+    }
+}
+
+fn assembly_error(e: AssemblyError<PointError>) -> ProblemError {
+    match e {
+        // An inverted cell or a failed return map: a smaller step may succeed.
+        AssemblyError::Cell { source, .. } => ProblemError::Recoverable(source.to_string()),
+        other => fatal(other),
+    }
+}
+
+/// Whether the unit vector `n` is a coordinate axis (to round-off); its axis if so.
+fn axis_of(n: &nalgebra::Vector3<f64>) -> Option<usize> {
+    (0..3).find(|&k| (n[k].abs() - 1.0).abs() <= 1e-12)
+}
+
 impl ShellProblem {
-    /// `constrained`: particles whose nodal values are the unknowns of the transformation;
-    /// `fixed`: `(particle, component)` nodal values held at zero (each particle must be in
-    /// `constrained`); `load`: the external load vector at load factor 1.
+    /// The problem with default options ([`SymmetryTreatment::Eliminate`], parallel assembly).
     pub fn new(
         model: ShellModel,
-        constrained: &[usize],
-        fixed: &[(usize, usize)],
-        load: Vec<f64>,
+        loads: Vec<Box<dyn ExternalLoad>>,
+        constraints: Vec<LinearConstraint>,
     ) -> Result<Self, ShellError> {
-        let n = model.n_dofs();
-        if load.len() != n {
-            return Err(ShellError::Dimension {
-                expected: n,
-                got: load.len(),
-            });
-        }
-        for &(p, c) in fixed {
-            if !constrained.contains(&p) || c >= DOFS_PER_PARTICLE {
-                return Err(ShellError::InvalidInput(format!(
-                    "fixed nodal value (particle {p}, component {c}): expected a constrained particle and a component < 5"
-                )));
+        Self::with_options(model, loads, constraints, ProblemOptions::default())
+    }
+
+    /// The problem: `loads` at load factor 1, `constraints` (rows on the generalised DOFs; the
+    /// symmetry conditions of the model's planes are added here).
+    pub fn with_options(
+        model: ShellModel,
+        loads: Vec<Box<dyn ExternalLoad>>,
+        constraints: Vec<LinearConstraint>,
+        options: ProblemOptions,
+    ) -> Result<Self, ShellError> {
+        let n_q = model.n_dofs();
+        let mut fixed = Vec::new();
+        let mut rows = Vec::new();
+        for sc in model.symmetry.self_conditions() {
+            let base = DOFS_PER_PARTICLE * sc.particle;
+            for &b in &sc.rotations {
+                match options.symmetry {
+                    SymmetryTreatment::Eliminate => fixed.push(base + 3 + b),
+                    SymmetryTreatment::Multipliers => rows.push(
+                        LinearConstraint::generalised(base + 3 + b, 0.0, RowKind::Rotation)
+                            .labelled(format!("symmetry: particle {}, α{}", sc.particle, b + 1)),
+                    ),
+                }
+            }
+            for n in &sc.normals {
+                match (options.symmetry, axis_of(n)) {
+                    (SymmetryTreatment::Eliminate, Some(k)) => fixed.push(base + k),
+                    _ => rows.push(LinearConstraint {
+                        label: format!(
+                            "symmetry: particle {}, ū·({}, {}, {})",
+                            sc.particle, n[0], n[1], n[2]
+                        ),
+                        terms: (0..3)
+                            .filter(|&c| n[c] != 0.0)
+                            .map(|c| (base + c, n[c]))
+                            .collect(),
+                        value: 0.0,
+                        kind: RowKind::Displacement,
+                    }),
+                }
             }
         }
-        let transform = Transformation::new(&model.shape_functions, constrained)
-            .map_err(|e| ShellError::InvalidInput(e.to_string()))?;
-        // Structural pattern of K̃ from a structurally full K (every coupled pair = 1).
-        let ones: Vec<(usize, usize, f64)> = model
-            .points
+        fixed.sort_unstable();
+        fixed.dedup();
+        // User rows: checked, duplicate DOFs merged, terms on eliminated DOFs dropped (those
+        // DOFs stay zero).
+        for c in constraints {
+            if !c.value.is_finite() {
+                return Err(ConstraintError::InvalidValue {
+                    label: c.label,
+                    value: c.value,
+                }
+                .into());
+            }
+            let mut dense: Vec<(usize, f64)> = Vec::with_capacity(c.terms.len());
+            for &(d, a) in &c.terms {
+                if d >= n_q {
+                    return Err(ConstraintError::DofOutOfRange {
+                        label: c.label,
+                        dof: d,
+                        n_dofs: n_q,
+                    }
+                    .into());
+                }
+                if !a.is_finite() {
+                    return Err(ConstraintError::NonFiniteCoefficient {
+                        label: c.label,
+                        dof: d,
+                        value: a,
+                    }
+                    .into());
+                }
+                if fixed.binary_search(&d).is_ok() {
+                    continue;
+                }
+                match dense.iter_mut().find(|(e, _)| *e == d) {
+                    Some(t) => t.1 += a,
+                    None => dense.push((d, a)),
+                }
+            }
+            dense.retain(|t| t.1 != 0.0);
+            if dense.is_empty() {
+                return Err(ConstraintError::EmptyRow { label: c.label }.into());
+            }
+            rows.push(LinearConstraint { terms: dense, ..c });
+        }
+        let (e, t) = (model.material.young, model.thickness);
+        let scales: Vec<f64> = rows
             .iter()
-            .flat_map(|p| {
-                let dofs: Vec<usize> = p
-                    .neighbours
-                    .iter()
-                    .flat_map(|&i| (0..5).map(move |c| 5 * i + c))
-                    .collect();
-                dofs.iter()
-                    .flat_map(|&a| dofs.iter().map(move |&b| (a, b, 1.0)))
-                    .collect::<Vec<_>>()
+            .map(|r| match r.kind {
+                RowKind::Displacement => e * t,
+                RowKind::Rotation => e * t * t * t / 12.0,
             })
             .collect();
-        let kt = transform
-            .transform_matrix(&CsrMatrix::from_triplets(n, n, &ones), DOFS_PER_PARTICLE)
-            .map_err(|e| ShellError::InvalidInput(e.to_string()))?;
-        let entries: Vec<(usize, usize)> = (0..n)
-            .flat_map(|i| kt.row(i).map(move |(j, _)| (i, j)).collect::<Vec<_>>())
-            .collect();
-        let pattern = SparsityPattern::from_entries(n, &entries)
-            .map_err(|e| ShellError::InvalidInput(e.to_string()))?;
-        let fixed = fixed
+        let n = n_q + rows.len();
+
+        // Pattern: point cells, constraint cells, then any follower-load entries they miss.
+        // Points with the same DOF list (the Gauss points of one background cell when the
+        // supports end on cell lines, as on a regular grid) share a pattern cell: their
+        // matrices are summed before the scatter, which cuts the slot map and the scatter by
+        // the number of points per cell.
+        let mut groups: Vec<Vec<usize>> = Vec::new();
+        let mut cells: Vec<Vec<usize>> = Vec::new();
+        let mut index: std::collections::HashMap<Vec<usize>, usize> =
+            std::collections::HashMap::new();
+        for k in 0..model.points.len() {
+            let dofs = model.point_dofs(k);
+            match index.get(&dofs) {
+                Some(&g) => groups[g].push(k),
+                None => {
+                    index.insert(dofs.clone(), cells.len());
+                    groups.push(vec![k]);
+                    cells.push(dofs);
+                }
+            }
+        }
+        for (c, r) in rows.iter().enumerate() {
+            let mut cell = vec![n_q + c];
+            cell.extend(r.terms.iter().map(|t| t.0));
+            cells.push(cell);
+        }
+        let pattern_error = |e: crate::solver::SolverError| ShellError::InvalidInput(e.to_string());
+        let mut pattern = SparsityPattern::from_cells(n, &cells).map_err(pattern_error)?;
+        let zeros = vec![0.0; n_q];
+        let mut entries = Vec::new();
+        for l in loads.iter().filter(|l| l.is_follower()) {
+            l.add_stiffness(&model, &zeros, 1.0, &mut entries)?;
+        }
+        let mut missing: Vec<Vec<usize>> = entries
             .iter()
-            .map(|&(p, c)| (DOFS_PER_PARTICLE * p + c, 0.0))
+            .filter(|&&(i, j, _)| pattern.slot(i, j).is_none())
+            .map(|&(i, j, _)| vec![i, j])
             .collect();
+        if !missing.is_empty() {
+            missing.sort_unstable();
+            missing.dedup();
+            cells.extend(missing);
+            pattern = SparsityPattern::from_cells(n, &cells).map_err(pattern_error)?;
+        }
+        let constraint_slots = rows
+            .iter()
+            .enumerate()
+            .map(|(c, r)| {
+                r.terms
+                    .iter()
+                    .map(|&(d, _)| {
+                        let s1 = pattern.slot(n_q + c, d);
+                        let s2 = pattern.slot(d, n_q + c);
+                        s1.zip(s2).ok_or_else(|| {
+                            ShellError::InvalidInput(format!(
+                                "constraint `{}`: DOF {d} missing from the pattern",
+                                r.label
+                            ))
+                        })
+                    })
+                    .collect::<Result<Vec<_>, _>>()
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut f = vec![0.0; n_q];
+        for l in &loads {
+            l.add_force(&model, &zeros, 1.0, &mut f)?;
+        }
+        let load_norm = (f.iter().map(|v| v * v).sum::<f64>()
+            + rows
+                .iter()
+                .zip(&scales)
+                .map(|(r, k)| (k * r.value).powi(2))
+                .sum::<f64>())
+        .sqrt();
         Ok(ShellProblem {
             model,
-            transform,
-            load,
+            loads,
+            constraints: rows,
+            scales,
             fixed,
             pattern,
+            groups,
+            constraint_slots,
+            n_q,
             committed: vec![0.0; n],
             cache: None,
+            load_norm,
+            execution: options.execution,
         })
     }
 
-    /// The sparse pattern of the transformed tangent (give it to the driver and its solver).
+    /// The sparse pattern of the tangent (give it to the driver and its solver).
     pub fn pattern(&self) -> &SparsityPattern {
         &self.pattern
     }
 
-    /// Generalised increment `Λ⁻¹ (ũ − ũ_committed)`.
-    fn increment(&self, u: &[f64]) -> Result<Vec<f64>, ProblemError> {
-        let du: Vec<f64> = u.iter().zip(&self.committed).map(|(a, b)| a - b).collect();
-        self.transform
-            .to_generalised(&du, DOFS_PER_PARTICLE)
-            .map_err(fatal)
+    /// Number of generalised DOFs (5 per real particle).
+    pub fn n_generalised(&self) -> usize {
+        self.n_q
     }
 
-    fn contributions(
+    /// The constraint rows (user rows after the symmetry rows), in multiplier order.
+    pub fn constraints(&self) -> &[LinearConstraint] {
+        &self.constraints
+    }
+
+    /// The row scales `k_c` (`E t` or `E t³/12`).
+    pub fn constraint_scales(&self) -> &[f64] {
+        &self.scales
+    }
+
+    /// Generalised DOFs eliminated as symmetry conditions (held at zero).
+    pub fn fixed_dofs(&self) -> &[usize] {
+        &self.fixed
+    }
+
+    /// The committed unknowns `[q, μ]`: the initial vector of a further driver run.
+    pub fn state(&self) -> &[f64] {
+        &self.committed
+    }
+
+    /// The converged generalised DOFs `q` (accumulated over the steps).
+    pub fn generalised_dofs(&self) -> &[f64] {
+        &self.committed[..self.n_q]
+    }
+
+    /// The converged (scaled) multipliers `μ`.
+    pub fn multipliers(&self) -> &[f64] {
+        &self.committed[self.n_q..]
+    }
+
+    /// The reactions: for each constraint row, the generalised force (displacement rows) or
+    /// moment (rotation rows) the support exerts on the shell, `−k_c μ_c`.
+    pub fn reactions(&self) -> Vec<f64> {
+        self.multipliers()
+            .iter()
+            .zip(&self.scales)
+            .map(|(m, k)| -m * k)
+            .collect()
+    }
+
+    /// The external generalised force `λ f_ext(q)` for the increment `q` from the committed
+    /// state (length [`Self::n_generalised`]).
+    pub fn external_force(&self, q: &[f64], load: f64) -> Result<Vec<f64>, ShellError> {
+        let mut f = vec![0.0; self.n_q];
+        for l in &self.loads {
+            l.add_force(&self.model, q, load, &mut f)?;
+        }
+        Ok(f)
+    }
+
+    /// Residual (and tangent into `values` when given) at the unknowns `u`; caches the trial
+    /// histories for [`NonlinearProblem::commit`].
+    fn evaluate(
         &mut self,
         u: &[f64],
-        tangent: bool,
-    ) -> Result<Vec<LocalContribution>, ProblemError> {
-        let q = self.increment(u)?;
-        // An inverted cell or a failed return map: a smaller step may succeed.
-        self.model
-            .contributions(&q, tangent)
-            .map_err(|e| ProblemError::Recoverable(e.to_string()))
-    }
-
-    fn transformed_residual(
-        &self,
-        c: &[LocalContribution],
         load: f64,
         r: &mut [f64],
+        values: Option<&mut [f64]>,
     ) -> Result<(), ProblemError> {
-        let f = self.model.internal_force(c);
-        let g: Vec<f64> = f
+        let n = self.pattern.n_dofs();
+        if u.len() != n || r.len() != n {
+            return Err(fatal(format!(
+                "unknowns of length {} and residual of length {}: expected {n}",
+                u.len(),
+                r.len()
+            )));
+        }
+        let n_q = self.n_q;
+        let q: Vec<f64> = u[..n_q]
             .iter()
-            .zip(&self.load)
-            .map(|(a, b)| a - load * b)
+            .zip(&self.committed)
+            .map(|(a, b)| a - b)
             .collect();
-        let rt = self
-            .transform
-            .transform_vector(&g, DOFS_PER_PARTICLE)
-            .map_err(fatal)?;
-        r.copy_from_slice(&rt);
-        Ok(())
-    }
-
-    fn transformed_tangent(
-        &self,
-        c: &[LocalContribution],
-        values: &mut [f64],
-    ) -> Result<(), ProblemError> {
-        let n = self.model.n_dofs();
-        let mut trip = Vec::new();
-        for lc in c {
-            let k = lc
-                .tangent
-                .as_ref()
-                .ok_or_else(|| fatal("tangent not computed"))?;
-            for (b, &j) in lc.dofs.iter().enumerate() {
-                for (a, &i) in lc.dofs.iter().enumerate() {
-                    trip.push((i, j, k[(a, b)]));
+        let model = &self.model;
+        let pattern = &self.pattern;
+        let np = model.points.len();
+        let groups = &self.groups;
+        let hist: Vec<OnceLock<Vec<PointHistory<f64>>>> =
+            (0..np).map(|_| OnceLock::new()).collect();
+        let tangent = values.is_some();
+        let point = |c: usize| -> Result<(Option<DMatrix<f64>>, DVector<f64>), PointError> {
+            if let Some(group) = groups.get(c) {
+                // The points of one cell in a fixed order (deterministic sums).
+                let mut sum: Option<(Option<DMatrix<f64>>, DVector<f64>)> = None;
+                for &k in group {
+                    let lc = model.local(k, &q, tangent).map_err(|e| PointError {
+                        point: k,
+                        uv: model.points[k].uv,
+                        source: e,
+                    })?;
+                    // Each point is evaluated once per assembly.
+                    let _ = hist[k].set(lc.history);
+                    let f = DVector::from_vec(lc.residual);
+                    sum = Some(match sum {
+                        None => (lc.tangent, f),
+                        Some((km, fs)) => {
+                            let km = match (km, lc.tangent) {
+                                (Some(mut a), Some(b)) => {
+                                    a += &b;
+                                    Some(a)
+                                }
+                                _ => None,
+                            };
+                            (km, fs + f)
+                        }
+                    });
+                }
+                sum.ok_or_else(|| PointError {
+                    point: np,
+                    uv: [f64::NAN; 2],
+                    source: ShellError::InvalidInput(format!("point cell {c} is empty")),
+                })
+            } else {
+                // Constraint and load cells: structure only, values added below.
+                let m = pattern.cell_dofs(c).len();
+                Ok((tangent.then(|| DMatrix::zeros(m, m)), DVector::zeros(m)))
+            }
+        };
+        match values {
+            Some(vals) => {
+                assemble(pattern, vals, r, self.execution, |c| {
+                    let (k, f) = point(c)?;
+                    let k = k.ok_or_else(|| PointError {
+                        point: np,
+                        uv: [f64::NAN; 2],
+                        source: ShellError::InvalidInput("tangent not computed".to_string()),
+                    })?;
+                    Ok((k, f))
+                })
+                .map_err(assembly_error)?;
+                for ((row, slots), &k) in self
+                    .constraints
+                    .iter()
+                    .zip(&self.constraint_slots)
+                    .zip(&self.scales)
+                {
+                    for (&(_, a), &(s1, s2)) in row.terms.iter().zip(slots) {
+                        vals[s1] += k * a;
+                        vals[s2] += k * a;
+                    }
+                }
+                let mut trip = Vec::new();
+                for l in self.loads.iter().filter(|l| l.is_follower()) {
+                    l.add_stiffness(model, &q, -load, &mut trip)
+                        .map_err(fatal)?;
+                }
+                for (i, j, v) in trip {
+                    let s = pattern.slot(i, j).ok_or_else(|| {
+                        fatal(format!(
+                            "load stiffness entry ({i}, {j}) is not in the pattern: a follower \
+                             load must report the same entries for every state"
+                        ))
+                    })?;
+                    vals[s] += v;
                 }
             }
-        }
-        let kt = self
-            .transform
-            .transform_matrix(&CsrMatrix::from_triplets(n, n, &trip), DOFS_PER_PARTICLE)
-            .map_err(fatal)?;
-        values.fill(0.0);
-        for i in 0..n {
-            for (j, v) in kt.row(i) {
-                let slot = self.pattern.slot(i, j).ok_or_else(|| {
-                    fatal(SolverError::DofOutOfRange {
-                        cell: 0,
-                        local: i,
-                        dof: j,
-                        n_dofs: n,
-                    })
-                })?;
-                values[slot] += v;
+            None => {
+                assemble_vector(pattern, r, self.execution, |c| point(c).map(|(_, f)| f))
+                    .map_err(assembly_error)?;
             }
         }
+        let histories = hist
+            .into_iter()
+            .map(|h| h.into_inner())
+            .collect::<Option<Histories>>()
+            .ok_or_else(|| fatal("a quadrature point was not evaluated"))?;
+        for l in &self.loads {
+            l.add_force(model, &q, -load, &mut r[..n_q])
+                .map_err(fatal)?;
+        }
+        for (c, (row, &k)) in self.constraints.iter().zip(&self.scales).enumerate() {
+            let mu = u[n_q + c];
+            let mut g = -load * row.value;
+            for &(d, a) in &row.terms {
+                r[d] += k * a * mu;
+                g += a * u[d];
+            }
+            r[n_q + c] = k * g;
+        }
+        self.cache = Some((u.to_vec(), histories));
         Ok(())
     }
 }
 
 impl NonlinearProblem for ShellProblem {
     fn n_dofs(&self) -> usize {
-        self.model.n_dofs()
+        self.pattern.n_dofs()
     }
     fn residual(&mut self, u: &[f64], load: f64, r: &mut [f64]) -> Result<(), ProblemError> {
-        let c = self.contributions(u, false)?;
-        self.transformed_residual(&c, load, r)?;
-        self.cache = Some((u.to_vec(), c));
-        Ok(())
+        self.evaluate(u, load, r, None)
     }
-    fn tangent(&mut self, u: &[f64], _load: f64, values: &mut [f64]) -> Result<(), ProblemError> {
-        let c = self.contributions(u, true)?;
-        self.transformed_tangent(&c, values)
+    fn tangent(&mut self, u: &[f64], load: f64, values: &mut [f64]) -> Result<(), ProblemError> {
+        let mut r = vec![0.0; self.pattern.n_dofs()];
+        self.evaluate(u, load, &mut r, Some(values))
     }
     fn residual_and_tangent(
         &mut self,
@@ -200,31 +524,31 @@ impl NonlinearProblem for ShellProblem {
         r: &mut [f64],
         values: &mut [f64],
     ) -> Result<(), ProblemError> {
-        let c = self.contributions(u, true)?;
-        self.transformed_residual(&c, load, r)?;
-        self.transformed_tangent(&c, values)?;
-        self.cache = Some((u.to_vec(), c));
-        Ok(())
+        self.evaluate(u, load, r, Some(values))
     }
     fn essential(&self, _load: f64) -> Vec<(usize, f64)> {
-        self.fixed.clone()
+        self.fixed.iter().map(|&d| (d, 0.0)).collect()
     }
     fn force_norm(&self, load: f64) -> f64 {
-        load.abs() * self.load.iter().map(|v| v * v).sum::<f64>().sqrt()
+        load.abs() * self.load_norm
     }
-    fn commit(&mut self, u: &[f64], _load: f64) {
-        let q = match self.increment(u) {
-            Ok(q) => q,
-            Err(_) => return, // unreachable for a state the driver evaluated
+    fn commit(&mut self, u: &[f64], load: f64) {
+        let cached = matches!(&self.cache, Some((uc, _)) if uc == u);
+        if !cached {
+            let mut r = vec![0.0; self.pattern.n_dofs()];
+            if self.evaluate(u, load, &mut r, None).is_err() {
+                return; // unreachable for a state the driver evaluated
+            }
+        }
+        let Some((_, histories)) = self.cache.take() else {
+            return;
         };
-        let c = match self.cache.take() {
-            Some((uc, c)) if uc == u => c,
-            _ => match self.model.contributions(&q, false) {
-                Ok(c) => c,
-                Err(_) => return,
-            },
-        };
-        self.model.commit(&q, c);
+        let q: Vec<f64> = u[..self.n_q]
+            .iter()
+            .zip(&self.committed)
+            .map(|(a, b)| a - b)
+            .collect();
+        self.model.commit_histories(&q, histories);
         self.committed = u.to_vec();
     }
     fn restore(&mut self) {

@@ -11,7 +11,9 @@ use shelldsa::material::MaterialParams;
 use shelldsa::meshfree::quadrature::{gauss_legendre, CellQuadrature};
 use shelldsa::meshfree::transform::{edge_particles, Edge, Transformation};
 use shelldsa::meshfree::{regular_grid, Basis, ParamBox, ShapeFunctions, ShapeValues};
+use shelldsa::shell::load::ExternalLoad;
 use shelldsa::shell::model::{Discretisation, ShellModel};
+use shelldsa::shell::ShellError;
 
 /// The strip: model, shape functions, clamping transformation and the unit tip load (+z).
 pub struct Strip {
@@ -53,6 +55,7 @@ pub fn elastic_model(surface: &Surface<f64>, spec: &ModelSpec) -> ShellModel {
             .zip(g2.weights.iter().copied())
             .collect(),
         thickness: spec.thickness,
+        symmetry: Vec::new(),
     };
     let material = MaterialParams::new(spec.young, 0.0, 1e30, 0.0, 1.0).unwrap();
     ShellModel::new(surface, disc, material).unwrap()
@@ -144,5 +147,31 @@ impl Strip {
         let mut sv = ShapeValues::new();
         self.shape.evaluate(uv, &mut sv).unwrap();
         sv.iter().map(|(i, psi, _)| psi * q(i)).sum()
+    }
+}
+
+/// A dead load given directly as a generalised force vector (load factor 1), e.g. the strip's
+/// edge-integrated tip load.
+#[derive(Debug, Clone)]
+pub struct GeneralisedLoad(pub Vec<f64>);
+
+impl ExternalLoad for GeneralisedLoad {
+    fn add_force(
+        &self,
+        model: &ShellModel,
+        _q: &[f64],
+        factor: f64,
+        f: &mut [f64],
+    ) -> Result<(), ShellError> {
+        if f.len() != self.0.len() || model.n_dofs() != f.len() {
+            return Err(ShellError::Dimension {
+                expected: self.0.len(),
+                got: f.len(),
+            });
+        }
+        for (a, b) in f.iter_mut().zip(&self.0) {
+            *a += factor * b;
+        }
+        Ok(())
     }
 }
