@@ -81,6 +81,7 @@ pub struct ShellProblem {
     cache: Option<(Vec<f64>, Histories)>,
     load_norm: f64,
     execution: Execution,
+    redundant: Vec<String>,
 }
 
 fn fatal<E: std::fmt::Display>(e: E) -> ProblemError {
@@ -170,6 +171,7 @@ impl ShellProblem {
         }
         fixed.sort_unstable();
         fixed.dedup();
+        let mut redundant = Vec::new();
         // User rows: checked, duplicate DOFs merged, terms on eliminated DOFs dropped (those
         // DOFs stay zero).
         for c in constraints {
@@ -206,8 +208,19 @@ impl ShellProblem {
                     None => dense.push((d, a)),
                 }
             }
-            dense.retain(|t| t.1 != 0.0);
+            // A row at a point of a symmetry plane along the plane's normal folds to
+            // coefficients `Ψ_I − Ψ_image ≈ 0` (equal on the plane) on the free DOFs: the
+            // symmetry already satisfies it. Coefficients below 1e-10 of the row's largest
+            // (round-off of the RK evaluation, ~1e-15 relative, with margin) are dropped, and
+            // an emptied homogeneous row is redundant (kept, it would make the system
+            // singular).
+            let scale = c.terms.iter().fold(0.0_f64, |m, t| m.max(t.1.abs()));
+            dense.retain(|t| t.1.abs() > 1e-10 * scale);
             if dense.is_empty() {
+                if c.value == 0.0 {
+                    redundant.push(c.label);
+                    continue;
+                }
                 return Err(ConstraintError::EmptyRow { label: c.label }.into());
             }
             rows.push(LinearConstraint { terms: dense, ..c });
@@ -309,7 +322,15 @@ impl ShellProblem {
             cache: None,
             load_norm,
             execution: options.execution,
+            redundant,
         })
+    }
+
+    /// Labels of the homogeneous constraints dropped because the symmetry planes already
+    /// satisfy them (e.g. a diaphragm's component along a symmetry plane's normal at the corner
+    /// where the two meet).
+    pub fn redundant_constraints(&self) -> &[String] {
+        &self.redundant
     }
 
     /// The sparse pattern of the tangent (give it to the driver and its solver).
