@@ -11,6 +11,7 @@ pub mod model;
 pub mod point;
 pub mod problem;
 pub mod rotation;
+pub mod tangent;
 
 use crate::kinematics::KinematicsError;
 use crate::material::MaterialError;
