@@ -67,7 +67,7 @@ fn point_kernels(
     if km.nrows() != nd {
         *km = DMatrix::zeros(nd, nd);
     } else {
-        km.fill(0.0);
+        km.as_mut_slice().fill(0.0);
     }
     let mut sum = ThicknessTangent::new(&p.shape, &parts, &xl).unwrap();
     for (l, &(zeta, wz)) in m.thickness_rule.iter().enumerate() {
