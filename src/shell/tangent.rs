@@ -286,16 +286,16 @@ impl<'a> ThicknessTangent<'a> {
                     set(9 + o, r0 + c, mo[c] * t1 + mo[3 + c] * t2);
                 }
             }
-            // Rotation row u = ∂d/∂α_b: r̃₀ = vec(u ⊗ (0, 0, t/2 Ψ)) has entries 6 + i,
-            // r̃₁ = vec(u ⊗ t/2 (Ψ̃,1, Ψ̃,2, 0)) entries i and 3 + i; `t` maps u to the image.
+            // Rotation row u = ∂d/∂α_b: r̃₀ = vec(u ⊗ (0, 0, t/2 Ψ)) has entries 6 + j,
+            // r̃₁ = vec(u ⊗ t/2 (Ψ̃,1, Ψ̃,2, 0)) entries j and 3 + j; `t` maps u to the image.
             let (w0, w1, w2) = (ht * t1, ht * t2, ht * sh.psi);
             let mut t = [[0.0; 3]; NY];
             for (o, to) in t.iter_mut().enumerate() {
-                for (i, ti) in to.iter_mut().enumerate() {
-                    *ti = if o < 9 {
-                        m0[o][6 + i] * w2 + m1[o][i] * w0 + m1[o][3 + i] * w1
+                for (j, tj) in to.iter_mut().enumerate() {
+                    *tj = if o < 9 {
+                        m0[o][6 + j] * w2 + m1[o][j] * w0 + m1[o][3 + j] * w1
                     } else {
-                        m1[o - 9][6 + i] * w2 + m2[o - 9][i] * w0 + m2[o - 9][3 + i] * w1
+                        m1[o - 9][6 + j] * w2 + m2[o - 9][j] * w0 + m2[o - 9][3 + j] * w1
                     };
                 }
             }
