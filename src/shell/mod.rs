@@ -14,6 +14,7 @@ pub mod point;
 pub mod problem;
 pub mod rotation;
 pub mod symmetry;
+pub mod tangent;
 
 use crate::kinematics::KinematicsError;
 use crate::material::MaterialError;

@@ -13,11 +13,12 @@
 //! results.
 
 use super::point::{
-    point_residual, point_tangent, ParticleState, PointHistory, PointInput, ShapeData,
-    SurfacePoint, DOFS_PER_PARTICLE,
+    point_residual, point_residual_with, ParticleState, PointHistory, PointIncrement, PointInput,
+    ShapeData, SurfacePoint, DOFS_PER_PARTICLE,
 };
 use super::rotation::rotate_director;
 use super::symmetry::{SymmetryLayout, SymmetryPlane};
+use super::tangent::ThicknessTangent;
 use super::ShellError;
 use crate::geometry::Surface;
 use crate::material::{MaterialParams, MaterialState};
@@ -560,6 +561,10 @@ impl ShellModel {
         let n_loc = x.len();
         let mut residual = vec![0.0; n_loc];
         let mut k_loc = tangent.then(|| DMatrix::zeros(n_loc, n_loc));
+        let inc = PointIncrement::new(&parts, &x)?;
+        let mut k_sum = tangent
+            .then(|| ThicknessTangent::new(&p.shape, &parts, &x))
+            .transpose()?;
         let mut history = Vec::with_capacity(nl);
         let mut plastic_layers = 0;
         for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
@@ -573,15 +578,18 @@ impl ShellModel {
                 material: &self.material,
                 history: &self.history[k * nl + l],
             };
-            let res = point_residual(&inp, &x)?;
+            let res = point_residual_with(&inp, &inc)?;
             for (r, v) in residual.iter_mut().zip(&res.residual) {
                 *r += v;
             }
-            if let Some(km) = k_loc.as_mut() {
-                *km += point_tangent(&inp, &x, &res)?;
+            if let Some(ks) = k_sum.as_mut() {
+                ks.add_layer(&inp, &res)?;
             }
             plastic_layers += usize::from(res.return_map.plastic);
             history.push(res.history);
+        }
+        if let (Some(ks), Some(km)) = (&k_sum, k_loc.as_mut()) {
+            ks.add_to(km)?;
         }
         let (residual, k_loc) = self.to_cell(p, residual, k_loc);
         Ok(LocalContribution {

@@ -215,6 +215,50 @@ fn invert<T: Real>(m: &M3<T>, what: &'static str) -> Result<(T, M3<T>), ShellErr
     Ok((det, inv))
 }
 
+/// The layer-independent part of a point's increment, per neighbour: `Δū_I`,
+/// `Δd_I = d_I(α_I) − d_Iⁿ` (Rodrigues' exact rotation) and the virtual directors `∂d_I/∂α_β`.
+/// The thickness layers of an in-plane point share it ([`point_residual_with`]), so the
+/// rotations are evaluated once per in-plane point rather than once per layer.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointIncrement<T> {
+    /// `Δū_I`.
+    pub du: Vec<V3<T>>,
+    /// `Δd_I`.
+    pub dd: Vec<V3<T>>,
+    /// `∂d_I/∂α_1`, `∂d_I/∂α_2` at `α_I`.
+    pub d_alpha: Vec<[V3<T>; 2]>,
+}
+
+impl<T: Real> PointIncrement<T> {
+    /// From the neighbours' committed states and the DOF increments (5 per neighbour:
+    /// `Δū_I` then `α_I`).
+    pub fn new(particles: &[ParticleState<T>], dofs: &[T]) -> Result<Self, ShellError> {
+        let n = particles.len();
+        if dofs.len() != DOFS_PER_PARTICLE * n {
+            return Err(ShellError::Dimension {
+                expected: DOFS_PER_PARTICLE * n,
+                got: dofs.len(),
+            });
+        }
+        let mut du = Vec::with_capacity(n);
+        let mut dd = Vec::with_capacity(n);
+        let mut d_alpha = Vec::with_capacity(n);
+        for (p, q) in particles.iter().zip(dofs.chunks_exact(DOFS_PER_PARTICLE)) {
+            du.push(V3::new(q[0], q[1], q[2]));
+            // Δd_I = f1 θ×dⁿ + f2 θ×(θ×dⁿ) (Rodrigues' formula without the dⁿ term): forming
+            // d(α) − dⁿ instead cancels to an absolute error ~ε, which the transverse shear
+            // stiffness turns into a load-independent residual floor (~3e-10 on the hemisphere).
+            let theta = p.e[0] * q[3] + p.e[1] * q[4];
+            let (f1, f2) = rodrigues_coefficients(theta.dot(&theta));
+            let c = theta.cross(&p.d);
+            dd.push(c * f1 + theta.cross(&c) * f2);
+            // Virtual director of the rotation DOFs: the exact ∂d_I/∂α_β of Rodrigues' formula.
+            d_alpha.push(director_first_derivatives(p, [q[3], q[4]]));
+        }
+        Ok(PointIncrement { du, dd, d_alpha })
+    }
+}
+
 /// Residual (internal force) of the point for DOF increments `dofs` (5 per neighbour:
 /// `Δū_I` then `α_I`), generic over the scalar: with dual numbers this is the reference.
 pub fn point_residual<T: Real>(
@@ -228,21 +272,28 @@ pub fn point_residual<T: Real>(
             got: dofs.len(),
         });
     }
-    let mut du = Vec::with_capacity(n);
-    let mut dd = Vec::with_capacity(n);
-    for (i, p) in inp.particles.iter().enumerate() {
-        let q = &dofs[DOFS_PER_PARTICLE * i..DOFS_PER_PARTICLE * (i + 1)];
-        du.push(V3::new(q[0], q[1], q[2]));
-        // Δd_I = f1 θ×dⁿ + f2 θ×(θ×dⁿ) (Rodrigues' formula without the dⁿ term): forming
-        // d(α) − dⁿ instead cancels to an absolute error ~ε, which the transverse shear
-        // stiffness turns into a load-independent residual floor (~3e-10 on the hemisphere).
-        let theta = p.e[0] * q[3] + p.e[1] * q[4];
-        let (f1, f2) = rodrigues_coefficients(theta.dot(&theta));
-        let c = theta.cross(&p.d);
-        dd.push(c * f1 + theta.cross(&c) * f2);
+    point_residual_with(inp, &PointIncrement::new(inp.particles, dofs)?)
+}
+
+/// [`point_residual`] with the layer-independent increment computed beforehand (from
+/// `inp.particles` and the DOFs): the same result, for the layers of one in-plane point.
+pub fn point_residual_with<T: Real>(
+    inp: &PointInput<T>,
+    incr: &PointIncrement<T>,
+) -> Result<PointResult<T>, ShellError> {
+    let n = inp.shape.len();
+    for got in [
+        inp.particles.len(),
+        incr.du.len(),
+        incr.dd.len(),
+        incr.d_alpha.len(),
+    ] {
+        if got != n {
+            return Err(ShellError::Dimension { expected: n, got });
+        }
     }
     let jn = step_start_jacobian(inp);
-    let g = increment_gradient(inp, &du, &dd);
+    let g = increment_gradient(inp, &incr.du, &incr.dd);
     let (_, jn_inv) = invert(&jn, "Jⁿ (step-start configuration)")?;
     let h = g * jn_inv;
     let l = mid_step_gradient(&h)?;
@@ -262,13 +313,9 @@ pub fn point_residual<T: Real>(
     let half_t = inp.thickness * 0.5;
     let z = half_t * inp.zeta;
     let mut residual = Vec::with_capacity(DOFS_PER_PARTICLE * n);
-    for (i, sh) in inp.shape.iter().enumerate() {
+    for (sh, da) in inp.shape.iter().zip(&incr.d_alpha) {
         let f = p.column(0) * T::cst(sh.dpsi_test[0]) + p.column(1) * T::cst(sh.dpsi_test[1]);
         let m = f * z + p.column(2) * (half_t * sh.psi);
-        let pi = &inp.particles[i];
-        let q = &dofs[DOFS_PER_PARTICLE * i..DOFS_PER_PARTICLE * (i + 1)];
-        // Virtual director of the rotation DOFs: the exact ∂d_I/∂α_β of Rodrigues' formula.
-        let da = director_first_derivatives(pi, [q[3], q[4]]);
         residual.extend_from_slice(&[f[0], f[1], f[2], da[0].dot(&m), da[1].dot(&m)]);
     }
     Ok(PointResult {

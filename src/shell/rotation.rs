@@ -86,18 +86,18 @@ pub fn rodrigues_coefficient_derivatives(x: f64) -> ([f64; 3], [f64; 3]) {
         let (odd, even) = factorials();
         let mut a = [0.0; 3];
         let mut b = [0.0; 3];
+        // Running powers x^k, x^(k−1), x^(k−2) (the negative powers enter with factor 0).
+        let (mut pk, mut pk1, mut pk2) = (1.0, 0.0, 0.0);
         for k in 0..TERMS {
             let sign = if k % 2 == 0 { 1.0 } else { -1.0 };
             let kf = k as f64;
-            let pk = x.powi(k as i32);
-            let pk1 = if k >= 1 { x.powi(k as i32 - 1) } else { 0.0 };
-            let pk2 = if k >= 2 { x.powi(k as i32 - 2) } else { 0.0 };
-            a[0] += sign * pk / odd[k];
-            a[1] += sign * kf * pk1 / odd[k];
-            a[2] += sign * kf * (kf - 1.0) * pk2 / odd[k];
-            b[0] += sign * pk / even[k];
-            b[1] += sign * kf * pk1 / even[k];
-            b[2] += sign * kf * (kf - 1.0) * pk2 / even[k];
+            let (co, ce) = (sign / odd[k], sign / even[k]);
+            let t = [pk, kf * pk1, kf * (kf - 1.0) * pk2];
+            for m in 0..3 {
+                a[m] += t[m] * co;
+                b[m] += t[m] * ce;
+            }
+            (pk2, pk1, pk) = (pk1, pk, pk * x);
         }
         (a, b)
     } else {
