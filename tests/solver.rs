@@ -800,3 +800,256 @@ fn cholesky_names_the_failing_dof_on_a_large_supernodal_sized_system() {
         );
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Predictor and stopping tests of the driver.
+
+fn steps_summary(report: &NewtonReport) -> Vec<(f64, Predictor, usize, Option<Acceptance>)> {
+    report
+        .converged_steps()
+        .map(|s| (s.load, s.predictor, s.iterations, s.acceptance))
+        .collect()
+}
+
+#[test]
+fn secant_predictor_is_exact_on_a_linear_path_even_when_steps_grow() {
+    // Linear springs (a = 0, β = 1, c = 0): u(λ) is linear in λ, so the previous increment
+    // scaled by Δλ/Δλ_prev is the exact solution of the next step (to round-off), whatever the
+    // step sizes. The zero predictor needs one Newton update per step.
+    for predictor in [Predictor::Secant, Predictor::Zero] {
+        let mut prob = SpringChain::new(8, 1.0, 3.0, None);
+        prob.a = 0.0;
+        let pattern = prob.pattern.clone();
+        let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+        let newton = NewtonSolver {
+            options: NewtonOptions::default(),
+            stepping: LoadStepping {
+                initial_step: 0.05,
+                grow_factor: 1.7,
+                predictor,
+                ..Default::default()
+            },
+        };
+        let report = newton
+            .run(&mut prob, &pattern, &mut solver, &[0.0; 9])
+            .unwrap();
+        let steps = steps_summary(&report);
+        println!("{predictor:?}: {steps:?}");
+        let sizes: Vec<f64> = report.converged_steps().map(|s| s.step_size).collect();
+        assert!(sizes.windows(2).any(|w| w[1] > 1.5 * w[0]), "{sizes:?}");
+        assert_eq!(steps[0].1, Predictor::Zero, "no previous increment");
+        assert_eq!(steps[0].2, 1);
+        for &(load, p, its, acc) in &steps[1..] {
+            assert_eq!(p, predictor);
+            match predictor {
+                Predictor::Secant => {
+                    assert_eq!(its, 0, "λ = {load}: the prediction is the solution");
+                    assert!(acc.is_some());
+                }
+                Predictor::Zero => assert_eq!(its, 1, "λ = {load}"),
+            }
+        }
+        // u_N = λ P / k_s summed: exact for linear springs.
+        let exact: f64 = (0..8).map(|s| 3.0 / SpringChain::k(s)).sum();
+        assert!((report.u[8] - exact).abs() <= 1e-13 * exact);
+    }
+}
+
+#[test]
+fn secant_predictor_saves_iterations_on_a_softening_chain() {
+    // Softening springs near their limit load: the path bends, the secant prediction is not
+    // exact, but it starts each step closer than the committed state does.
+    let mut totals = Vec::new();
+    for predictor in [Predictor::Zero, Predictor::Secant] {
+        let mut prob = SpringChain::new(10, 0.05, 2.0, None);
+        let pattern = prob.pattern.clone();
+        let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+        let newton = NewtonSolver {
+            options: NewtonOptions {
+                residual_rtol: 1e-12,
+                ..Default::default()
+            },
+            stepping: LoadStepping {
+                initial_step: 0.05,
+                max_step: 0.05,
+                predictor,
+                ..Default::default()
+            },
+        };
+        let report = newton
+            .run(&mut prob, &pattern, &mut solver, &[0.0; 11])
+            .unwrap();
+        let total: usize = report.converged_steps().map(|s| s.iterations).sum();
+        println!("{predictor:?}: {total} iterations in 20 steps");
+        totals.push(total);
+    }
+    assert!(totals[1] < totals[0], "{totals:?}");
+}
+
+/// A spring chain whose residual carries deterministic noise of size `noise` (a stand-in for
+/// round-off far above `ε ‖|K||u|‖`), optionally reported as its residual scale.
+struct Noisy {
+    chain: SpringChain,
+    noise: f64,
+    report_scale: bool,
+    rng: Rng,
+}
+
+impl NonlinearProblem for Noisy {
+    fn n_dofs(&self) -> usize {
+        self.chain.n_dofs()
+    }
+    fn residual(&mut self, u: &[f64], l: f64, r: &mut [f64]) -> Result<(), ProblemError> {
+        self.chain.residual(u, l, r)?;
+        for x in r.iter_mut() {
+            *x += self.noise * self.rng.next();
+        }
+        Ok(())
+    }
+    fn tangent(&mut self, u: &[f64], l: f64, v: &mut [f64]) -> Result<(), ProblemError> {
+        self.chain.tangent(u, l, v)
+    }
+    fn residual_and_tangent(
+        &mut self,
+        u: &[f64],
+        l: f64,
+        r: &mut [f64],
+        v: &mut [f64],
+    ) -> Result<(), ProblemError> {
+        self.residual(u, l, r)?;
+        self.tangent(u, l, v)
+    }
+    fn essential(&self, l: f64) -> Vec<(usize, f64)> {
+        self.chain.essential(l)
+    }
+    fn force_norm(&self, l: f64) -> f64 {
+        self.chain.force_norm(l)
+    }
+    fn residual_scale(&self) -> f64 {
+        if self.report_scale {
+            // ‖noise‖ ≤ √n · noise; the driver multiplies by roundoff_factor · ε.
+            self.noise * (self.n_dofs() as f64).sqrt() / f64::EPSILON
+        } else {
+            0.0
+        }
+    }
+    fn commit(&mut self, u: &[f64], l: f64) {
+        self.chain.commit(u, l)
+    }
+    fn restore(&mut self) {
+        self.chain.restore()
+    }
+}
+
+fn noisy_run(
+    noise: f64,
+    report_scale: bool,
+    options: NewtonOptions,
+) -> Result<NewtonReport, Box<NewtonFailure>> {
+    let mut prob = Noisy {
+        chain: SpringChain::new(10, 0.05, 2.0, None),
+        noise,
+        report_scale,
+        rng: Rng(0xF100),
+    };
+    let pattern = prob.chain.pattern.clone();
+    let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+    let newton = NewtonSolver {
+        options,
+        stepping: LoadStepping {
+            initial_step: 0.25,
+            max_step: 0.25,
+            ..Default::default()
+        },
+    };
+    newton.run(&mut prob, &pattern, &mut solver, &[0.0; 11])
+}
+
+#[test]
+fn unattainable_tolerance_is_met_at_the_roundoff_floor() {
+    // rtol = 1e-18 asks for less than round-off (the internal forces are O(1)): the driver stops
+    // at the first residual below ε ‖|K||u|‖, after the iterations quadratic convergence needs,
+    // where the bare tolerance test runs into max_iterations.
+    let tight = NewtonOptions {
+        residual_rtol: 1e-18,
+        energy_rtol: 0.0,
+        ..Default::default()
+    };
+    let report = noisy_run(0.0, false, tight).unwrap();
+    let reference = noisy_run(
+        0.0,
+        false,
+        NewtonOptions {
+            residual_rtol: 1e-12,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    for (st, rf) in report.converged_steps().zip(reference.converged_steps()) {
+        println!(
+            "λ {}: {:?} after {} (rtol 1e-12: {}), r {:?}, floor {:.2e}",
+            st.load,
+            st.acceptance,
+            st.iterations,
+            rf.iterations,
+            st.residual_norms,
+            st.roundoff_floors.last().unwrap()
+        );
+        assert_eq!(st.acceptance, Some(Acceptance::RoundoffFloor));
+        assert!(st.residual_norms.last() <= st.roundoff_floors.last());
+        // At most one update beyond the 1e-12 tolerance (whose last residual is already within
+        // a few orders of the floor).
+        assert!(st.iterations <= rf.iterations + 1, "λ {}", st.load);
+    }
+    // Without the floor (and the stagnation fallback) the same tolerance is never met.
+    let fail = noisy_run(
+        0.0,
+        false,
+        NewtonOptions {
+            roundoff_factor: 0.0,
+            stagnation_ratio: 0.0,
+            ..tight
+        },
+    )
+    .unwrap_err();
+    assert!(
+        matches!(fail.reason, FailureReason::MaxIterations(20)),
+        "{fail}"
+    );
+}
+
+#[test]
+fn noise_above_the_estimated_floor_is_caught_by_the_scale_or_by_stagnation() {
+    // Noise of 1e-9 in every residual entry, far above ε ‖|K||u|‖ ≈ 1e-15, below the tolerance
+    // rtol·r_ref only for rtol > ~1e-9. With rtol = 1e-12:
+    let opts = NewtonOptions {
+        residual_rtol: 1e-12,
+        ..Default::default()
+    };
+    // the problem reports its scale: the floor test accepts at the first noisy residual;
+    let with_scale = noisy_run(1e-9, true, opts).unwrap();
+    // it does not: the residual stalls twice and the stagnation test accepts, two updates later;
+    let without = noisy_run(1e-9, false, opts).unwrap();
+    for (a, b) in with_scale.converged_steps().zip(without.converged_steps()) {
+        println!(
+            "λ {}: scale reported {:?} after {} {:?}; not reported {:?} after {} {:?}",
+            a.load,
+            a.acceptance,
+            a.iterations,
+            a.residual_norms,
+            b.acceptance,
+            b.iterations,
+            b.residual_norms
+        );
+        assert_eq!(a.acceptance, Some(Acceptance::RoundoffFloor));
+        assert_eq!(b.acceptance, Some(Acceptance::Stagnation));
+        assert_eq!(b.iterations, a.iterations + 2);
+        assert!(*b.residual_norms.last().unwrap() <= 1e-12f64.sqrt() * 2.0 * b.load);
+    }
+    // A stall far above the tolerance is a failure, not round-off: noise 1e-4 > √rtol · r_ref.
+    let fail = noisy_run(1e-4, false, opts).unwrap_err();
+    assert!(
+        matches!(fail.reason, FailureReason::MaxIterations(_)),
+        "{fail}"
+    );
+}

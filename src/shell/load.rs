@@ -1,14 +1,43 @@
 //! External loads on the shell, at load factor 1 (the driver scales them by λ).
 //!
 //! A load adds its generalised force `f_ext(q)` (5 components per particle: forces on `Δū_I`,
-//! moments on `α_I`) for the increment `q` from the committed state. Configuration-dependent
-//! loads (pressure following the surface, a moment about the current director) also add their
-//! load stiffness `∂f_ext/∂q`; the problem's tangent is then `K − λ ∂f_ext/∂q`.
+//! moments on `α_I`) for the increment `q` from the committed state: the discrete load linear
+//! form `l(z̄)` of the paper's eq. 33 (and its follower generalisation). Configuration-dependent
+//! loads (pressure following the surface, a moment acting through the current director) also
+//! add their load stiffness `∂f_ext/∂q`; the problem's tangent is then `K − λ ∂f_ext/∂q` (the
+//! linearised load term of eq. 36).
+//!
+//! Loads:
+//! - [`PointForce`]: a dead point force at a parameter point, `f_I = Ψ_I(ξ_P) P`;
+//! - [`Gravity`]: a dead load per unit initial area, `f_I = ∫ Ψ_I b dA⁰`;
+//! - [`Pressure`]: a follower pressure normal to the current mid-surface,
+//!   `f_I = ∫ p Ψ_I (x,1 × x,2) dξ`;
+//! - [`Moment`]: a line moment per unit initial length on a parametric edge, acting through the
+//!   rotation of the interpolated director, `δW = ∫ m · (d × δd)/|d|² ds`.
+//!
+//! Every load goes from global to point-local degrees of freedom through the model's one seam
+//! ([`ShellModel::gather_local`], [`ShellModel::scatter_local`],
+//! [`ShellModel::scatter_particle`], [`ShellModel::particle_state`]); a load stiffness is mapped
+//! back with the transpose of the scatter ([`GatherMap`]), so a particle whose DOFs are a linear
+//! map of other particles' (a symmetry image) is handled by the seam alone. The forces of the
+//! configuration-dependent loads are written once, generic over the scalar
+//! ([`GenericLoad::force_generic`]), so that their dual-number Jacobian is the reference of the
+//! hand-derived stiffness. Formulas, signs and derivations: `docs/loads.md`.
 
 use super::model::ShellModel;
+use super::point::{director_first_derivatives, ParticleState, DOFS_PER_PARTICLE};
+use super::rotation::{director_derivatives, rotate_director};
 use super::ShellError;
-use crate::meshfree::ShapeValues;
+use crate::geometry::Surface;
+use crate::meshfree::quadrature::gauss_legendre;
+use crate::meshfree::transform::Edge;
+use crate::meshfree::{ParamBox, ShapeValues};
+use crate::scalar::Real;
+use nalgebra::{DMatrix, Matrix3, Vector3};
+use std::collections::HashMap;
 use std::fmt::Debug;
+
+type V3<T> = Vector3<T>;
 
 /// An external load.
 pub trait ExternalLoad: Send + Sync + Debug {
@@ -36,6 +65,165 @@ pub trait ExternalLoad: Send + Sync + Debug {
     ) -> Result<(), ShellError> {
         Ok(())
     }
+}
+
+/// A load whose force is written once over any scalar: with dual numbers its Jacobian is the
+/// reference of [`ExternalLoad::add_stiffness`] (`tests/shell_loads.rs`).
+pub trait GenericLoad {
+    /// Add `factor · f_ext(q)` into `f`, in scalar `T`.
+    fn force_generic<T: Real>(
+        &self,
+        model: &ShellModel,
+        q: &[T],
+        factor: f64,
+        f: &mut [T],
+    ) -> Result<(), ShellError>;
+}
+
+fn check_sizes(model: &ShellModel, q: usize, f: Option<usize>) -> Result<(), ShellError> {
+    let n = model.n_dofs();
+    for got in std::iter::once(q).chain(f) {
+        if got != n {
+            return Err(ShellError::Dimension { expected: n, got });
+        }
+    }
+    Ok(())
+}
+
+fn check_finite(field: &str, v: &[f64]) -> Result<(), ShellError> {
+    if v.iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(ShellError::InvalidInput(format!(
+            "{field} = {v:?}: expected finite values"
+        )))
+    }
+}
+
+fn check_region(field: &str, region: &Option<ParamBox>) -> Result<(), ShellError> {
+    if let Some(b) = region {
+        let ok = (0..2).all(|k| b.lo[k].is_finite() && b.hi[k].is_finite() && b.lo[k] <= b.hi[k]);
+        if !ok {
+            return Err(ShellError::InvalidInput(format!(
+                "{field} = {b:?}: expected finite corners with lo <= hi"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The quadrature points of `model` inside `region` (all of them without one); an empty
+/// selection is an error naming the region.
+fn selected_points(
+    model: &ShellModel,
+    region: &Option<ParamBox>,
+    what: &str,
+) -> Result<Vec<usize>, ShellError> {
+    let sel: Vec<usize> = (0..model.points.len())
+        .filter(|&k| region.is_none_or(|b| b.contains(model.points[k].uv)))
+        .collect();
+    if sel.is_empty() {
+        return Err(ShellError::InvalidInput(format!(
+            "{what} region {region:?}: contains no quadrature point of the model ({} points)",
+            model.points.len()
+        )));
+    }
+    Ok(sel)
+}
+
+/// The gather map of shape-function particles: for each of a particle's 5 local components,
+/// the global `(dof, coefficient)` pairs it is gathered from. It is built as the transpose of
+/// [`ShellModel::scatter_particle`] (scatter a unit local vector, read the global entries), so
+/// whatever linear map the seam applies (identity for a real particle, a reflection for a
+/// symmetry image) the load stiffness `Gᵀ K_loc G` follows it.
+#[derive(Debug)]
+pub struct GatherMap {
+    rows: HashMap<usize, [Vec<(usize, f64)>; DOFS_PER_PARTICLE]>,
+    scratch: Vec<f64>,
+}
+
+impl GatherMap {
+    /// An empty map for `model`.
+    pub fn new(model: &ShellModel) -> Self {
+        GatherMap {
+            rows: HashMap::new(),
+            scratch: vec![0.0; model.n_dofs()],
+        }
+    }
+
+    /// The rows of shape-function particle `j` (computed on first use: one scatter and one scan
+    /// of the global vector per component).
+    pub fn rows(
+        &mut self,
+        model: &ShellModel,
+        j: usize,
+    ) -> &[Vec<(usize, f64)>; DOFS_PER_PARTICLE] {
+        let scratch = &mut self.scratch;
+        self.rows.entry(j).or_insert_with(|| {
+            std::array::from_fn(|c| {
+                let mut e = [0.0; DOFS_PER_PARTICLE];
+                e[c] = 1.0;
+                model.scatter_particle(j, &e, scratch);
+                let mut row = Vec::new();
+                for (i, v) in scratch.iter_mut().enumerate() {
+                    if *v != 0.0 {
+                        row.push((i, *v));
+                        *v = 0.0;
+                    }
+                }
+                row
+            })
+        })
+    }
+
+    /// Component `c` of particle `j` gathered from the global vector `q`.
+    pub fn gather<T: Real>(&mut self, model: &ShellModel, j: usize, c: usize, q: &[T]) -> T {
+        self.rows(model, j)[c]
+            .iter()
+            .fold(T::zero(), |s, &(i, g)| s + q[i] * g)
+    }
+
+    /// Add `Gᵀ K_loc G` as triplets: `k_loc` is indexed by `(particle, component)` pairs
+    /// `local[a]` on both sides.
+    pub fn add_triplets(
+        &mut self,
+        model: &ShellModel,
+        local: &[(usize, usize)],
+        k_loc: &DMatrix<f64>,
+        out: &mut Vec<(usize, usize, f64)>,
+    ) {
+        let rows: Vec<Vec<(usize, f64)>> = local
+            .iter()
+            .map(|&(j, c)| self.rows(model, j)[c].clone())
+            .collect();
+        for (a, ra) in rows.iter().enumerate() {
+            for (b, rb) in rows.iter().enumerate() {
+                let v = k_loc[(a, b)];
+                if v == 0.0 {
+                    continue;
+                }
+                for &(i, gi) in ra {
+                    for &(jj, gj) in rb {
+                        out.push((i, jj, gi * v * gj));
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn lift_state<T: Real>(p: &ParticleState<f64>) -> ParticleState<T> {
+    ParticleState {
+        u: p.u.map(T::cst),
+        d: p.d.map(T::cst),
+        d0: p.d0.map(T::cst),
+        e: p.e.map(|v| v.map(T::cst)),
+    }
+}
+
+/// `[a]×`, the matrix of `v ↦ a × v`.
+fn skew(a: &V3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -a[2], a[1], a[2], 0.0, -a[0], -a[1], a[0], 0.0)
 }
 
 /// A dead point force `P` at parameter coordinates `uv` (a point of the mid-surface),
@@ -72,5 +260,448 @@ impl ExternalLoad for PointForce {
             model.scatter_particle(j, &l, f);
         }
         Ok(())
+    }
+}
+
+/// A dead load per unit initial mid-surface area (gravity, self-weight: `b = ρ t g`), on the
+/// whole surface or on the quadrature points inside a parameter box:
+/// `f_I = ∫ Ψ_I b dA⁰ = Σ_qp Ψ_I b |x̄⁰,1 × x̄⁰,2| w` (the paper's eq. 33 with the body force
+/// integrated through the thickness). Translations only.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Gravity {
+    load: [f64; 3],
+    region: Option<ParamBox>,
+}
+
+impl Gravity {
+    /// Load `b` per unit area (global axes) over the whole surface.
+    pub fn new(load: [f64; 3]) -> Result<Self, ShellError> {
+        check_finite("gravity load per unit area", &load)?;
+        Ok(Gravity { load, region: None })
+    }
+    /// Restrict to the quadrature points inside `region` (a box that cuts through background
+    /// cells integrates the cut cells only approximately).
+    pub fn within(mut self, region: ParamBox) -> Result<Self, ShellError> {
+        self.region = Some(region);
+        check_region("gravity region", &self.region)?;
+        Ok(self)
+    }
+    /// The load per unit area.
+    pub fn load(&self) -> [f64; 3] {
+        self.load
+    }
+}
+
+impl GenericLoad for Gravity {
+    fn force_generic<T: Real>(
+        &self,
+        model: &ShellModel,
+        q: &[T],
+        factor: f64,
+        f: &mut [T],
+    ) -> Result<(), ShellError> {
+        check_sizes(model, q.len(), Some(f.len()))?;
+        for k in selected_points(model, &self.region, "gravity")? {
+            let p = &model.points[k];
+            let da = p.surface.x_a[0].cross(&p.surface.x_a[1]).norm() * p.weight * factor;
+            let local: Vec<T> = p
+                .shape
+                .iter()
+                .flat_map(|s| {
+                    let w = s.psi * da;
+                    [
+                        T::cst(self.load[0] * w),
+                        T::cst(self.load[1] * w),
+                        T::cst(self.load[2] * w),
+                        T::zero(),
+                        T::zero(),
+                    ]
+                })
+                .collect();
+            model.scatter_local(k, &local, f);
+        }
+        Ok(())
+    }
+}
+
+impl ExternalLoad for Gravity {
+    fn add_force(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        factor: f64,
+        f: &mut [f64],
+    ) -> Result<(), ShellError> {
+        self.force_generic(model, q, factor, f)
+    }
+}
+
+/// A follower pressure `p` per unit current area, normal to the current mid-surface, on the
+/// whole surface or on the quadrature points inside a parameter box:
+///
+/// `f_I = ∫ p Ψ_I (x̄,1 × x̄,2) dξ = Σ_qp w p Ψ_I (x̄,1 × x̄,2)`,
+/// `x̄,α = x̄⁰,α + Σ_J Ψ_J,α (ū_J + Δū_J)`.
+///
+/// **Sign:** `x̄,1 × x̄,2 = n |x̄,1 × x̄,2|` with `n` the current normal, which starts as the
+/// surface normal `n⁰ = x̄⁰,1 × x̄⁰,2 / |…|` of the geometry. A positive `p` pushes the surface
+/// along `+n` (for a cylinder with outward `n⁰`, an internal pressure). Translations only; the
+/// rotation DOFs carry no pressure work (a mid-surface load).
+///
+/// Load stiffness (hand-derived, `docs/loads.md`): the 3×3 block of particles `(I, J)` is
+/// `∂f_I/∂Δū_J = Σ_qp w p Ψ_I (Ψ_J,2 [x̄,1]× − Ψ_J,1 [x̄,2]×)`; it is not symmetric in general
+/// (a pressure on an open surface whose boundary moves is not conservative).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Pressure {
+    pressure: f64,
+    region: Option<ParamBox>,
+}
+
+impl Pressure {
+    /// Pressure `p` (sign: see the type's documentation) over the whole surface.
+    pub fn new(pressure: f64) -> Result<Self, ShellError> {
+        check_finite("pressure", &[pressure])?;
+        Ok(Pressure {
+            pressure,
+            region: None,
+        })
+    }
+    /// Restrict to the quadrature points inside `region`.
+    pub fn within(mut self, region: ParamBox) -> Result<Self, ShellError> {
+        self.region = Some(region);
+        check_region("pressure region", &self.region)?;
+        Ok(self)
+    }
+    /// The pressure.
+    pub fn pressure(&self) -> f64 {
+        self.pressure
+    }
+
+    /// `x̄,1`, `x̄,2` at point `k` for the gathered states and local increments.
+    fn tangents<T: Real>(
+        model: &ShellModel,
+        k: usize,
+        parts: &[ParticleState<T>],
+        x: &[T],
+    ) -> [V3<T>; 2] {
+        let p = &model.points[k];
+        let mut xa = p.surface.x_a.map(|v| v.map(T::cst));
+        for (n, (s, st)) in p.shape.iter().zip(parts).enumerate() {
+            let q = &x[DOFS_PER_PARTICLE * n..DOFS_PER_PARTICLE * n + 3];
+            let u = st.u + V3::new(q[0], q[1], q[2]);
+            for (a, xa) in xa.iter_mut().enumerate() {
+                *xa += u * T::cst(s.dpsi[a]);
+            }
+        }
+        xa
+    }
+}
+
+impl GenericLoad for Pressure {
+    fn force_generic<T: Real>(
+        &self,
+        model: &ShellModel,
+        q: &[T],
+        factor: f64,
+        f: &mut [T],
+    ) -> Result<(), ShellError> {
+        check_sizes(model, q.len(), Some(f.len()))?;
+        for k in selected_points(model, &self.region, "pressure")? {
+            let (parts, x) = model.gather_local(k, q);
+            let [x1, x2] = Self::tangents(model, k, &parts, &x);
+            let p = &model.points[k];
+            let c = x1.cross(&x2) * T::cst(self.pressure * p.weight * factor);
+            let local: Vec<T> = p
+                .shape
+                .iter()
+                .flat_map(|s| {
+                    let v = c * T::cst(s.psi);
+                    [v[0], v[1], v[2], T::zero(), T::zero()]
+                })
+                .collect();
+            model.scatter_local(k, &local, f);
+        }
+        Ok(())
+    }
+}
+
+impl ExternalLoad for Pressure {
+    fn add_force(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        factor: f64,
+        f: &mut [f64],
+    ) -> Result<(), ShellError> {
+        self.force_generic(model, q, factor, f)
+    }
+    fn is_follower(&self) -> bool {
+        true
+    }
+    fn add_stiffness(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        factor: f64,
+        out: &mut Vec<(usize, usize, f64)>,
+    ) -> Result<(), ShellError> {
+        check_sizes(model, q.len(), None)?;
+        let mut map = GatherMap::new(model);
+        for k in selected_points(model, &self.region, "pressure")? {
+            let (parts, x) = model.gather_local(k, q);
+            let [x1, x2] = Self::tangents(model, k, &parts, &x);
+            let p = &model.points[k];
+            let pw = self.pressure * p.weight * factor;
+            let (s1, s2) = (skew(&x1), skew(&x2));
+            let n = p.shape.len();
+            let mut kl = DMatrix::zeros(3 * n, 3 * n);
+            for (i, si) in p.shape.iter().enumerate() {
+                for (j, sj) in p.shape.iter().enumerate() {
+                    let block = (s1 * sj.dpsi[1] - s2 * sj.dpsi[0]) * (pw * si.psi);
+                    kl.view_mut((3 * i, 3 * j), (3, 3)).copy_from(&block);
+                }
+            }
+            let local: Vec<(usize, usize)> = p
+                .neighbours
+                .iter()
+                .flat_map(|&j| (0..3).map(move |c| (j, c)))
+                .collect();
+            map.add_triplets(model, &local, &kl, out);
+        }
+        Ok(())
+    }
+}
+
+/// One point of an edge rule, with its shape functions.
+#[derive(Clone, Debug, PartialEq)]
+struct EdgePoint {
+    uv: [f64; 2],
+    /// Gauss weight times the initial arc-length element `|x̄⁰,t|`.
+    weight: f64,
+    /// Initial normal `n⁰`.
+    n0: V3<f64>,
+    /// Shape-function particles and `Ψ_J`.
+    shape: Vec<(usize, f64)>,
+}
+
+/// A line moment `m` per unit initial length on a parametric edge, about a fixed (global) axis,
+/// acting through the rotation of the RK-interpolated director
+/// `d(ξ) = n⁰(ξ) + Σ_J Ψ_J(ξ) (d_J − d⁰_J)`:
+///
+/// `δW = ∫ m · δθ ds`, `δθ = d × δd / |d|²`, `δd = Σ_J Ψ_J Σ_β (∂d_J/∂α_β) δα_Jβ`,
+///
+/// so the generalised moment on `α_Jβ` is `f_Jβ = ∫ Ψ_J (∂d_J/∂α_β) · g ds` with
+/// `g = (m × d)/|d|²`, and the load stiffness is
+/// `∂f_Jβ/∂α_Kγ = ∫ Ψ_J [δ_JK (∂²d_J/∂α_β∂α_γ) · g + (∂d_J/∂α_β) · A Ψ_K (∂d_K/∂α_γ)] ds` with
+/// `A = ∂g/∂d = [m]×/|d|² − 2 (m × d) dᵀ/|d|⁴`. No force on the translations.
+///
+/// **Conservative** exactly when `d` stays in the plane normal to `m` (planar bending about a
+/// fixed axis): then `m · δθ = |m| δφ` with `φ` the angle of `d` in that plane, the load has the
+/// potential `−|m| ∫ φ ds` and its stiffness is symmetric. When `d` leaves that plane,
+/// `(d × δd)·m/|d|²` is not a total differential and the stiffness has a skew part
+/// (measured in `tests/shell_loads.rs`; `docs/loads.md`).
+///
+/// The edge is integrated with `intervals` equal sub-intervals of `points` Gauss–Legendre points
+/// each; the load is bound to the model it was built for (its shape functions at the edge
+/// points are computed once).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Moment {
+    moment: [f64; 3],
+    n_dofs: usize,
+    points: Vec<EdgePoint>,
+}
+
+impl Moment {
+    /// The moment `moment` per unit initial length (global axes) on `edge` of the parameter
+    /// domain of `surface` (the surface `model` was built on).
+    pub fn on_edge(
+        model: &ShellModel,
+        surface: &Surface<f64>,
+        edge: Edge,
+        moment: [f64; 3],
+        intervals: usize,
+        points: usize,
+    ) -> Result<Self, ShellError> {
+        check_finite("moment per unit length", &moment)?;
+        if intervals == 0 {
+            return Err(ShellError::InvalidInput(
+                "moment edge rule: intervals = 0, expected at least 1".into(),
+            ));
+        }
+        let rule = gauss_legendre(points)
+            .map_err(|e| ShellError::InvalidInput(format!("moment edge rule: {e}")))?;
+        let dom = surface.domain();
+        // Fixed coordinate index and value, and the running coordinate's range.
+        let (fixed, value, run) = match edge {
+            Edge::UMin => (0, dom[0][0], dom[1]),
+            Edge::UMax => (0, dom[0][1], dom[1]),
+            Edge::VMin => (1, dom[1][0], dom[0]),
+            Edge::VMax => (1, dom[1][1], dom[0]),
+        };
+        let mut sv = ShapeValues::new();
+        let mut pts = Vec::with_capacity(intervals * points);
+        for i in 0..intervals {
+            let a = run[0] + (run[1] - run[0]) * i as f64 / intervals as f64;
+            let b = run[0] + (run[1] - run[0]) * (i + 1) as f64 / intervals as f64;
+            let (xs, ws) = rule.mapped(a, b);
+            for (&t, &w) in xs.iter().zip(&ws) {
+                let mut uv = [0.0; 2];
+                uv[fixed] = value;
+                uv[1 - fixed] = t;
+                let sd = surface.eval(uv[0], uv[1]);
+                let n0 = sd.normal().map_err(|e| {
+                    ShellError::InvalidInput(format!("moment edge point {uv:?}: {e}"))
+                })?;
+                let tangent = if fixed == 0 { sd.xv } else { sd.xu };
+                model.shape_functions.evaluate(uv, &mut sv).map_err(|e| {
+                    ShellError::InvalidInput(format!("moment edge point {uv:?}: {e}"))
+                })?;
+                pts.push(EdgePoint {
+                    uv,
+                    weight: w * tangent.norm(),
+                    n0,
+                    shape: sv.iter().map(|(j, psi, _)| (j, psi)).collect(),
+                });
+            }
+        }
+        Ok(Moment {
+            moment,
+            n_dofs: model.n_dofs(),
+            points: pts,
+        })
+    }
+
+    /// The moment per unit length.
+    pub fn moment(&self) -> [f64; 3] {
+        self.moment
+    }
+
+    /// Total edge length in the initial configuration (the sum of the rule's weights).
+    pub fn edge_length(&self) -> f64 {
+        self.points.iter().map(|p| p.weight).sum()
+    }
+
+    fn check_model(&self, model: &ShellModel) -> Result<(), ShellError> {
+        if model.n_dofs() != self.n_dofs {
+            return Err(ShellError::InvalidInput(format!(
+                "moment load built for a model with {} DOFs, used with one of {}",
+                self.n_dofs,
+                model.n_dofs()
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl GenericLoad for Moment {
+    fn force_generic<T: Real>(
+        &self,
+        model: &ShellModel,
+        q: &[T],
+        factor: f64,
+        f: &mut [T],
+    ) -> Result<(), ShellError> {
+        self.check_model(model)?;
+        check_sizes(model, q.len(), Some(f.len()))?;
+        let m = V3::from(self.moment).map(|v| T::cst(v * factor));
+        let mut map = GatherMap::new(model);
+        for ep in &self.points {
+            let mut d = ep.n0.map(T::cst);
+            let mut da = Vec::with_capacity(ep.shape.len());
+            for &(j, psi) in &ep.shape {
+                let st: ParticleState<T> = lift_state(&model.particle_state(j));
+                let alpha = [map.gather(model, j, 3, q), map.gather(model, j, 4, q)];
+                let dj = rotate_director(&st.d, &st.e[0], &st.e[1], alpha);
+                d += (dj - st.d0) * T::cst(psi);
+                da.push(director_first_derivatives(&st, alpha));
+            }
+            let g = m.cross(&d) * (T::cst(ep.weight) / d.norm_squared());
+            for (&(j, psi), dj) in ep.shape.iter().zip(&da) {
+                let local = [
+                    T::zero(),
+                    T::zero(),
+                    T::zero(),
+                    dj[0].dot(&g) * psi,
+                    dj[1].dot(&g) * psi,
+                ];
+                model.scatter_particle(j, &local, f);
+            }
+        }
+        Ok(())
+    }
+}
+
+impl ExternalLoad for Moment {
+    fn add_force(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        factor: f64,
+        f: &mut [f64],
+    ) -> Result<(), ShellError> {
+        self.force_generic(model, q, factor, f)
+    }
+    fn is_follower(&self) -> bool {
+        true
+    }
+    fn add_stiffness(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        factor: f64,
+        out: &mut Vec<(usize, usize, f64)>,
+    ) -> Result<(), ShellError> {
+        self.check_model(model)?;
+        check_sizes(model, q.len(), None)?;
+        let m = V3::from(self.moment) * factor;
+        let mut map = GatherMap::new(model);
+        for ep in &self.points {
+            let mut d = ep.n0;
+            let mut dirs = Vec::with_capacity(ep.shape.len());
+            for &(j, psi) in &ep.shape {
+                let st = model.particle_state(j);
+                let alpha = [map.gather(model, j, 3, q), map.gather(model, j, 4, q)];
+                let h = director_derivatives(&st.d, &st.e[0], &st.e[1], alpha);
+                d += (h.d - st.d0) * psi;
+                dirs.push(h);
+            }
+            let dd = d.norm_squared();
+            let mxd = m.cross(&d);
+            let g = mxd * (ep.weight / dd);
+            let a = (skew(&m) / dd - mxd * d.transpose() * (2.0 / (dd * dd))) * ep.weight;
+            let n = ep.shape.len();
+            let mut kl = DMatrix::zeros(2 * n, 2 * n);
+            for (i, (&(_, pi), hi)) in ep.shape.iter().zip(&dirs).enumerate() {
+                for (j, (&(_, pj), hj)) in ep.shape.iter().zip(&dirs).enumerate() {
+                    for b in 0..2 {
+                        for c in 0..2 {
+                            let mut v = hi.d_a[b].dot(&(a * hj.d_a[c])) * (pi * pj);
+                            if i == j {
+                                v += hi.d_ab[b][c].dot(&g) * pi;
+                            }
+                            kl[(2 * i + b, 2 * j + c)] = v;
+                        }
+                    }
+                }
+            }
+            let local: Vec<(usize, usize)> = ep
+                .shape
+                .iter()
+                .flat_map(|&(j, _)| (3..5).map(move |c| (j, c)))
+                .collect();
+            map.add_triplets(model, &local, &kl, out);
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn skew_is_the_cross_product_matrix() {
+        let a = V3::new(0.3, -1.2, 2.0);
+        let v = V3::new(-0.7, 0.4, 1.1);
+        assert!((skew(&a) * v - a.cross(&v)).norm() < 1e-15);
     }
 }

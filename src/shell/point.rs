@@ -339,7 +339,10 @@ pub fn point_residual_with<T: Real>(
 
 /// `∂d/∂α_β` of Rodrigues' formula, generic (same formula as
 /// [`super::rotation::director_derivatives`], written over `T` so the residual is generic).
-fn director_first_derivatives<T: Real>(p: &ParticleState<T>, alpha: [T; 2]) -> [V3<T>; 2] {
+pub(crate) fn director_first_derivatives<T: Real>(
+    p: &ParticleState<T>,
+    alpha: [T; 2],
+) -> [V3<T>; 2] {
     let theta = p.e[0] * alpha[0] + p.e[1] * alpha[1];
     let x = theta.dot(&theta);
     let (f1, f2, f1p, f2p) = super::rotation::rodrigues_with_first_derivatives(x);

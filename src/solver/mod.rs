@@ -26,8 +26,8 @@ pub use assembly::{assemble, assemble_vector, AssemblyError, Execution};
 pub use dirichlet::EssentialBc;
 pub use linear::{LinearSolver, Method, Parallelism, SolverOptions};
 pub use newton::{
-    ConvergedStep, FailureReason, LoadStepping, NewtonFailure, NewtonOptions, NewtonReport,
-    NewtonSolver, NonlinearProblem, ProblemError, StepRecord,
+    Acceptance, ConvergedStep, FailureReason, LoadStepping, NewtonFailure, NewtonOptions,
+    NewtonReport, NewtonSolver, NonlinearProblem, Predictor, ProblemError, StepRecord,
 };
 pub use pattern::SparsityPattern;
 
