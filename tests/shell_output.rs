@@ -152,6 +152,9 @@ fn record(load_start: f64, load: f64, converged: bool) -> StepRecord {
         residual_norms: vec![1.0, 1e-3, 1e-12],
         energy_norms: vec![1.0, 1e-20],
         converged,
+        predictor: shelldsa::solver::Predictor::Zero,
+        acceptance: converged.then_some(shelldsa::solver::Acceptance::Tolerance),
+        roundoff_floors: vec![0.0; 3],
         failure: (!converged).then_some(FailureReason::MaxIterations(2)),
     }
 }

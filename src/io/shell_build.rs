@@ -18,19 +18,21 @@ use super::shell_case::{
 };
 use super::shell_output::{OutputError, OutputGrid, ShellOutput, StepSummary};
 use crate::meshfree::quadrature::{CellQuadrature, QuadratureError};
+use crate::meshfree::transform::Edge;
 use crate::meshfree::vci::VciOrder;
 use crate::meshfree::{jittered_grid, ParticleGrid};
 use crate::shell::constraints::{
     edge_constraints, ConstraintError, EdgeCondition, LinearConstraint,
 };
 use crate::shell::integration::{apply_vci, boundary_rule};
-use crate::shell::load::{ExternalLoad, PointForce};
+use crate::shell::load::{ExternalLoad, Gravity, Moment, PointForce, Pressure};
 use crate::shell::model::{Discretisation, ShellModel};
 use crate::shell::problem::ShellProblem;
 use crate::shell::symmetry::SymmetryPlane;
 use crate::solver::{
     ConvergedStep, LinearSolver, LoadStepping, Method, NewtonOptions, NewtonSolver,
-    NonlinearProblem, ProblemError, SolverError, SolverOptions, SparsityPattern, StepRecord,
+    NonlinearProblem, Predictor, ProblemError, SolverError, SolverOptions, SparsityPattern,
+    StepRecord,
 };
 use nalgebra::Vector3;
 use serde_json::json;
@@ -162,35 +164,10 @@ pub fn newton_settings(case: &ShellCase) -> (NewtonOptions, LoadStepping) {
 // functions and remove the entries of `unsupported` that become possible.
 
 /// Features of `case` the current [`ShellProblem`] and driver cannot express, each as the
-/// error [`connect`] or [`driver`] would return. Empty when the case can run.
-pub fn unsupported(case: &ShellCase) -> Vec<BuildError> {
-    let mut out = Vec::new();
-    let un = |key: String, what: &str, needs: &str| BuildError::Unsupported {
-        key,
-        what: what.into(),
-        needs: needs.into(),
-    };
-    for (k, l) in case.loads.iter().enumerate() {
-        let what = match l {
-            Load::PointForce { .. } => continue,
-            Load::Pressure { .. } => "a follower pressure",
-            Load::Gravity { .. } => "a gravity (per-area) load",
-            Load::Moment { .. } => "an edge moment",
-        };
-        out.push(un(
-            format!("load[{k}].kind"),
-            what,
-            "shell::load has only PointForce in this build",
-        ));
-    }
-    if case.steps.predictor == Some(PredictorKind::Secant) {
-        out.push(un(
-            "steps.predictor".into(),
-            "the secant predictor",
-            "the Newton driver has no predictor option in this build",
-        ));
-    }
-    out
+/// error [`connect`] or [`driver`] would return. Empty when the case can run (everything the
+/// case format describes runs in this build; the seam stays for future features).
+pub fn unsupported(_case: &ShellCase) -> Vec<BuildError> {
+    Vec::new()
 }
 
 /// The global axis of a displacement component, or the rotation index of a rotation one.
@@ -303,13 +280,28 @@ pub fn connect(case: &ShellCase, mut disc: Discretisation) -> Result<ShellProble
 
     // Loads at load factor 1.
     let mut loads: Vec<Box<dyn ExternalLoad>> = Vec::new();
-    for l in &case.loads {
+    for (k, l) in case.loads.iter().enumerate() {
+        let key = format!("load[{k}]");
+        let err = |e: crate::shell::ShellError| model_err(&key, e);
         loads.push(match l {
             Load::PointForce { at, force } => Box::new(PointForce {
                 uv: *at,
                 force: *force,
             }),
-            _ => unreachable!("rejected by `unsupported`"),
+            Load::Gravity { per_area } => Box::new(Gravity::new(*per_area).map_err(err)?),
+            Load::Pressure { value } => Box::new(Pressure::new(*value).map_err(err)?),
+            // The edge rule: one interval per particle spacing along the edge (the kernels
+            // are piecewise cubic there), 4 Gauss points each.
+            Load::Moment { edge, per_length } => {
+                let along = match edge {
+                    Edge::UMin | Edge::UMax => case.particles.counts[1],
+                    Edge::VMin | Edge::VMax => case.particles.counts[0],
+                };
+                Box::new(
+                    Moment::on_edge(&model, &case.surface, *edge, *per_length, along - 1, 4)
+                        .map_err(err)?,
+                )
+            }
         });
     }
     ShellProblem::new(model, loads, constraints).map_err(|e| model_err("boundary", e))
@@ -317,14 +309,13 @@ pub fn connect(case: &ShellCase, mut disc: Discretisation) -> Result<ShellProble
 
 /// The Newton driver of `[steps]`.
 pub fn driver(case: &ShellCase) -> Result<NewtonSolver, BuildError> {
-    if case.steps.predictor == Some(PredictorKind::Secant) {
-        return Err(BuildError::Unsupported {
-            key: "steps.predictor".into(),
-            what: "the secant predictor".into(),
-            needs: "the Newton driver has no predictor option in this build".into(),
-        });
+    let (options, mut stepping) = newton_settings(case);
+    if let Some(p) = case.steps.predictor {
+        stepping.predictor = match p {
+            PredictorKind::Zero => Predictor::Zero,
+            PredictorKind::Secant => Predictor::Secant,
+        };
     }
-    let (options, stepping) = newton_settings(case);
     Ok(NewtonSolver { options, stepping })
 }
 
@@ -452,6 +443,9 @@ where
     }
     fn force_norm(&self, load: f64) -> f64 {
         self.inner.force_norm(load)
+    }
+    fn residual_scale(&self) -> f64 {
+        self.inner.residual_scale()
     }
     fn on_converged(&mut self, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
         self.inner.on_converged(step)?;
