@@ -41,6 +41,14 @@
 //! constraint then holds to round-off *with that rule*, so boundary loads of a patch test must use
 //! it too (or a rule of the same accuracy, see [`BoundaryRule::breakpoint_aligned`]).
 //!
+//! **Coupling.** Computed particle by particle ([`VciCoupling::PerParticle`]), the corrections
+//! break the pointwise partition of nullity `Σ_I Ψ̃_I,α(x_q) = 0`, so a rigid test translation has
+//! a test strain at the quadrature points. On a thin bending-dominated shell (the pinched
+//! hemisphere, R/t = 250) that made the solution 4-6 % too flexible. [`VciCoupling::PartitionOfNullity`]
+//! subtracts at each point the mean correction of its neighbours and solves for the coefficients
+//! of all particles together, so both the integration constraints and the partition of nullity
+//! hold (docs/integration.md §2.4, §4.8).
+//!
 //! Particles outside the domain (mirror images for symmetry planes) are just more shape
 //! functions: they are corrected like the others. A particle whose support contains too few
 //! quadrature points for the requested order (e.g. an image whose support reaches only a thin
@@ -416,12 +424,46 @@ pub struct ParticleDefect {
 #[derive(Clone, Debug)]
 pub struct VciCorrection {
     order: VciOrder,
+    coupling: VciCoupling,
     frames: Vec<Frame>,
     boundary: Moments,
     boundary_mag: Moments,
     coefficients: Vec<[[f64; 3]; 2]>,
     achieved: Vec<VciOrder>,
+    /// Per quadrature point, the mean correction `μ_qα` subtracted from every neighbour
+    /// ([`VciCoupling::PartitionOfNullity`]); empty for [`VciCoupling::PerParticle`].
+    offsets: Vec<[f64; 2]>,
+    iterations: usize,
+    solve_residual: f64,
 }
+
+/// How the particles' corrections are computed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum VciCoupling {
+    /// Each particle on its own (Chen, Hillman & Rüter 2013): `Ψ̃_I,α = Ψ_I,α + c_Iα·p^I`, one
+    /// small moment system per particle. The integration constraints hold, but the corrected
+    /// gradients lose the pointwise partition of nullity `Σ_I Ψ̃_I,α(x_q) = 0`: a rigid test
+    /// translation has a non-zero test strain at the quadrature points (docs/integration.md §4.8).
+    PerParticle,
+    /// The same constraints, and the partition of nullity at every quadrature point:
+    /// `Ψ̃_I,α(x_q) = Ψ_I,α(x_q) + c_Iα·p^I(x_q) − μ_α(x_q)`, with `μ_α(x_q)` the mean of the
+    /// neighbours' corrections at the point. The coefficients of all particles are coupled
+    /// through `μ`: one sparse symmetric positive semi-definite system, solved by conjugate
+    /// gradients preconditioned with the per-particle moment matrices (whose single step is the
+    /// [`VciCoupling::PerParticle`] correction). The recommended form for shells.
+    PartitionOfNullity,
+}
+
+/// Relative residual (2-norm, against the right-hand side) at which the coupled conjugate
+/// gradient solve of [`VciCoupling::PartitionOfNullity`] stops: the constraints then hold to
+/// about this relative accuracy.
+pub const VCI_CG_TOLERANCE: f64 = 1e-14;
+/// The coupled solve stops when this many iterations brought no new smallest residual (the
+/// round-off floor of the singular system, about 3e-14 relative on a jittered patch).
+pub const VCI_CG_STALL: usize = 10;
+/// Iteration limit of that solve (measured: 37 iterations on the 17² hemisphere, 11 to 77 on the
+/// 9² jittered shell patches; docs/integration.md §2.4).
+pub const VCI_CG_MAX_ITERATIONS: usize = 2000;
 
 /// Solve `A c = r` for the 1×1 or 3×3 moment matrix by an equilibrated Cholesky factorisation;
 /// `None` if a pivot is not positive or the condition estimate exceeds [`VCI_MAX_CONDITION`].
@@ -493,6 +535,20 @@ impl VciCorrection {
         points: &Q,
         order: VciOrder,
     ) -> Result<Self, VciError> {
+        Self::with_coupling(sf, boundary, points, order, VciCoupling::PerParticle)
+    }
+
+    /// As [`VciCorrection::new`], with the corrections coupled as `coupling` says. With
+    /// [`VciCoupling::PartitionOfNullity`] the corrected gradients depend on the quadrature
+    /// point: evaluate them with [`VciCorrection::corrected_gradient_at`] and the point's index in
+    /// `points`.
+    pub fn with_coupling<Q: QuadratureShapes + ?Sized>(
+        sf: &ShapeFunctions,
+        boundary: &BoundaryRule,
+        points: &Q,
+        order: VciOrder,
+        coupling: VciCoupling,
+    ) -> Result<Self, VciError> {
         let n = sf.len();
         let frames: Vec<Frame> = sf
             .particles()
@@ -556,8 +612,11 @@ impl VciCorrection {
         let (bmom, boundary_mag) = boundary_moments(sf, boundary, &frames)?;
         let mut coefficients = vec![[[0.0; 3]; 2]; n];
         let mut achieved = vec![order; n];
+        let mut offsets = Vec::new();
+        let (mut iterations, mut solve_residual) = (0, 0.0);
         if nt > 0 {
             let (dmom, amat) = domain_moments(points, &frames, None);
+            let mut rhs = vec![[[0.0; 3]; 2]; n];
             for i in 0..n {
                 let mut r = [[0.0; 3]; 2];
                 for alpha in 0..2 {
@@ -565,6 +624,7 @@ impl VciCorrection {
                         r[alpha][k] = bmom[i][alpha][k] - dmom[i][alpha][k];
                     }
                 }
+                rhs[i] = r;
                 let mut m = nt;
                 loop {
                     if m == 0 {
@@ -585,15 +645,64 @@ impl VciCorrection {
                     m = if m == 3 { 1 } else { 0 };
                 }
             }
+            if coupling == VciCoupling::PartitionOfNullity {
+                let terms: Vec<usize> = achieved.iter().map(|a| a.terms()).collect();
+                let sol = coupled_solve(points, &frames, &amat, &terms, rhs, coefficients);
+                coefficients = sol.coefficients;
+                offsets = sol.offsets;
+                iterations = sol.iterations;
+                solve_residual = sol.residual;
+            }
         }
         Ok(VciCorrection {
             order,
+            coupling,
             frames,
             boundary: bmom,
             boundary_mag,
             coefficients,
             achieved,
+            offsets,
+            iterations,
+            solve_residual,
         })
+    }
+
+    /// How the corrections were coupled.
+    pub fn coupling(&self) -> VciCoupling {
+        self.coupling
+    }
+    /// Conjugate-gradient iterations of the coupled solve (0 for [`VciCoupling::PerParticle`]).
+    pub fn iterations(&self) -> usize {
+        self.iterations
+    }
+    /// Final relative residual of the coupled solve (0 for [`VciCoupling::PerParticle`]).
+    pub fn solve_residual(&self) -> f64 {
+        self.solve_residual
+    }
+    /// The mean correction `μ_α(x_k)` subtracted at quadrature point `k`
+    /// ([`VciCoupling::PartitionOfNullity`]; zero otherwise).
+    pub fn point_offset(&self, k: usize) -> [f64; 2] {
+        self.offsets.get(k).copied().unwrap_or([0.0; 2])
+    }
+
+    /// Corrected test gradient of particle `i` at quadrature point `k` (index in the points the
+    /// correction was built from) at `x`, from its RK gradient `grad` there:
+    /// [`VciCorrection::corrected_gradient`] minus the point's offset `μ(x_k)` when the
+    /// corrections are coupled by [`VciCoupling::PartitionOfNullity`].
+    #[inline]
+    pub fn corrected_gradient_at(
+        &self,
+        i: usize,
+        k: usize,
+        x: [f64; 2],
+        grad: [f64; 2],
+    ) -> [f64; 2] {
+        let g = self.corrected_gradient(i, x, grad);
+        match self.offsets.get(k) {
+            Some(m) => [g[0] - m[0], g[1] - m[1]],
+            None => g,
+        }
     }
 
     /// The requested order.
@@ -633,7 +742,9 @@ impl VciCorrection {
     }
 
     /// Corrected test gradient `Ψ̃_I,α(x) = Ψ_I,α(x) + Σ_j c_Iαj p^I_j(x)` of particle `i` at a
-    /// quadrature point `x` of its support, from its RK gradient `grad` there.
+    /// quadrature point `x` of its support, from its RK gradient `grad` there (without the
+    /// point offset of [`VciCoupling::PartitionOfNullity`]: see
+    /// [`VciCorrection::corrected_gradient_at`]).
     #[inline]
     pub fn corrected_gradient(&self, i: usize, x: [f64; 2], grad: [f64; 2]) -> [f64; 2] {
         let p = self.frames[i].p(x);
@@ -721,7 +832,7 @@ fn domain_moments<Q: QuadratureShapes + ?Sized>(
         points.for_each_shape(q, &mut |i, v, g| {
             let f = &frames[i];
             let p = f.p(x);
-            let g = corr.map_or(g, |c| c.corrected_gradient(i, x, g));
+            let g = corr.map_or(g, |c| c.corrected_gradient_at(i, q, x, g));
             for alpha in 0..2 {
                 for k in 0..3 {
                     d[i][alpha][k] += w * (g[alpha] * p[k] + v * f.dp(alpha, k));
@@ -749,7 +860,7 @@ fn magnitudes<Q: QuadratureShapes + ?Sized>(
         points.for_each_shape(q, &mut |i, v, g| {
             let f = &frames[i];
             let p = f.p(x);
-            let g = corr.map_or(g, |c| c.corrected_gradient(i, x, g));
+            let g = corr.map_or(g, |c| c.corrected_gradient_at(i, q, x, g));
             for alpha in 0..2 {
                 for k in 0..3 {
                     m[i][alpha][k] += w * ((g[alpha] * p[k]).abs() + (v * f.dp(alpha, k)).abs());
@@ -758,4 +869,269 @@ fn magnitudes<Q: QuadratureShapes + ?Sized>(
         });
     }
     m
+}
+
+/// Result of [`coupled_solve`].
+struct Coupled {
+    coefficients: Vec<[[f64; 3]; 2]>,
+    offsets: Vec<[f64; 2]>,
+    iterations: usize,
+    residual: f64,
+}
+
+/// The neighbours of every point with their basis values `p^I(x_q)`, and the weights.
+struct PointBasis {
+    weights: Vec<f64>,
+    start: Vec<usize>,
+    entries: Vec<(usize, [f64; 3])>,
+}
+
+impl PointBasis {
+    fn new<Q: QuadratureShapes + ?Sized>(points: &Q, frames: &[Frame]) -> Self {
+        let mut weights = Vec::with_capacity(points.n_points());
+        let mut start = vec![0];
+        let mut entries = Vec::new();
+        for q in 0..points.n_points() {
+            let (x, w) = points.point(q);
+            weights.push(w);
+            points.for_each_shape(q, &mut |i, _, _| entries.push((i, frames[i].p(x))));
+            start.push(entries.len());
+        }
+        PointBasis {
+            weights,
+            start,
+            entries,
+        }
+    }
+    fn at(&self, q: usize) -> &[(usize, [f64; 3])] {
+        &self.entries[self.start[q]..self.start[q + 1]]
+    }
+    /// Corrections `δ_I(x_q) = Σ_{j < m_I} c_Iαj p^I_j(x_q)` of the neighbours of `q`, and their
+    /// mean `μ_qα`, passed to `f(I, p^I(x_q), δ_I − μ)` per neighbour; returns `μ_q`.
+    fn projected(
+        &self,
+        q: usize,
+        c: &[[[f64; 3]; 2]],
+        terms: &[usize],
+        mut f: impl FnMut(usize, &[f64; 3], [f64; 2]),
+    ) -> [f64; 2] {
+        let nb = self.at(q);
+        if nb.is_empty() {
+            return [0.0; 2];
+        }
+        let delta = |i: usize, p: &[f64; 3], a: usize| -> f64 {
+            (0..terms[i]).map(|j| c[i][a][j] * p[j]).sum()
+        };
+        let mut mu = [0.0; 2];
+        for (i, p) in nb {
+            for (a, m) in mu.iter_mut().enumerate() {
+                *m += delta(*i, p, a);
+            }
+        }
+        for m in &mut mu {
+            *m /= nb.len() as f64;
+        }
+        for (i, p) in nb {
+            f(*i, p, [delta(*i, p, 0) - mu[0], delta(*i, p, 1) - mu[1]]);
+        }
+        mu
+    }
+}
+
+/// `Σ` over particles, directions and active terms of `a·b`.
+fn dot(a: &[[[f64; 3]; 2]], b: &[[[f64; 3]; 2]]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| {
+            (0..2)
+                .map(|al| (0..3).map(|k| x[al][k] * y[al][k]).sum::<f64>())
+                .sum::<f64>()
+        })
+        .sum()
+}
+
+/// The coupled constraints of [`VciCoupling::PartitionOfNullity`]. With `δ_I(x_q) = c_I·p^I(x_q)`
+/// and `μ_q` the mean of `δ` over the neighbours of `q`, the integration constraints of the
+/// corrected gradients `Ψ_I,α + δ_I − μ` read, per particle, direction and active term `k`,
+///
+/// ```text
+/// (K c)_Iαk = Σ_q w_q p^I_k(x_q) (δ_Iα(x_q) − μ_qα) = r_Iαk     (r: boundary minus domain moments)
+/// ```
+///
+/// `K` is symmetric positive semi-definite (`cᵀKc = Σ_q w_q Σ_I (δ_I − μ_q)²`); its null space
+/// (one global linear `δ`, which the mean removes) is orthogonal to `r` when the domain and
+/// boundary rules integrate constants and linears exactly, so conjugate gradients converge.
+/// The preconditioner is the block diagonal of per-particle moment matrices `A_I`, started from
+/// the per-particle solution `c0`.
+fn coupled_solve<Q: QuadratureShapes + ?Sized>(
+    points: &Q,
+    frames: &[Frame],
+    amat: &[[[f64; 3]; 3]],
+    terms: &[usize],
+    rhs: Moments,
+    c0: Vec<[[f64; 3]; 2]>,
+) -> Coupled {
+    let n = frames.len();
+    let basis = PointBasis::new(points, frames);
+    let mut r = rhs;
+    for (ri, &m) in r.iter_mut().zip(terms) {
+        for row in ri.iter_mut() {
+            row[m..].fill(0.0);
+        }
+    }
+    let apply = |c: &[[[f64; 3]; 2]]| -> Moments {
+        let mut out = vec![[[0.0; 3]; 2]; n];
+        for q in 0..basis.weights.len() {
+            let w = basis.weights[q];
+            basis.projected(q, c, terms, |i, p, d| {
+                for a in 0..2 {
+                    for k in 0..terms[i] {
+                        out[i][a][k] += w * p[k] * d[a];
+                    }
+                }
+            });
+        }
+        out
+    };
+    let precondition = |res: &Moments| -> Moments {
+        res.iter()
+            .enumerate()
+            .map(|(i, ri)| {
+                if terms[i] == 0 {
+                    return [[0.0; 3]; 2];
+                }
+                // The per-particle systems were solvable at this order (that is how `terms`
+                // was chosen), so this succeeds.
+                solve_moments(&amat[i], terms[i], *ri).unwrap_or([[0.0; 3]; 2])
+            })
+            .collect()
+    };
+    // The null space of K: a global linear correction `g`, as coefficients in every particle's
+    // frame (`g ∈ {1, u, v}` per direction, a linear `g` only when every particle at a point has
+    // all three terms). The right-hand side is orthogonal to it unless a particle touching the
+    // domain cannot be corrected to the requested order (degraded): then the constraints of the
+    // others and the partition of nullity cannot all hold, and the null-space part of `r` (the
+    // degraded particles' defect, spread over all) is removed so that the rest is solved.
+    let at_points: Vec<bool> = {
+        let mut v = vec![false; n];
+        for (i, _) in &basis.entries {
+            v[*i] = true;
+        }
+        v
+    };
+    let full = (0..n).all(|i| !at_points[i] || terms[i] == 3);
+    let mut null: Vec<Moments> = Vec::new();
+    for a in 0..2 {
+        for g in 0..if full { 3 } else { 1 } {
+            let mut v = vec![[[0.0; 3]; 2]; n];
+            for i in (0..n).filter(|&i| at_points[i] && terms[i] > 0) {
+                let f = &frames[i];
+                // g = 1, u, v in frame I: [g(x_I), ∂g/∂u a_1, ∂g/∂v a_2].
+                v[i][a] = match g {
+                    0 => [1.0, 0.0, 0.0],
+                    1 => [f.centre[0], 1.0 / f.inv_scale[0], 0.0],
+                    _ => [f.centre[1], 0.0, 1.0 / f.inv_scale[1]],
+                };
+            }
+            for u in &null {
+                let s = dot(&v, u);
+                for (vi, ui) in v.iter_mut().zip(u) {
+                    for b in 0..2 {
+                        for k in 0..3 {
+                            vi[b][k] -= s * ui[b][k];
+                        }
+                    }
+                }
+            }
+            let norm = dot(&v, &v).sqrt();
+            if norm > 0.0 {
+                v.iter_mut()
+                    .for_each(|vi| vi.iter_mut().flatten().for_each(|x| *x /= norm));
+                null.push(v);
+            }
+        }
+    }
+    for u in &null {
+        let s = dot(&r, u);
+        for (ri, ui) in r.iter_mut().zip(u) {
+            for b in 0..2 {
+                for k in 0..3 {
+                    ri[b][k] -= s * ui[b][k];
+                }
+            }
+        }
+    }
+    let norm_r = dot(&r, &r).sqrt();
+    let mut c = c0;
+    for (ci, &m) in c.iter_mut().zip(terms) {
+        for row in ci.iter_mut() {
+            row[m..].fill(0.0);
+        }
+    }
+    let kc = apply(&c);
+    let mut res: Moments = r
+        .iter()
+        .zip(&kc)
+        .map(|(a, b)| std::array::from_fn(|al| std::array::from_fn(|k| a[al][k] - b[al][k])))
+        .collect();
+    let mut iterations = 0;
+    let mut rel = if norm_r > 0.0 {
+        dot(&res, &res).sqrt() / norm_r
+    } else {
+        0.0
+    };
+    // K is singular: round-off puts a small component of the residual in its null space, which
+    // conjugate gradients cannot remove; once the residual reaches that floor it stagnates and
+    // then grows. Keep the best iterate and stop when no progress was made for a while.
+    let mut best = (rel, c.clone(), iterations);
+    if rel > VCI_CG_TOLERANCE {
+        let mut z = precondition(&res);
+        let mut d = z.clone();
+        let mut rz = dot(&res, &z);
+        while iterations < VCI_CG_MAX_ITERATIONS
+            && rel > VCI_CG_TOLERANCE
+            && iterations < best.2 + VCI_CG_STALL
+        {
+            iterations += 1;
+            let kd = apply(&d);
+            let dkd = dot(&d, &kd);
+            if !(dkd > 0.0 && rz.is_finite()) {
+                break; // only the null space is left
+            }
+            let step = rz / dkd;
+            for i in 0..n {
+                for a in 0..2 {
+                    for k in 0..3 {
+                        c[i][a][k] += step * d[i][a][k];
+                        res[i][a][k] -= step * kd[i][a][k];
+                    }
+                }
+            }
+            rel = dot(&res, &res).sqrt() / norm_r;
+            if rel < best.0 {
+                best = (rel, c.clone(), iterations);
+            }
+            z = precondition(&res);
+            let rz_new = dot(&res, &z);
+            let beta = rz_new / rz;
+            rz = rz_new;
+            for i in 0..n {
+                for a in 0..2 {
+                    for k in 0..3 {
+                        d[i][a][k] = z[i][a][k] + beta * d[i][a][k];
+                    }
+                }
+            }
+        }
+    }
+    let (residual, c, _) = best;
+    let offsets = (0..basis.weights.len())
+        .map(|q| basis.projected(q, &c, terms, |_, _, _| {}))
+        .collect();
+    Coupled {
+        coefficients: c,
+        offsets,
+        iterations,
+        residual,
+    }
 }

@@ -5,14 +5,19 @@
 //! `dV = det J dξ1 dξ2 dζ`): the translation rows of particle `I` are `Σ_q Σ_ζ Ψ_I,α P:α` with
 //! `P = w det(J) σᵍ J⁻ᵀ` (see [`super::point`]), so the divergence theorem that VCI restores is the
 //! one in the parameter plane, `∫ (Ψ_I P:α),α dξ = ∮ Ψ_I P:α n_α ds`, with parameter-domain
-//! weights and arc length. [`apply_vci`] writes the corrected gradients into
+//! weights and arc length. The correction is coupled so that the partition of nullity
+//! `Σ_I Ψ̃_I,α = 0` also holds at every point ([`VciCoupling::PartitionOfNullity`]; without it the
+//! pinched hemisphere was 4-6 % too flexible, docs/integration.md §4.8). [`apply_vci`] writes the
+//! corrected gradients into
 //! `ShapeData::dpsi_test` of every quadrature point; the trial gradients `dpsi` are untouched
 //! (Petrov–Galerkin: the internal force is no longer the gradient of the stored energy and the
 //! tangent is not symmetric, but the patch tests pass; see `docs/integration.md`).
 
 use super::model::ShellModel;
 use super::ShellError;
-use crate::meshfree::vci::{BoundaryRule, QuadratureShapes, VciCorrection, VciError, VciOrder};
+use crate::meshfree::vci::{
+    BoundaryRule, QuadratureShapes, VciCorrection, VciCoupling, VciError, VciOrder,
+};
 use crate::meshfree::ParamBox;
 
 /// Points per segment of the default boundary rule: the contour integrals of the RK functions to
@@ -51,6 +56,9 @@ pub struct VciReport {
     pub defect_before: f64,
     /// The same with the corrected gradients (round-off when the correction succeeded).
     pub defect_after: f64,
+    /// Conjugate-gradient iterations of the coupled correction
+    /// ([`VciCoupling::PartitionOfNullity`]).
+    pub iterations: usize,
 }
 
 /// The default boundary rule for `model` on `domain`: 8 Gauss points on every segment between
@@ -67,7 +75,8 @@ pub fn boundary_rule(model: &ShellModel, domain: ParamBox) -> Result<BoundaryRul
 }
 
 /// Replace the test gradients `points[k].shape[i].dpsi_test` of `model` by the variationally
-/// consistent ones of `order`, computed from the trial gradients `dpsi`, the model's quadrature
+/// consistent ones of `order` (coupled by [`VciCoupling::PartitionOfNullity`]), computed from the
+/// trial gradients `dpsi`, the model's quadrature
 /// (which must cover exactly the rectangular parameter `domain`) and the contour integrals by
 /// `boundary` (e.g. [`boundary_rule`]). [`VciOrder::Off`] restores `dpsi_test = dpsi`. Repeated
 /// calls do not accumulate: each starts from `dpsi`.
@@ -77,8 +86,14 @@ pub fn apply_vci(
     boundary: &BoundaryRule,
 ) -> Result<VciReport, ShellError> {
     let pts = ModelPoints(model);
-    let correction =
-        VciCorrection::new(&model.shape_functions, boundary, &pts, order).map_err(vci_error)?;
+    let correction = VciCorrection::with_coupling(
+        &model.shape_functions,
+        boundary,
+        &pts,
+        order,
+        VciCoupling::PartitionOfNullity,
+    )
+    .map_err(vci_error)?;
     let worst = |corrected: bool| {
         correction
             .defects(&pts, corrected)
@@ -89,13 +104,14 @@ pub fn apply_vci(
     };
     let defect_before = worst(false);
     let defect_after = worst(true);
-    for p in &mut model.points {
+    for (k, p) in model.points.iter_mut().enumerate() {
         for (&i, s) in p.neighbours.iter().zip(p.shape.iter_mut()) {
-            s.dpsi_test = correction.corrected_gradient(i, p.uv, s.dpsi);
+            s.dpsi_test = correction.corrected_gradient_at(i, k, p.uv, s.dpsi);
         }
     }
     Ok(VciReport {
         degraded: correction.degraded(),
+        iterations: correction.iterations(),
         correction,
         defect_before,
         defect_after,
