@@ -44,8 +44,8 @@ fn last_monitor(results: &Value, name: &str) -> [f64; 3] {
 /// MacNeal–Harder pinched hemisphere, linear (reference-values §1): radial displacement at A
 /// per unit load 0.0935 (converged shear-deformable elements), target ±1 %. The case applies
 /// P = 1e-3 so that the nonlinear solve is linear (the geometric effect at P = 1 is ~0.6 %, at
-/// P = 1e-3 below 1e-5 relative). Measured at 17 × 17 particles, 2 × 2 Gauss points per cell:
-/// −0.70 % (README table).
+/// P = 1e-3 below 1e-5 relative). Measured at 17 × 17 particles, 2 × 2 Gauss points per cell,
+/// second-order VCI: +0.42 % (README table).
 #[test]
 fn hemisphere_linear_macneal_harder() {
     let r = run_case("hemisphere-linear");
@@ -64,7 +64,7 @@ fn hemisphere_linear_macneal_harder() {
 
 /// Pinched cylinder with rigid diaphragms, octant (reference-values §2): radial displacement
 /// under the load 1.8248e-5 for P = 1 (the octant carries P/4), target ±2 %. Measured at
-/// 25 × 25 particles: −0.22 % (README table).
+/// 25 × 25 particles: −0.54 % (README table).
 #[test]
 fn pinched_cylinder_diaphragms() {
     let r = run_case("pinched-cylinder");
@@ -76,7 +76,7 @@ fn pinched_cylinder_diaphragms() {
 
 /// Scordelis–Lo roof (reference-values §2): vertical displacement at the middle of the free
 /// edge 0.3024 under self-weight 90, target ±2 %. The case applies 1e-3 of the self-weight (the
-/// linear response; README), so w × 1000 is compared. Measured at 17 × 17: −0.54 %.
+/// linear response; README), so w × 1000 is compared. Measured at 17 × 17: −0.52 %.
 #[test]
 fn scordelis_lo_roof() {
     let r = run_case("scordelis-lo");
