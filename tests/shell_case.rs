@@ -327,7 +327,7 @@ fn wrong_boundary_entries_are_named() {
     rejects(
         "at = [1.0, 0.0]\ncomponents",
         "at = [1.0, 0.0]\nedge = \"v-min\"\ncomponents",
-        &["`boundary[1].at`", "either `edge` or `at`"],
+        &["`boundary[1].at`", "either `edge`, `at`"],
     );
     rejects(
         "kind = \"clamped\"\nedge = \"u-min\"",
@@ -450,4 +450,158 @@ fn syntax_unknown_keys_and_surfaces_are_reported_by_name() {
     );
     // A boundary entry with a key of no kind at all.
     rejects("edge = \"u-min\"", "edge = \"u-min\"\nside = 1", &["side"]);
+}
+
+#[test]
+fn stops_are_read_and_checked() {
+    assert!(parse(GOOD).unwrap().steps.stops.is_empty(), "default: none");
+    let c = parse(&GOOD.replacen(
+        "max_step = 0.2",
+        "max_step = 0.2\nfinal_load = 2.0\nstops = [0.25, 0.5, 2.0]",
+        1,
+    ))
+    .unwrap();
+    assert_eq!(c.steps.stops, vec![0.25, 0.5, 2.0]);
+    rejects(
+        "max_step = 0.2",
+        "max_step = 0.2\nstops = [0.5, 0.4]",
+        &["`steps.stops[1]`", "0.4", "(0.5, steps.final_load = 1]"],
+    );
+    rejects(
+        "max_step = 0.2",
+        "max_step = 0.2\nstops = [0.0]",
+        &["`steps.stops[0]`", "(0, steps.final_load = 1]"],
+    );
+    rejects(
+        "max_step = 0.2",
+        "max_step = 0.2\nstops = [0.5, 1.5]",
+        &["`steps.stops[1]`", "1.5", "steps.final_load = 1]"],
+    );
+    rejects(
+        "max_step = 0.2",
+        "max_step = 0.2\nstops = [nan]",
+        &["`steps.stops[0]`", "NaN", "a finite load factor"],
+    );
+    rejects(
+        "max_step = 0.2",
+        "max_step = 0.2\nstops = 0.5",
+        &["stops", "sequence"],
+    );
+}
+
+/// `GOOD` as a plane problem: `uy` and `rot1` held on every particle, the clamp holding the
+/// other three components, the point condition only `ux`.
+fn plane_strip() -> String {
+    GOOD.replacen(
+        "kind = \"clamped\"\nedge = \"u-min\"",
+        "kind = \"fixed\"\neverywhere = true\ncomponents = [\"rot1\", \"uy\"]\n\n\
+         [[boundary]]\nkind = \"fixed\"\nedge = \"u-min\"\ncomponents = [\"ux\", \"uz\", \"rot2\"]",
+        1,
+    )
+    .replacen("components = [\"uy\", \"ux\"]", "components = [\"ux\"]", 1)
+}
+
+#[test]
+fn components_held_everywhere_are_read_and_not_held_twice() {
+    let c = parse(&plane_strip()).unwrap();
+    assert_eq!(
+        c.boundary[0],
+        Boundary::Fixed {
+            location: Location::Everywhere,
+            components: vec![Component::Uy, Component::Rot1],
+        }
+    );
+    let key_err = |text: String, want: &[&str]| {
+        let e = err(&text);
+        println!("{e}");
+        for w in want {
+            assert!(e.contains(w), "error lacks {w:?}: {e}");
+        }
+    };
+    // A clamped edge holds uy again.
+    key_err(
+        GOOD.replacen(
+            "[[boundary]]\nkind = \"clamped\"",
+            "[[boundary]]\nkind = \"fixed\"\neverywhere = true\ncomponents = [\"uy\"]\n\n\
+             [[boundary]]\nkind = \"clamped\"",
+            1,
+        ),
+        &[
+            "`boundary[1].kind`",
+            "\"clamped\" (holds \"uy\")",
+            "boundary[0] (everywhere = true)",
+        ],
+    );
+    // The point condition holds uy again.
+    key_err(
+        plane_strip().replacen("components = [\"ux\"]", "components = [\"ux\", \"uy\"]", 1),
+        &["`boundary[2].components`", "\"fixed\" (holds \"uy\")"],
+    );
+    // A prescribed rotation is not a displacement; a prescribed uy is held twice.
+    key_err(
+        plane_strip()
+            .replacen(
+                "at = [1.0, 0.0]\ncomponents = [\"ux\"]",
+                "at = [1.0, 0.0]\ncomponent = \"uy\"\nvalue = 0.1",
+                1,
+            )
+            .replacen(
+                "kind = \"fixed\"\nat = [1.0, 0.0]",
+                "kind = \"prescribed\"\nat = [1.0, 0.0]",
+                1,
+            ),
+        &["`boundary[2].component`", "\"prescribed\" (holds \"uy\")"],
+    );
+    // Where: exactly one of edge, at, everywhere = true.
+    key_err(
+        plane_strip().replacen(
+            "everywhere = true",
+            "everywhere = true\nedge = \"u-max\"",
+            1,
+        ),
+        &[
+            "`boundary[0].everywhere`",
+            "given with `edge`",
+            "not two of them",
+        ],
+    );
+    key_err(
+        plane_strip().replacen("everywhere = true", "everywhere = false", 1),
+        &["`boundary[0].edge`", "false", "`everywhere = true`"],
+    );
+    key_err(
+        GOOD.replacen(
+            "kind = \"clamped\"\nedge = \"u-min\"",
+            "kind = \"clamped\"\nedge = \"u-min\"\neverywhere = true",
+            1,
+        ),
+        &[
+            "`boundary[0].everywhere`",
+            "no `everywhere` for kind = \"clamped\"",
+        ],
+    );
+}
+
+#[test]
+fn a_symmetry_row_made_only_of_held_components_is_rejected() {
+    // A square rotated by 45° about z: its edge u-min runs along (1, 1, 0), so the symmetry
+    // plane through it has the normal (1, −1, 0) (not a coordinate axis: a multiplier row
+    // ux − uy = 0 on its particles). With ux and uy held everywhere that row repeats theirs.
+    let square = GOOD
+        .replacen("edge_u = [12.0, 0.0, 0.0]", "edge_u = [1.0, -1.0, 0.0]", 1)
+        .replacen("edge_v = [0.0, 1.0, 0.0]", "edge_v = [1.0, 1.0, 0.0]", 1)
+        .replacen(
+            "kind = \"clamped\"\nedge = \"u-min\"",
+            "kind = \"symmetry\"\nedge = \"u-min\"\nnormal = [1.0, -1.0, 0.0]\n\
+             point = [0.0, 0.0, 0.0]\n\n[[boundary]]\nkind = \"fixed\"\neverywhere = true\n\
+             components = [\"ux\", \"uy\"]",
+            1,
+        )
+        .replacen("components = [\"uy\", \"ux\"]", "components = [\"uz\"]", 1);
+    let e = err(&square);
+    println!("{e}");
+    assert!(e.contains("`boundary[0].normal`") && e.contains("not held on every particle"));
+    // With only ux held the row reduces to −uy = 0 on those particles, independent of the
+    // held rows: accepted.
+    parse(&square.replacen("components = [\"ux\", \"uy\"]", "components = [\"ux\"]", 1)).unwrap();
 }

@@ -1053,3 +1053,144 @@ fn noise_above_the_estimated_floor_is_caught_by_the_scale_or_by_stagnation() {
         "{fail}"
     );
 }
+
+/// Run the softening chain (β = 0.05, end load 2λ) with `stepping`; return the report.
+fn chain_with_stepping(stepping: LoadStepping) -> Result<NewtonReport, Box<NewtonFailure>> {
+    let mut prob = SpringChain::new(10, 0.05, 2.0, None);
+    let pattern = prob.pattern.clone();
+    let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+    let newton = NewtonSolver {
+        options: NewtonOptions::default(),
+        stepping,
+    };
+    newton.run(&mut prob, &pattern, &mut solver, &[0.0; 11])
+}
+
+#[test]
+fn load_stepping_lands_exactly_on_the_stops() {
+    // Constant step 0.3 (no growth): every step is 0.3 or is clipped to the next stop, and the
+    // step after a clipped one is 0.3 again (not the clipped size).
+    let report = chain_with_stepping(LoadStepping {
+        initial_step: 0.3,
+        grow_factor: 1.0,
+        stops: vec![0.1, 0.25, 0.5, 0.55, 1.0],
+        ..Default::default()
+    })
+    .unwrap();
+    let loads: Vec<f64> = report.converged_steps().map(|s| s.load).collect();
+    let sizes: Vec<f64> = report.converged_steps().map(|s| s.step_size).collect();
+    println!("loads {loads:?}, step sizes {sizes:?}");
+    // The stops are met bit for bit (the load factor is the stop itself, not a sum of steps);
+    // the one unclipped step 0.55 + 0.3 is a sum, exact to round-off of the addition.
+    assert_eq!(loads.len(), 6, "{loads:?}");
+    for (k, stop) in [(0, 0.1), (1, 0.25), (2, 0.5), (3, 0.55), (5, 1.0)] {
+        assert_eq!(loads[k], stop, "{loads:?}");
+    }
+    assert!((loads[4] - 0.85).abs() <= 1e-15, "{loads:?}");
+    assert!((sizes[4] - 0.3).abs() <= 1e-15, "{sizes:?}");
+    assert_eq!(report.load, 1.0);
+    assert_eq!(report.attempts.len(), 6, "no step was cut");
+
+    // With growth (every step easy, factor 2): a clipped step neither grows the step size nor
+    // shrinks it; an unclipped one doubles it.
+    let report = chain_with_stepping(LoadStepping {
+        initial_step: 0.1,
+        grow_factor: 2.0,
+        easy_iterations: 100,
+        stops: vec![0.15, 0.6],
+        ..Default::default()
+    })
+    .unwrap();
+    let loads: Vec<f64> = report.converged_steps().map(|s| s.load).collect();
+    let sizes: Vec<f64> = report.converged_steps().map(|s| s.step_size).collect();
+    println!("loads {loads:?}, step sizes {sizes:?}");
+    // 0.1 (grows to 0.2) → 0.15 clipped (stays 0.2) → 0.35 (grows to 0.4) → 0.6 clipped
+    // (stays 0.4) → 1.0 (a full step of 0.4).
+    let expected = [
+        (0.1, 0.1),
+        (0.15, 0.05),
+        (0.35, 0.2),
+        (0.6, 0.25),
+        (1.0, 0.4),
+    ];
+    assert_eq!(loads.len(), expected.len(), "{loads:?}");
+    for (k, (l, h)) in expected.iter().enumerate() {
+        // Sums of a few steps: round-off of the additions (≤ 1e-15 at these magnitudes).
+        assert!((loads[k] - l).abs() <= 1e-15, "{loads:?}");
+        assert!((sizes[k] - h).abs() <= 1e-15, "{sizes:?}");
+    }
+    assert_eq!(loads[1], 0.15);
+    assert_eq!(loads[3], 0.6);
+
+    // The converged state at a stop does not depend on the path to it: the same chain with
+    // one step to 0.25 and with the clipped steps above (tolerance: both solves converge to
+    // rtol 1e-8 of the load, so the end displacement agrees to about that).
+    let one = chain_with_stepping(LoadStepping {
+        initial_step: 0.25,
+        end: 0.25,
+        ..Default::default()
+    })
+    .unwrap();
+    let stopped = chain_with_stepping(LoadStepping {
+        initial_step: 0.3,
+        grow_factor: 1.0,
+        end: 0.25,
+        stops: vec![0.1, 0.25],
+        ..Default::default()
+    })
+    .unwrap();
+    let (a, b) = (one.u[10], stopped.u[10]);
+    assert!((a - b).abs() <= 1e-7 * a.abs(), "{a} vs {b}");
+}
+
+#[test]
+fn a_failed_clipped_step_is_cut_from_its_clipped_size() {
+    // Stiffening chain (f = k (e + e³), end load 20λ, overstretch above e = 4): the step to
+    // the stop 0.9 overstretches (linear predictor e ≈ 17); the retry is 0.45, half the
+    // clipped step (not half the step size 1), and the stop is still met exactly.
+    let mut prob = SpringChain::new(10, 1.0, 20.0, None);
+    prob.a = 0.0;
+    prob.c = 1.0;
+    prob.e_limit = 4.0;
+    let pattern = prob.pattern.clone();
+    let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+    let newton = NewtonSolver {
+        options: NewtonOptions::default(),
+        stepping: LoadStepping {
+            initial_step: 1.0,
+            stops: vec![0.9],
+            ..Default::default()
+        },
+    };
+    let report = newton
+        .run(&mut prob, &pattern, &mut solver, &[0.0; 11])
+        .unwrap();
+    let first = &report.attempts[0];
+    assert!(!first.converged);
+    assert_eq!((first.load, first.step_size), (0.9, 0.9));
+    assert_eq!(report.attempts[1].step_size, 0.45);
+    assert!(report.converged_steps().any(|s| s.load == 0.9));
+    assert_eq!(report.load, 1.0);
+}
+
+#[test]
+fn invalid_stops_are_a_setup_failure() {
+    for stops in [
+        vec![0.5, 0.4],
+        vec![0.0],
+        vec![0.3, 0.3],
+        vec![1.5],
+        vec![f64::NAN],
+    ] {
+        let fail = chain_with_stepping(LoadStepping {
+            stops: stops.clone(),
+            ..Default::default()
+        })
+        .unwrap_err();
+        assert!(
+            matches!(&fail.reason, FailureReason::Setup(m) if m.contains("stops[")),
+            "{stops:?}: {fail}"
+        );
+        assert!(fail.report.attempts.is_empty());
+    }
+}

@@ -22,11 +22,12 @@ use crate::meshfree::transform::Edge;
 use crate::meshfree::vci::VciOrder;
 use crate::meshfree::{jittered_grid, ParticleGrid};
 use crate::shell::constraints::{
-    edge_constraints, ConstraintError, EdgeCondition, LinearConstraint,
+    edge_constraints, ConstraintError, EdgeCondition, LinearConstraint, RowKind,
 };
 use crate::shell::integration::{apply_vci, boundary_rule};
 use crate::shell::load::{ExternalLoad, Gravity, Moment, PointForce, Pressure};
 use crate::shell::model::{Discretisation, ShellModel};
+use crate::shell::point::DOFS_PER_PARTICLE;
 use crate::shell::problem::ShellProblem;
 use crate::shell::symmetry::SymmetryPlane;
 use crate::solver::{
@@ -152,6 +153,7 @@ pub fn newton_settings(case: &ShellCase) -> (NewtonOptions, LoadStepping) {
             max_step: s.max_step,
             cut_factor: s.cut_factor,
             grow_factor: s.grow_factor,
+            stops: s.stops.clone(),
             ..LoadStepping::default()
         },
     )
@@ -261,6 +263,26 @@ pub fn connect(case: &ShellCase, mut disc: Discretisation) -> Result<ShellProble
                             constraints.push(
                                 LinearConstraint::rotation(&model, *at, r, 0.0).map_err(err)?,
                             );
+                        }
+                    }
+                    // The generalised DOFs of every real particle (images follow their
+                    // sources); those the symmetry planes eliminate are dropped by the problem.
+                    Location::Everywhere => {
+                        for i in 0..model.n_particles() {
+                            for &c in components {
+                                let kind = match c {
+                                    Component::Rot1 | Component::Rot2 => RowKind::Rotation,
+                                    _ => RowKind::Displacement,
+                                };
+                                constraints.push(
+                                    LinearConstraint::generalised(
+                                        DOFS_PER_PARTICLE * i + c.index(),
+                                        0.0,
+                                        kind,
+                                    )
+                                    .labelled(format!("{key}: particle {i}, {}", c.name())),
+                                );
+                            }
                         }
                     }
                 }

@@ -95,6 +95,7 @@ struct BoundaryFile {
     components: Option<Vec<String>>,
     component: Option<String>,
     value: Option<f64>,
+    everywhere: Option<bool>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -133,6 +134,8 @@ struct StepsFile {
     grow_factor: f64,
     #[serde(default)]
     predictor: Option<String>,
+    #[serde(default)]
+    stops: Vec<f64>,
 }
 
 fn one() -> f64 {
@@ -280,6 +283,10 @@ pub enum Location {
     Edge(Edge),
     /// One parameter point.
     Point([f64; 2]),
+    /// Every real particle (`everywhere = true`): the listed generalised DOFs of each particle
+    /// are held, so the interpolated component is zero everywhere. For `rot1`/`rot2` these
+    /// are the rotations about each particle's own lamina vectors.
+    Everywhere,
 }
 
 /// One `[[boundary]]` entry.
@@ -362,7 +369,7 @@ pub enum PredictorKind {
 }
 
 /// `[steps]`: load stepping from 0 to `final_load` and Newton tolerances.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct StepsSpec {
     /// First load-factor step.
     pub initial_step: f64,
@@ -388,6 +395,9 @@ pub struct StepsSpec {
     pub grow_factor: f64,
     /// Predictor (`None`: the driver's default).
     pub predictor: Option<PredictorKind>,
+    /// Load levels the stepping lands on exactly (strictly ascending, finite, in
+    /// `(0, final_load]`; possibly empty).
+    pub stops: Vec<f64>,
 }
 
 /// A named point whose displacement is recorded at every converged step.
@@ -719,6 +729,7 @@ impl Checker<'_> {
             .enumerate()
             .map(|(k, l)| self.load(k, l, &param_box))
             .collect::<Result<Vec<_>, _>>()?;
+        self.check_everywhere(&boundary)?;
         let steps = self.steps(&f.steps)?;
 
         let mut monitors: Vec<Monitor> = Vec::with_capacity(f.monitor.len());
@@ -825,6 +836,7 @@ impl Checker<'_> {
             ("components", b.components.is_some()),
             ("component", b.component.is_some()),
             ("value", b.value.is_some()),
+            ("everywhere", b.everywhere.is_some()),
         ];
         let kind = b.kind.as_str();
         let edge = |this: &Self| -> Result<Edge, CaseError> {
@@ -878,23 +890,35 @@ impl Checker<'_> {
                 })
             }
             "fixed" => {
-                self.only(&key, kind, &present, &["edge", "at", "components"])?;
-                let location = match (&b.edge, b.at) {
-                    (Some(_), None) => Location::Edge(edge(self)?),
-                    (None, Some(at)) => Location::Point(self.param_point(&format!("{key}.at"), at, pb)?),
-                    (Some(_), Some(_)) => {
+                self.only(&key, kind, &present, &["edge", "at", "components", "everywhere"])?;
+                let everywhere = b.everywhere == Some(true);
+                let location = match (&b.edge, b.at, everywhere) {
+                    (Some(_), None, false) => Location::Edge(edge(self)?),
+                    (None, Some(at), false) => Location::Point(self.param_point(&format!("{key}.at"), at, pb)?),
+                    (None, None, true) => Location::Everywhere,
+                    (Some(_), Some(_), _) => {
                         return Err(self.err(
                             format!("{key}.at"),
                             "(given with `edge`)",
-                            "either `edge` or `at`, not both",
+                            "either `edge`, `at` or `everywhere = true`, not two of them",
                         ))
                     }
-                    (None, None) => {
+                    (e, _, true) => {
+                        let other = if e.is_some() { "edge" } else { "at" };
+                        return Err(self.err(
+                            format!("{key}.everywhere"),
+                            format!("true (given with `{other}`)"),
+                            "either `edge`, `at` or `everywhere = true`, not two of them",
+                        ));
+                    }
+                    (None, None, false) => {
+                        let value = if b.everywhere.is_some() { "false" } else { "(missing)" };
                         return Err(self.err(
                             format!("{key}.edge"),
-                            "(missing)",
-                            "`edge` or `at = [u, v]` (one is required for kind = \"fixed\")",
-                        ))
+                            value,
+                            "`edge`, `at = [u, v]` or `everywhere = true` (one is required for \
+                             kind = \"fixed\")",
+                        ));
                     }
                 };
                 let ck = format!("{key}.components");
@@ -946,6 +970,76 @@ impl Checker<'_> {
                 "one of [\"symmetry\", \"clamped\", \"simply-supported\", \"fixed\", \"prescribed\"]",
             )),
         }
+    }
+
+    /// Components held on every particle (`fixed`, `everywhere = true`) must not be held again
+    /// by another entry: the rows would repeat the particle rows (a singular constraint
+    /// system). A symmetry plane is fine (its conditions on the plane's particles are
+    /// eliminated DOFs, and the repeated rows are dropped), except a plane whose normal is not
+    /// a coordinate axis with every component of the normal held: its multiplier row would
+    /// repeat them.
+    fn check_everywhere(&self, boundary: &[Boundary]) -> Result<(), CaseError> {
+        let mut held: Vec<(usize, Component)> = Vec::new();
+        for (k, b) in boundary.iter().enumerate() {
+            if let Boundary::Fixed {
+                location: Location::Everywhere,
+                components,
+            } = b
+            {
+                held.extend(components.iter().map(|&c| (k, c)));
+            }
+        }
+        if held.is_empty() {
+            return Ok(());
+        }
+        let is_held = |c: Component| held.iter().find(|h| h.1 == c).map(|h| h.0);
+        let displacements = [Component::Ux, Component::Uy, Component::Uz];
+        for (k, b) in boundary.iter().enumerate() {
+            let (holds, what): (Vec<Component>, &str) = match b {
+                Boundary::Clamped { .. } => (Component::ALL.to_vec(), "kind"),
+                Boundary::SimplySupported { .. } => (displacements.to_vec(), "kind"),
+                Boundary::Fixed { components, .. } => (components.clone(), "components"),
+                Boundary::Prescribed { component, .. } => (vec![*component], "component"),
+                Boundary::Symmetry { normal, .. } => {
+                    let nonzero: Vec<Component> = (0..3)
+                        .filter(|&i| normal[i] != 0.0)
+                        .map(|i| displacements[i])
+                        .collect();
+                    if nonzero.len() > 1 && nonzero.iter().all(|&c| is_held(c).is_some()) {
+                        return Err(self.err(
+                            format!("boundary[{k}].normal"),
+                            fmt_arr(normal),
+                            "a plane whose normal has a component not held on every particle \
+                             (the symmetry row would repeat those of `everywhere = true`)",
+                        ));
+                    }
+                    continue;
+                }
+            };
+            for c in holds {
+                match is_held(c) {
+                    Some(j) if j != k => {
+                        let which = match b {
+                            Boundary::Clamped { .. } => "clamped",
+                            Boundary::SimplySupported { .. } => "simply-supported",
+                            Boundary::Fixed { .. } => "fixed",
+                            _ => "prescribed",
+                        };
+                        return Err(self.err(
+                            format!("boundary[{k}].{what}"),
+                            format!("{which:?} (holds {:?})", c.name()),
+                            format!(
+                                "no component held on every particle by boundary[{j}] \
+                                 (everywhere = true): list only the other components here, \
+                                 e.g. kind = \"fixed\" with `components`"
+                            ),
+                        ));
+                    }
+                    _ => {}
+                }
+            }
+        }
+        Ok(())
     }
 
     /// The edge must lie in the plane, and the surface normal along it must lie in the plane
@@ -1150,6 +1244,20 @@ impl Checker<'_> {
                 ))
             }
         };
+        let mut prev = 0.0;
+        for (k, &v) in s.stops.iter().enumerate() {
+            if !(v.is_finite() && v > prev && v <= final_load) {
+                return Err(self.err(
+                    format!("steps.stops[{k}]"),
+                    v.to_string(),
+                    format!(
+                        "a finite load factor in ({prev}, steps.final_load = {final_load}] \
+                         (stops strictly ascending, after 0)"
+                    ),
+                ));
+            }
+            prev = v;
+        }
         Ok(StepsSpec {
             initial_step,
             min_step,
@@ -1163,6 +1271,7 @@ impl Checker<'_> {
             cut_factor: s.cut_factor,
             grow_factor: s.grow_factor,
             predictor,
+            stops: s.stops.clone(),
         })
     }
 }

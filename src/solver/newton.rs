@@ -45,7 +45,9 @@
 //! than `divergence_factor` over iteration 0), too many iterations, a singular tangent, or a
 //! recoverable [`ProblemError`]; it is then restored ([`NonlinearProblem::restore`]) and retried
 //! with `cut_factor · Δλ` (with the secant predictor scaled down accordingly). After a step that
-//! converged in at most `easy_iterations`, `Δλ` grows by `grow_factor` up to `max_step`. Below
+//! converged in at most `easy_iterations`, `Δλ` grows by `grow_factor` up to `max_step`. A step
+//! that would pass one of the load levels in [`LoadStepping::stops`] (or the end) is clipped to
+//! land on it exactly; the next step resumes the unclipped `Δλ`. Below
 //! `min_step` the run stops with a [`NewtonFailure`] naming the load level, the reason and the
 //! residual norms, and keeping every converged step.
 
@@ -195,8 +197,9 @@ pub enum Predictor {
     Secant,
 }
 
-/// Load stepping from `start` to `end` (load factors, `end ≥ start`).
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Load stepping from `start` to `end` (load factors, `end ≥ start`), landing exactly on every
+/// load level in `stops`.
+#[derive(Debug, Clone, PartialEq)]
 pub struct LoadStepping {
     /// Initial load factor (the problem's committed state must be at this level).
     pub start: f64,
@@ -218,6 +221,13 @@ pub struct LoadStepping {
     pub max_attempts: usize,
     /// How a step's iteration starts (default [`Predictor::Secant`]).
     pub predictor: Predictor,
+    /// Load levels the stepping must land on exactly (strictly ascending, finite, within
+    /// `(start, end]`; default none). A step that would pass the next stop is clipped to it
+    /// (the load factor is then the stop itself, bit for bit); the step after a clipped one
+    /// uses the unclipped step size again, which a clipped step neither grows nor shrinks
+    /// (an easy clipped step says little about the full step). A clipped step that fails is
+    /// cut from its clipped size.
+    pub stops: Vec<f64>,
 }
 
 impl Default for LoadStepping {
@@ -233,6 +243,7 @@ impl Default for LoadStepping {
             easy_iterations: 4,
             max_attempts: 10_000,
             predictor: Predictor::default(),
+            stops: Vec::new(),
         }
     }
 }
@@ -380,7 +391,7 @@ impl fmt::Display for NewtonFailure {
 impl std::error::Error for NewtonFailure {}
 
 /// The driver: options plus load stepping.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct NewtonSolver {
     /// Convergence settings.
     pub options: NewtonOptions,
@@ -419,7 +430,7 @@ impl NewtonSolver {
         u0: &[f64],
         mut progress: F,
     ) -> Result<NewtonReport, Box<NewtonFailure>> {
-        let st = self.stepping;
+        let st = &self.stepping;
         let n = problem.n_dofs();
         let mut report = NewtonReport {
             u: u0.to_vec(),
@@ -453,7 +464,7 @@ impl NewtonSolver {
         {
             Some(format!("invalid load stepping {st:?}"))
         } else {
-            None
+            stops_error(st)
         };
         if let Some(msg) = setup {
             return Err(fail(
@@ -483,9 +494,20 @@ impl NewtonSolver {
                 let load = report.load;
                 return Err(fail(report, load, step, reason, vec![]));
             }
-            let remaining = st.end - report.load;
-            let (dl, target) = if remaining <= step * (1.0 + 1e-9) {
-                (remaining, st.end)
+            // The next level to land on: the first stop beyond the committed load, else the
+            // end. A step reaching it (to round-off of the step) is clipped to it exactly.
+            let stop = st
+                .stops
+                .iter()
+                .copied()
+                .find(|&s| s - report.load > 1e-12 * scale)
+                .unwrap_or(st.end);
+            let remaining = stop - report.load;
+            let reach = remaining <= step * (1.0 + 1e-9);
+            // Shorter than the step size by more than round-off.
+            let clipped = reach && remaining < step * (1.0 - 1e-9);
+            let (dl, target) = if reach {
+                (remaining, stop)
             } else {
                 (step, report.load + step)
             };
@@ -546,7 +568,8 @@ impl NewtonSolver {
                     report.u = u;
                     report.load = target;
                     progress(&rec);
-                    if rec.iterations <= st.easy_iterations {
+                    // A clipped step keeps the unclipped size for the next one.
+                    if !clipped && rec.iterations <= st.easy_iterations {
                         step = (step * st.grow_factor).min(st.max_step);
                     }
                     report.attempts.push(rec);
@@ -688,6 +711,22 @@ impl NewtonSolver {
         }
         unreachable!("the loop returns at k = max_iterations")
     }
+}
+
+/// Why `st.stops` is invalid (strictly ascending, finite, within `(start, end]`), if it is.
+fn stops_error(st: &LoadStepping) -> Option<String> {
+    let mut prev = st.start;
+    for (k, &s) in st.stops.iter().enumerate() {
+        if !(s.is_finite() && s > prev && s <= st.end) {
+            return Some(format!(
+                "stops[{k}] = {s}: the stops must be finite, strictly ascending and within \
+                 (start, end] = ({}, {}]",
+                st.start, st.end
+            ));
+        }
+        prev = s;
+    }
+    None
 }
 
 /// `max(‖ |K| |u| ‖, ‖ |K| |u − u_n| ‖)` over the free rows (the raw tangent, before
