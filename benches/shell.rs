@@ -161,5 +161,116 @@ fn bench(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, bench);
+/// The elastoplastic hemisphere of `verification/hemisphere-plastic/case.toml` as the CLI builds
+/// it (quarter model, 17 × 17 particles, 2 × 2 Gauss points per cell, image particles), on 1 and
+/// on 2 threads (a local rayon pool; faer's LU runs serial on 1 thread and on the pool on 2):
+/// assembly of the residual and of residual + tangent (throughput per particle), numeric LU,
+/// one solve, and the whole run to P = 100 without output (sample size 10: about 10–25 s per
+/// sample). Run: `cargo bench --bench shell -- hemisphere_plastic` (the whole run alone:
+/// `-- hemisphere_plastic/run`).
+fn bench_plastic(c: &mut Criterion) {
+    use criterion::{BenchmarkId, Throughput};
+    use shelldsa::io::shell_build::build;
+    use shelldsa::io::shell_case::read_shell_case;
+    use shelldsa::solver::{LinearSolver, Method, NonlinearProblem, Parallelism, SolverOptions};
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("verification/hemisphere-plastic/case.toml");
+    let case = read_shell_case(&path).unwrap();
+    let mut built = build(&case).unwrap();
+    let pattern = built.problem.pattern().clone();
+    let n = pattern.n_dofs();
+    let nq = built.problem.n_generalised();
+    // A state with a strain level of the run (displacements ~ 1e-2, rotations ~ 1e-3).
+    let u: Vec<f64> = (0..n)
+        .map(|j| {
+            if j < nq {
+                1e-3 * ((j as f64) * 0.37).sin()
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let mut r = vec![0.0; n];
+    let mut values = vec![0.0; pattern.nnz()];
+    println!(
+        "hemisphere-plastic: {} particles, {n} unknowns, {} stored entries",
+        built.n_particles,
+        pattern.nnz()
+    );
+    let mut g = c.benchmark_group("hemisphere_plastic");
+    g.sample_size(10);
+    for threads in [1usize, 2] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let par = if threads == 1 {
+            Parallelism::Sequential
+        } else {
+            Parallelism::Rayon(0)
+        };
+        let t = format!("{threads}_threads");
+        g.throughput(Throughput::Elements(built.n_particles as u64));
+        let p = &mut built.problem;
+        g.bench_function(BenchmarkId::new("residual", &t), |b| {
+            b.iter(|| pool.install(|| p.residual(black_box(&u), 10.0, &mut r).unwrap()))
+        });
+        g.bench_function(BenchmarkId::new("residual_and_tangent", &t), |b| {
+            b.iter(|| {
+                pool.install(|| {
+                    p.residual_and_tangent(black_box(&u), 10.0, &mut r, &mut values)
+                        .unwrap()
+                })
+            })
+        });
+        g.throughput(Throughput::Elements(1));
+        let opts = SolverOptions {
+            parallelism: par,
+            singularity_probe: None,
+        };
+        let mut solver = LinearSolver::new(&pattern, Method::Lu, opts).unwrap();
+        // The essential DOFs of the symmetry planes as the driver eliminates them.
+        let bc = shelldsa::solver::EssentialBc::new(n, &p.essential(10.0)).unwrap();
+        let mut rhs: Vec<f64> = r.iter().map(|x| -x).collect();
+        let g0 = vec![0.0; bc.dofs().len()];
+        bc.apply_with(&pattern, &mut values, &mut rhs, &g0).unwrap();
+        g.bench_function(BenchmarkId::new("factorize_lu", &t), |b| {
+            b.iter(|| pool.install(|| solver.factorize(black_box(&values)).unwrap()))
+        });
+        solver.factorize(&values).unwrap();
+        let mut x = rhs.clone();
+        g.bench_function(BenchmarkId::new("solve", &t), |b| {
+            b.iter(|| {
+                x.copy_from_slice(&rhs);
+                pool.install(|| solver.solve_in_place(black_box(&mut x)).unwrap())
+            })
+        });
+        g.bench_function(BenchmarkId::new("run", &t), |b| {
+            b.iter(|| {
+                pool.install(|| {
+                    let mut fresh = build(&case).unwrap();
+                    let pat = fresh.problem.pattern().clone();
+                    let mut s = LinearSolver::new(
+                        &pat,
+                        Method::Lu,
+                        SolverOptions {
+                            parallelism: par,
+                            ..SolverOptions::default()
+                        },
+                    )
+                    .unwrap();
+                    let u0 = vec![0.0; pat.n_dofs()];
+                    let report = fresh
+                        .newton
+                        .run(&mut fresh.problem, &pat, &mut s, &u0)
+                        .unwrap();
+                    black_box(report.attempts.len())
+                })
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench, bench_plastic);
 criterion_main!(benches);

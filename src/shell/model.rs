@@ -474,12 +474,7 @@ impl ShellModel {
         tangent: Option<DMatrix<f64>>,
     ) -> (Vec<f64>, Option<DMatrix<f64>>) {
         const D: usize = DOFS_PER_PARTICLE;
-        let maps: Vec<(usize, Matrix3<f64>, f64)> = p
-            .neighbours
-            .iter()
-            .enumerate()
-            .filter_map(|(a, &j)| self.dof_map(j).map.map(|(q, det)| (a, q, det)))
-            .collect();
+        let maps = self.image_maps(p);
         if maps.is_empty() {
             return (residual, tangent);
         }
@@ -501,30 +496,7 @@ impl ShellModel {
             }
         }
         let kc = tangent.map(|mut k| {
-            // K T: columns of image b, (K T)[:, c] = Σ_r K[:, r] Q[r, c]; rotations × det.
-            for &(b, q, det) in &maps {
-                let c0 = D * b;
-                for row in 0..nl {
-                    let x = [k[(row, c0)], k[(row, c0 + 1)], k[(row, c0 + 2)]];
-                    for c in 0..3 {
-                        k[(row, c0 + c)] = x[0] * q[(0, c)] + x[1] * q[(1, c)] + x[2] * q[(2, c)];
-                    }
-                    k[(row, c0 + 3)] *= det;
-                    k[(row, c0 + 4)] *= det;
-                }
-            }
-            // Tᵀ K: rows of image a.
-            for &(a, q, det) in &maps {
-                let r0 = D * a;
-                for col in 0..nl {
-                    let x = [k[(r0, col)], k[(r0 + 1, col)], k[(r0 + 2, col)]];
-                    for c in 0..3 {
-                        k[(r0 + c, col)] = x[0] * q[(0, c)] + x[1] * q[(1, c)] + x[2] * q[(2, c)];
-                    }
-                    k[(r0 + 3, col)] *= det;
-                    k[(r0 + 4, col)] *= det;
-                }
-            }
+            transform_images(&maps, k.as_mut_slice(), nl);
             if nc == nl {
                 // Distinct sources in neighbour order: the transformed matrix is the cell's.
                 return k;
@@ -599,6 +571,113 @@ impl ShellModel {
             history,
             plastic_layers,
         })
+    }
+
+    /// The images among the neighbours of `p`: `(neighbour slot, Q, det Q)`.
+    fn image_maps(&self, p: &QuadraturePoint) -> Vec<(usize, Matrix3<f64>, f64)> {
+        p.neighbours
+            .iter()
+            .enumerate()
+            .filter_map(|(a, &j)| self.dof_map(j).map.map(|(q, det)| (a, q, det)))
+            .collect()
+    }
+
+    /// Add the internal force of in-plane point `k` for the global increment `dofs`, and its
+    /// consistent tangent when `tangent` is given, into the arrays of its cell (5 per source
+    /// particle, [`QuadraturePoint::sources`] order as [`ShellModel::point_dofs`]; the tangent
+    /// column-major). Returns the trial histories of the layers and the number of plastic
+    /// layers. The same values as [`ShellModel::local`] (to round-off: the tangent is added in
+    /// place rather than formed and then summed), without a per-point matrix: the assembly path
+    /// of [`super::problem::ShellProblem`], which sums the points of a cell into one buffer.
+    pub fn add_to_cell(
+        &self,
+        k: usize,
+        dofs: &[f64],
+        residual: &mut [f64],
+        tangent: Option<&mut [f64]>,
+    ) -> Result<(Vec<PointHistory<f64>>, usize), ShellError> {
+        const D: usize = DOFS_PER_PARTICLE;
+        let p = &self.points[k];
+        let nc = D * p.sources.len();
+        if residual.len() != nc {
+            return Err(ShellError::Dimension {
+                expected: nc,
+                got: residual.len(),
+            });
+        }
+        if let Some(t) = &tangent {
+            if t.len() != nc * nc {
+                return Err(ShellError::Dimension {
+                    expected: nc * nc,
+                    got: t.len(),
+                });
+            }
+        }
+        let (parts, x) = self.gather_local(k, dofs);
+        let nl = self.thickness_rule.len();
+        let n_loc = x.len();
+        let mut r_loc = vec![0.0; n_loc];
+        let inc = PointIncrement::new(&parts, &x)?;
+        let mut k_sum = tangent
+            .is_some()
+            .then(|| ThicknessTangent::new(&p.shape, &parts, &x))
+            .transpose()?;
+        let mut history = Vec::with_capacity(nl);
+        let mut plastic_layers = 0;
+        for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
+            let inp = PointInput {
+                surface: &p.surface,
+                zeta,
+                thickness: self.thickness,
+                weight: p.weight * wz,
+                shape: &p.shape,
+                particles: &parts,
+                material: &self.material,
+                history: &self.history[k * nl + l],
+            };
+            let res = point_residual_with(&inp, &inc)?;
+            for (r, v) in r_loc.iter_mut().zip(&res.residual) {
+                *r += v;
+            }
+            if let Some(ks) = k_sum.as_mut() {
+                ks.add_layer(&inp, &res)?;
+            }
+            plastic_layers += usize::from(res.return_map.plastic);
+            history.push(res.history);
+        }
+        let (r_cell, _) = self.to_cell(p, r_loc, None);
+        for (a, b) in residual.iter_mut().zip(&r_cell) {
+            *a += b;
+        }
+        if let (Some(ks), Some(kc)) = (&k_sum, tangent) {
+            let maps = self.image_maps(p);
+            if maps.is_empty() {
+                // No images: the neighbours are the sources, in order.
+                ks.add_to_slice(kc)?;
+            } else {
+                LOCAL_TANGENT.with(|buf| -> Result<(), ShellError> {
+                    let mut kl = buf.borrow_mut();
+                    kl.clear();
+                    kl.resize(n_loc * n_loc, 0.0);
+                    ks.add_to_slice(&mut kl)?;
+                    transform_images(&maps, &mut kl, n_loc);
+                    for (b, col) in kl.chunks_exact(D * n_loc).enumerate() {
+                        let sb = D * p.source_slot[b];
+                        for (cb, col) in col.chunks_exact(n_loc).enumerate() {
+                            let dst = &mut kc[(sb + cb) * nc..(sb + cb + 1) * nc];
+                            for (a, blk) in col.chunks_exact(D).enumerate() {
+                                let sa = D * p.source_slot[a];
+                                for (d, v) in dst[sa..sa + D].iter_mut().zip(blk) {
+                                    *d += v;
+                                }
+                            }
+                        }
+                    }
+                    Ok(())
+                })?;
+            }
+        }
+        Ok((history, plastic_layers))
     }
 
     /// All local contributions (parallel over in-plane points, returned in point order).
@@ -708,6 +787,45 @@ impl ShellModel {
             }
         }
     }
+}
+
+/// The image part of the map to a cell, in place on a column-major `nl × nl` neighbour-local
+/// matrix: `K T` on the columns of the images (`(K T)[:, c] = Σ_r K[:, r] Q[r, c]`, rotations
+/// × det), then `Tᵀ K` on their rows.
+fn transform_images(maps: &[(usize, Matrix3<f64>, f64)], k: &mut [f64], nl: usize) {
+    const D: usize = DOFS_PER_PARTICLE;
+    for &(b, q, det) in maps {
+        let c0 = D * b;
+        let (_, tail) = k.split_at_mut(c0 * nl);
+        let (c0c, rest) = tail.split_at_mut(nl);
+        let (c1c, rest) = rest.split_at_mut(nl);
+        let (c2c, rest) = rest.split_at_mut(nl);
+        for row in 0..nl {
+            let x = [c0c[row], c1c[row], c2c[row]];
+            c0c[row] = x[0] * q[(0, 0)] + x[1] * q[(1, 0)] + x[2] * q[(2, 0)];
+            c1c[row] = x[0] * q[(0, 1)] + x[1] * q[(1, 1)] + x[2] * q[(2, 1)];
+            c2c[row] = x[0] * q[(0, 2)] + x[1] * q[(1, 2)] + x[2] * q[(2, 2)];
+        }
+        for v in &mut rest[..2 * nl] {
+            *v *= det;
+        }
+    }
+    for &(a, q, det) in maps {
+        let r0 = D * a;
+        for col in k.chunks_exact_mut(nl) {
+            let x = [col[r0], col[r0 + 1], col[r0 + 2]];
+            for c in 0..3 {
+                col[r0 + c] = x[0] * q[(0, c)] + x[1] * q[(1, c)] + x[2] * q[(2, c)];
+            }
+            col[r0 + 3] *= det;
+            col[r0 + 4] *= det;
+        }
+    }
+}
+
+thread_local! {
+    /// Per-thread neighbour-local tangent of [`ShellModel::add_to_cell`] (points with images).
+    static LOCAL_TANGENT: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 fn mf(e: MeshfreeError) -> ShellError {

@@ -34,10 +34,10 @@ use super::model::ShellModel;
 use super::point::{PointHistory, DOFS_PER_PARTICLE};
 use super::ShellError;
 use crate::solver::{
-    assemble, assemble_vector, AssemblyError, Execution, NonlinearProblem, ProblemError,
-    SparsityPattern,
+    assemble_vector, assemble_with, AssemblyBuffers, AssemblyError, Execution, NonlinearProblem,
+    ProblemError, SparsityPattern,
 };
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DVector;
 use std::sync::OnceLock;
 
 /// How the symmetry conditions of the particles on a plane are imposed.
@@ -82,6 +82,8 @@ pub struct ShellProblem {
     load_norm: f64,
     execution: Execution,
     redundant: Vec<String>,
+    /// Cell buffers of the tangent assembly, reused over the Newton iterations.
+    buffers: AssemblyBuffers,
 }
 
 fn fatal<E: std::fmt::Display>(e: E) -> ProblemError {
@@ -323,6 +325,7 @@ impl ShellProblem {
             load_norm,
             execution: options.execution,
             redundant,
+            buffers: AssemblyBuffers::new(),
         })
     }
 
@@ -422,56 +425,37 @@ impl ShellProblem {
         let groups = &self.groups;
         let hist: Vec<OnceLock<Vec<PointHistory<f64>>>> =
             (0..np).map(|_| OnceLock::new()).collect();
-        let tangent = values.is_some();
-        let point = |c: usize| -> Result<(Option<DMatrix<f64>>, DVector<f64>), PointError> {
-            if let Some(group) = groups.get(c) {
-                // The points of one cell in a fixed order (deterministic sums).
-                let mut sum: Option<(Option<DMatrix<f64>>, DVector<f64>)> = None;
-                for &k in group {
-                    let lc = model.local(k, &q, tangent).map_err(|e| PointError {
-                        point: k,
-                        uv: model.points[k].uv,
-                        source: e,
-                    })?;
-                    // Each point is evaluated once per assembly.
-                    let _ = hist[k].set(lc.history);
-                    let f = DVector::from_vec(lc.residual);
-                    sum = Some(match sum {
-                        None => (lc.tangent, f),
-                        Some((km, fs)) => {
-                            let km = match (km, lc.tangent) {
-                                (Some(mut a), Some(b)) => {
-                                    a += &b;
-                                    Some(a)
-                                }
-                                _ => None,
-                            };
-                            (km, fs + f)
-                        }
-                    });
-                }
-                sum.ok_or_else(|| PointError {
-                    point: np,
-                    uv: [f64::NAN; 2],
-                    source: ShellError::InvalidInput(format!("point cell {c} is empty")),
-                })
-            } else {
+        let point_error = |k: usize, e: ShellError| PointError {
+            point: k,
+            uv: model.points[k].uv,
+            source: e,
+        };
+        // The points of cell `c` in a fixed order (deterministic sums) into its arrays.
+        let cell = |c: usize, kc: Option<&mut [f64]>, fc: &mut [f64]| -> Result<(), PointError> {
+            let Some(group) = groups.get(c) else {
                 // Constraint and load cells: structure only, values added below.
-                let m = pattern.cell_dofs(c).len();
-                Ok((tangent.then(|| DMatrix::zeros(m, m)), DVector::zeros(m)))
+                return Ok(());
+            };
+            let mut kc = kc;
+            for &k in group {
+                let (h, _) = model
+                    .add_to_cell(k, &q, fc, kc.as_deref_mut())
+                    .map_err(|e| point_error(k, e))?;
+                // Each point is evaluated once per assembly.
+                let _ = hist[k].set(h);
             }
+            Ok(())
         };
         match values {
             Some(vals) => {
-                assemble(pattern, vals, r, self.execution, |c| {
-                    let (k, f) = point(c)?;
-                    let k = k.ok_or_else(|| PointError {
-                        point: np,
-                        uv: [f64::NAN; 2],
-                        source: ShellError::InvalidInput("tangent not computed".to_string()),
-                    })?;
-                    Ok((k, f))
-                })
+                assemble_with(
+                    pattern,
+                    vals,
+                    r,
+                    self.execution,
+                    &mut self.buffers,
+                    |c, kc, fc| cell(c, Some(kc), fc),
+                )
                 .map_err(assembly_error)?;
                 for ((row, slots), &k) in self
                     .constraints
@@ -500,8 +484,11 @@ impl ShellProblem {
                 }
             }
             None => {
-                assemble_vector(pattern, r, self.execution, |c| point(c).map(|(_, f)| f))
-                    .map_err(assembly_error)?;
+                assemble_vector(pattern, r, self.execution, |c| {
+                    let mut f = DVector::zeros(pattern.cell_dofs(c).len());
+                    cell(c, None, f.as_mut_slice()).map(|()| f)
+                })
+                .map_err(assembly_error)?;
             }
         }
         let histories = hist

@@ -264,6 +264,19 @@ impl<'a> ThicknessTangent<'a> {
                 },
             });
         }
+        self.add_to_slice(k.as_mut_slice())
+    }
+
+    /// [`ThicknessTangent::add_to`] into a column-major `5n × 5n` slice (a reused buffer).
+    pub fn add_to_slice(&self, k: &mut [f64]) -> Result<(), ShellError> {
+        let n = self.shape.len();
+        let nd = DOFS_PER_PARTICLE * n;
+        if k.len() != nd * nd {
+            return Err(ShellError::Dimension {
+                expected: nd * nd,
+                got: k.len(),
+            });
+        }
         if self.layers == 0 {
             return Ok(());
         }
@@ -305,7 +318,7 @@ impl<'a> ThicknessTangent<'a> {
                 }
             }
         }
-        add_columns(x, scratch, ht, self.shape, &self.dirs, k.as_mut_slice());
+        add_columns(x, scratch, ht, self.shape, &self.dirs, k);
         // Change of the rotation virtual field: ∂²d_I/∂α_b∂α_γ · m_I,
         // m_I = (Σ P) s̃₀ + (Σ ζ P) s̃₁ = t/2 (Ψ (Σ P)_{:3} + Ψ̃,1 (Σ ζP)_{:1} + Ψ̃,2 (Σ ζP)_{:2}).
         let [p0, p1] = &self.p_moments;
@@ -317,7 +330,7 @@ impl<'a> ThicknessTangent<'a> {
             let r0 = DOFS_PER_PARTICLE * i + 3;
             for b in 0..2 {
                 for g in 0..2 {
-                    k[(r0 + b, r0 + g)] += dir.d_ab[b][g].dot(&m);
+                    k[(r0 + g) * nd + r0 + b] += dir.d_ab[b][g].dot(&m);
                 }
             }
         }

@@ -149,7 +149,8 @@ where
         Execution::Serial => {
             for c in 0..n_cells {
                 let (k, f) = check(c, local(c))?;
-                scatter(pattern, c, &k, &f, values, rhs, 0, 0..pattern.n_dofs());
+                let (k, f) = (k.as_slice(), f.as_slice());
+                scatter(pattern, c, k, f, values, rhs, 0, 0..pattern.n_dofs());
             }
         }
         Execution::Parallel => {
@@ -172,6 +173,106 @@ where
                     .into_par_iter()
                     .for_each(|(cols, base, vals, r)| {
                         for (i, (k, f)) in batch.iter().enumerate() {
+                            let (k, f) = (k.as_slice(), f.as_slice());
+                            scatter(pattern, start + i, k, f, vals, r, base, cols.clone());
+                        }
+                    });
+                start = end;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Reusable cell buffers of [`assemble_with`]: one matrix and one vector per cell of a batch,
+/// kept between assemblies so that repeated assemblies (Newton iterations) allocate nothing
+/// and touch no fresh pages.
+#[derive(Debug, Default, Clone)]
+pub struct AssemblyBuffers {
+    cells: Vec<(Vec<f64>, Vec<f64>)>,
+}
+
+impl AssemblyBuffers {
+    /// Empty buffers (they grow on first use).
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Zeroed buffers for the cells `cells`, in order.
+    fn take(
+        &mut self,
+        pattern: &SparsityPattern,
+        cells: std::ops::Range<usize>,
+    ) -> &mut [(Vec<f64>, Vec<f64>)] {
+        if self.cells.len() < cells.len() {
+            self.cells.resize_with(cells.len(), Default::default);
+        }
+        let bufs = &mut self.cells[..cells.len()];
+        for (c, (k, f)) in cells.zip(bufs.iter_mut()) {
+            let m = pattern.cell_dofs(c).len();
+            k.clear();
+            k.resize(m * m, 0.0);
+            f.clear();
+            f.resize(m, 0.0);
+        }
+        bufs
+    }
+}
+
+/// [`assemble`] with the cell contributions written into reused buffers:
+/// `local(c, k, f)` receives the zeroed column-major `m × m` matrix `k` and vector `f` of cell
+/// `c` (`m = pattern.cell_dofs(c).len()`) and adds the cell's contribution to them. The
+/// buffers live in `buffers` between calls. Same order of additions, hence the same
+/// bit-identical results for any number of threads, as [`assemble`].
+pub fn assemble_with<F, E>(
+    pattern: &SparsityPattern,
+    values: &mut [f64],
+    rhs: &mut [f64],
+    exec: Execution,
+    buffers: &mut AssemblyBuffers,
+    local: F,
+) -> Result<(), AssemblyError<E>>
+where
+    F: Fn(usize, &mut [f64], &mut [f64]) -> Result<(), E> + Sync,
+    E: Send,
+{
+    check_len("assemble: values", values.len(), pattern.nnz())?;
+    check_len("assemble: rhs", rhs.len(), pattern.n_dofs())?;
+    values.fill(0.0);
+    rhs.fill(0.0);
+    let n_cells = pattern.n_cells();
+    match exec {
+        Execution::Serial => {
+            for c in 0..n_cells {
+                let (k, f) = &mut buffers.take(pattern, c..c + 1)[0];
+                local(c, k, f).map_err(|source| AssemblyError::Cell { cell: c, source })?;
+                scatter(pattern, c, k, f, values, rhs, 0, 0..pattern.n_dofs());
+            }
+        }
+        Execution::Parallel => {
+            let parts = partitions(pattern, rayon::current_num_threads());
+            let b = batch_len();
+            let mut start = 0;
+            while start < n_cells {
+                let end = (start + b).min(n_cells);
+                let bufs = buffers.take(pattern, start..end);
+                let results: Vec<Result<(), E>> = bufs
+                    .par_iter_mut()
+                    .enumerate()
+                    .map(|(i, (k, f))| local(start + i, k, f))
+                    .collect();
+                // The lowest failing cell is reported, as in the serial loop.
+                for (i, res) in results.into_iter().enumerate() {
+                    res.map_err(|source| AssemblyError::Cell {
+                        cell: start + i,
+                        source,
+                    })?;
+                }
+                let bufs = &*bufs;
+                split_by_columns(pattern, &parts, values, rhs)
+                    .into_par_iter()
+                    .for_each(|(cols, base, vals, r)| {
+                        for (i, (k, f)) in bufs.iter().enumerate() {
                             scatter(pattern, start + i, k, f, vals, r, base, cols.clone());
                         }
                     });
@@ -189,8 +290,8 @@ where
 fn scatter(
     pattern: &SparsityPattern,
     c: usize,
-    k: &DMatrix<f64>,
-    f: &DVector<f64>,
+    kk: &[f64],
+    f: &[f64],
     vals: &mut [f64],
     r: &mut [f64],
     base: usize,
@@ -199,7 +300,6 @@ fn scatter(
     let dofs = pattern.cell_dofs(c);
     let slots = pattern.cell_slots(c);
     let m = dofs.len();
-    let kk = k.as_slice();
     for (jj, &col) in dofs.iter().enumerate() {
         if cols.contains(&col) {
             let kcol = &kk[jj * m..(jj + 1) * m];

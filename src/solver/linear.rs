@@ -22,9 +22,15 @@ pub enum Method {
 }
 
 /// Threading of faer's factorisation and solve kernels.
+///
+/// The default is sequential. On the elastoplastic hemisphere tangent (1446 unknowns, 616k
+/// stored entries) one numeric LU took 54.5 ms serial and 41 ms on 2 threads when the second
+/// core was free (best of 15), but 105 ms on 2 threads against 57 ms serial while another job
+/// held a core (criterion, `benches/shell.rs`): on a shared 2-core machine the serial kernel is
+/// the robust choice (docs/shell-formulation.md §8 item 7).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Parallelism {
-    /// Single-threaded (the default: on 2 cores faer's own parallelism was measured slower).
+    /// Single-threaded (the default).
     #[default]
     Sequential,
     /// faer's rayon parallelism with this many threads (`0`: all threads of the global pool).

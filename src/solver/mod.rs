@@ -22,7 +22,9 @@ pub mod linear;
 pub mod newton;
 pub mod pattern;
 
-pub use assembly::{assemble, assemble_vector, AssemblyError, Execution};
+pub use assembly::{
+    assemble, assemble_vector, assemble_with, AssemblyBuffers, AssemblyError, Execution,
+};
 pub use dirichlet::EssentialBc;
 pub use linear::{LinearSolver, Method, Parallelism, SolverOptions};
 pub use newton::{
