@@ -153,6 +153,7 @@ pub fn newton_settings(case: &ShellCase) -> (NewtonOptions, LoadStepping) {
             max_step: s.max_step,
             cut_factor: s.cut_factor,
             grow_factor: s.grow_factor,
+            easy_iterations: s.easy_iterations,
             stops: s.stops.clone(),
             ..LoadStepping::default()
         },

@@ -132,6 +132,8 @@ struct StepsFile {
     cut_factor: f64,
     #[serde(default = "default_grow")]
     grow_factor: f64,
+    #[serde(default = "default_easy")]
+    easy_iterations: i64,
     #[serde(default)]
     predictor: Option<String>,
     #[serde(default)]
@@ -153,6 +155,10 @@ fn default_energy_rtol() -> f64 {
 fn default_cut() -> f64 {
     0.5
 }
+fn default_easy() -> i64 {
+    4
+}
+
 fn default_grow() -> f64 {
     1.5
 }
@@ -393,6 +399,8 @@ pub struct StepsSpec {
     pub cut_factor: f64,
     /// Step factor after an easy step, ≥ 1.
     pub grow_factor: f64,
+    /// A step converging in at most this many iterations is easy (the step then grows).
+    pub easy_iterations: usize,
     /// Predictor (`None`: the driver's default).
     pub predictor: Option<PredictorKind>,
     /// Load levels the stepping lands on exactly (strictly ascending, finite, in
@@ -1232,6 +1240,7 @@ impl Checker<'_> {
                 "a finite factor >= 1",
             ));
         }
+        let easy_iterations = self.count("steps.easy_iterations", s.easy_iterations, 0, None)?;
         let predictor = match s.predictor.as_deref() {
             None => None,
             Some("zero") => Some(PredictorKind::Zero),
@@ -1270,6 +1279,7 @@ impl Checker<'_> {
             energy_atol: s.energy_atol,
             cut_factor: s.cut_factor,
             grow_factor: s.grow_factor,
+            easy_iterations,
             predictor,
             stops: s.stops.clone(),
         })
