@@ -63,6 +63,16 @@ pub struct LocalContribution {
     pub plastic_layers: usize,
 }
 
+/// Receives the thickness-integrated tangent of a point ([`ShellModel::layers`]).
+type TangentSink<'s> = dyn FnMut(&ThicknessTangent<'_>) -> Result<(), ShellError> + 's;
+
+/// What the thickness layers of one in-plane point give ([`ShellModel::layers`]).
+struct Layers {
+    residual: Vec<f64>,
+    history: Vec<PointHistory<f64>>,
+    plastic_layers: usize,
+}
+
 /// The committed mid-surface at one parameter point ([`ShellModel::sample`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MidSurfaceSample {
@@ -528,13 +538,41 @@ impl ShellModel {
         tangent: bool,
     ) -> Result<LocalContribution, ShellError> {
         let p = &self.points[k];
+        let n_loc = DOFS_PER_PARTICLE * p.neighbours.len();
+        let mut k_loc = tangent.then(|| DMatrix::zeros(n_loc, n_loc));
+        let mut add = |ks: &ThicknessTangent<'_>| match k_loc.as_mut() {
+            Some(km) => ks.add_to(km),
+            None => Ok(()),
+        };
+        let layers = self.layers(k, dofs, tangent.then_some(&mut add as &mut TangentSink<'_>))?;
+        let (residual, k_loc) = self.to_cell(p, layers.residual, k_loc);
+        let (history, plastic_layers) = (layers.history, layers.plastic_layers);
+        Ok(LocalContribution {
+            dofs: self.point_dofs(k),
+            residual,
+            tangent: k_loc,
+            history,
+            plastic_layers,
+        })
+    }
+
+    /// The layers of in-plane point `k`: local residual summed over the thickness (5 per
+    /// neighbour), the trial histories and the number of plastic layers; the
+    /// thickness-integrated tangent, when `tangent` is given, is handed to it (shared by
+    /// [`ShellModel::local`] and [`ShellModel::add_to_cell`]).
+    fn layers(
+        &self,
+        k: usize,
+        dofs: &[f64],
+        tangent: Option<&mut TangentSink<'_>>,
+    ) -> Result<Layers, ShellError> {
+        let p = &self.points[k];
         let (parts, x) = self.gather_local(k, dofs);
         let nl = self.thickness_rule.len();
-        let n_loc = x.len();
-        let mut residual = vec![0.0; n_loc];
-        let mut k_loc = tangent.then(|| DMatrix::zeros(n_loc, n_loc));
+        let mut residual = vec![0.0; x.len()];
         let inc = PointIncrement::new(&parts, &x)?;
         let mut k_sum = tangent
+            .is_some()
             .then(|| ThicknessTangent::new(&p.shape, &parts, &x))
             .transpose()?;
         let mut history = Vec::with_capacity(nl);
@@ -560,14 +598,11 @@ impl ShellModel {
             plastic_layers += usize::from(res.return_map.plastic);
             history.push(res.history);
         }
-        if let (Some(ks), Some(km)) = (&k_sum, k_loc.as_mut()) {
-            ks.add_to(km)?;
+        if let (Some(ks), Some(sink)) = (&k_sum, tangent) {
+            sink(ks)?;
         }
-        let (residual, k_loc) = self.to_cell(p, residual, k_loc);
-        Ok(LocalContribution {
-            dofs: self.point_dofs(k),
+        Ok(Layers {
             residual,
-            tangent: k_loc,
             history,
             plastic_layers,
         })
@@ -613,69 +648,52 @@ impl ShellModel {
                 });
             }
         }
-        let (parts, x) = self.gather_local(k, dofs);
-        let nl = self.thickness_rule.len();
-        let n_loc = x.len();
-        let mut r_loc = vec![0.0; n_loc];
-        let inc = PointIncrement::new(&parts, &x)?;
-        let mut k_sum = tangent
-            .is_some()
-            .then(|| ThicknessTangent::new(&p.shape, &parts, &x))
-            .transpose()?;
-        let mut history = Vec::with_capacity(nl);
-        let mut plastic_layers = 0;
-        for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
-            let inp = PointInput {
-                surface: &p.surface,
-                zeta,
-                thickness: self.thickness,
-                weight: p.weight * wz,
-                shape: &p.shape,
-                particles: &parts,
-                material: &self.material,
-                history: &self.history[k * nl + l],
+        let n_loc = D * p.neighbours.len();
+        let tangent_requested = tangent.is_some();
+        let mut tangent = tangent;
+        let mut add = |ks: &ThicknessTangent<'_>| -> Result<(), ShellError> {
+            let Some(kc) = tangent.as_deref_mut() else {
+                return Ok(());
             };
-            let res = point_residual_with(&inp, &inc)?;
-            for (r, v) in r_loc.iter_mut().zip(&res.residual) {
-                *r += v;
-            }
-            if let Some(ks) = k_sum.as_mut() {
-                ks.add_layer(&inp, &res)?;
-            }
-            plastic_layers += usize::from(res.return_map.plastic);
-            history.push(res.history);
-        }
-        let (r_cell, _) = self.to_cell(p, r_loc, None);
-        for (a, b) in residual.iter_mut().zip(&r_cell) {
-            *a += b;
-        }
-        if let (Some(ks), Some(kc)) = (&k_sum, tangent) {
             let maps = self.image_maps(p);
             if maps.is_empty() {
                 // No images: the neighbours are the sources, in order.
-                ks.add_to_slice(kc)?;
-            } else {
-                LOCAL_TANGENT.with(|buf| -> Result<(), ShellError> {
-                    let mut kl = buf.borrow_mut();
-                    kl.clear();
-                    kl.resize(n_loc * n_loc, 0.0);
-                    ks.add_to_slice(&mut kl)?;
-                    transform_images(&maps, &mut kl, n_loc);
-                    for (b, col) in kl.chunks_exact(D * n_loc).enumerate() {
-                        let sb = D * p.source_slot[b];
-                        for (cb, col) in col.chunks_exact(n_loc).enumerate() {
-                            let dst = &mut kc[(sb + cb) * nc..(sb + cb + 1) * nc];
-                            for (a, blk) in col.chunks_exact(D).enumerate() {
-                                let sa = D * p.source_slot[a];
-                                for (d, v) in dst[sa..sa + D].iter_mut().zip(blk) {
-                                    *d += v;
-                                }
+                return ks.add_to_slice(kc);
+            }
+            LOCAL_TANGENT.with(|buf| -> Result<(), ShellError> {
+                let mut kl = buf.borrow_mut();
+                kl.clear();
+                kl.resize(n_loc * n_loc, 0.0);
+                ks.add_to_slice(&mut kl)?;
+                transform_images(&maps, &mut kl, n_loc);
+                for (b, col) in kl.chunks_exact(D * n_loc).enumerate() {
+                    let sb = D * p.source_slot[b];
+                    for (cb, col) in col.chunks_exact(n_loc).enumerate() {
+                        let dst = &mut kc[(sb + cb) * nc..(sb + cb + 1) * nc];
+                        for (a, blk) in col.chunks_exact(D).enumerate() {
+                            let sa = D * p.source_slot[a];
+                            for (d, v) in dst[sa..sa + D].iter_mut().zip(blk) {
+                                *d += v;
                             }
                         }
                     }
-                    Ok(())
-                })?;
-            }
+                }
+                Ok(())
+            })
+        };
+        let with_tangent = tangent_requested;
+        let Layers {
+            residual: r_loc,
+            history,
+            plastic_layers,
+        } = self.layers(
+            k,
+            dofs,
+            with_tangent.then_some(&mut add as &mut TangentSink<'_>),
+        )?;
+        let (r_cell, _) = self.to_cell(p, r_loc, None);
+        for (a, b) in residual.iter_mut().zip(&r_cell) {
+            *a += b;
         }
         Ok((history, plastic_layers))
     }
