@@ -168,28 +168,12 @@ impl Differentiable for Fixture {
         ND
     }
     fn eval<T: Real>(&self, x: &[T]) -> Vec<T> {
-        let s = SurfacePoint {
-            x_a: self.surface.x_a.map(|v| v.map(T::cst)),
-            n: self.surface.n.map(T::cst),
-            n_a: self.surface.n_a.map(|v| v.map(T::cst)),
-        };
-        let ps: Vec<ParticleState<T>> = self
-            .particles
-            .iter()
-            .map(|p| ParticleState {
-                u: p.u.map(T::cst),
-                d: p.d.map(T::cst),
-                d0: p.d0.map(T::cst),
-                e: p.e.map(|v| v.map(T::cst)),
-            })
-            .collect();
+        let s = self.surface.lift::<T>();
+        let ps: Vec<ParticleState<T>> = self.particles.iter().map(|p| p.lift()).collect();
         let m = self.material.lift();
         let mut out = vec![T::zero(); ND];
         for (l, &(zeta, wz)) in self.layers.iter().enumerate() {
-            let h = PointHistory {
-                frame: self.history[l].frame.map(T::cst),
-                material: self.history[l].material.lift(),
-            };
+            let h = self.history[l].lift::<T>();
             let inp = PointInput {
                 surface: &s,
                 zeta,

@@ -212,15 +212,6 @@ impl GatherMap {
     }
 }
 
-fn lift_state<T: Real>(p: &ParticleState<f64>) -> ParticleState<T> {
-    ParticleState {
-        u: p.u.map(T::cst),
-        d: p.d.map(T::cst),
-        d0: p.d0.map(T::cst),
-        e: p.e.map(|v| v.map(T::cst)),
-    }
-}
-
 /// `[a]×`, the matrix of `v ↦ a × v`.
 fn skew(a: &V3<f64>) -> Matrix3<f64> {
     Matrix3::new(0.0, -a[2], a[1], a[2], 0.0, -a[0], -a[1], a[0], 0.0)
@@ -608,7 +599,7 @@ impl GenericLoad for Moment {
             let mut d = ep.n0.map(T::cst);
             let mut da = Vec::with_capacity(ep.shape.len());
             for &(j, psi) in &ep.shape {
-                let st: ParticleState<T> = lift_state(&model.particle_state(j));
+                let st: ParticleState<T> = model.particle_state(j).lift();
                 let alpha = [map.gather(model, j, 3, q), map.gather(model, j, 4, q)];
                 let dj = rotate_director(&st.d, &st.e[0], &st.e[1], alpha);
                 d += (dj - st.d0) * T::cst(psi);

@@ -327,15 +327,7 @@ impl ShellModel {
         let parts = p
             .neighbours
             .iter()
-            .map(|&i| {
-                let q = &self.particle_state(i);
-                ParticleState {
-                    u: q.u.map(T::cst),
-                    d: q.d.map(T::cst),
-                    d0: q.d0.map(T::cst),
-                    e: q.e.map(|v| v.map(T::cst)),
-                }
-            })
+            .map(|&i| self.particle_state(i).lift())
             .collect();
         let mut x = Vec::with_capacity(DOFS_PER_PARTICLE * p.neighbours.len());
         for &j in &p.neighbours {
@@ -751,17 +743,9 @@ impl ShellModel {
         let m = self.material.lift::<T>();
         for (k, p) in self.points.iter().enumerate() {
             let (parts, x) = self.gather_local(k, dofs);
-            let s = SurfacePoint {
-                x_a: p.surface.x_a.map(|v| v.map(T::cst)),
-                n: p.surface.n.map(T::cst),
-                n_a: p.surface.n_a.map(|v| v.map(T::cst)),
-            };
+            let s = p.surface.lift::<T>();
             for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
-                let hk = &self.history[k * nl + l];
-                let h = PointHistory {
-                    frame: hk.frame.map(T::cst),
-                    material: hk.material.lift(),
-                };
+                let h = self.history[k * nl + l].lift::<T>();
                 let inp = PointInput {
                     surface: &s,
                     zeta,

@@ -64,6 +64,18 @@ impl<T: Real> SurfacePoint<T> {
     }
 }
 
+impl SurfacePoint<f64> {
+    /// The same geometry as constants of scalar `T` (a dual-number evaluation without a seed
+    /// in the geometry).
+    pub fn lift<T: Real>(&self) -> SurfacePoint<T> {
+        SurfacePoint {
+            x_a: self.x_a.map(|v| v.map(T::cst)),
+            n: self.n.map(T::cst),
+            n_a: self.n_a.map(|v| v.map(T::cst)),
+        }
+    }
+}
+
 /// Committed state of one particle (the generalised coefficients of the RK approximation).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ParticleState<T> {
@@ -75,6 +87,18 @@ pub struct ParticleState<T> {
     pub d0: V3<T>,
     /// Rotation axes `e1_I, e2_I ⟂ d_Iⁿ` of the two rotation DOFs.
     pub e: [V3<T>; 2],
+}
+
+impl ParticleState<f64> {
+    /// The same state as constants of scalar `T`.
+    pub fn lift<T: Real>(&self) -> ParticleState<T> {
+        ParticleState {
+            u: self.u.map(T::cst),
+            d: self.d.map(T::cst),
+            d0: self.d0.map(T::cst),
+            e: self.e.map(|v| v.map(T::cst)),
+        }
+    }
 }
 
 /// One neighbour's shape-function data at the point (on the parameter domain: design-free).
@@ -111,6 +135,16 @@ pub struct PointHistory<T> {
     pub frame: M3<T>,
     /// Stress, back stress, effective plastic strain.
     pub material: MaterialState<T>,
+}
+
+impl PointHistory<f64> {
+    /// The same history as constants of scalar `T`.
+    pub fn lift<T: Real>(&self) -> PointHistory<T> {
+        PointHistory {
+            frame: self.frame.map(T::cst),
+            material: self.material.lift(),
+        }
+    }
 }
 
 /// Everything a point evaluation needs.
