@@ -641,55 +641,11 @@ fn curved_bending_error_is_integration_error() {
     assert!(last < 1e-6, "{last:e}");
 }
 
-/// Scordelis–Lo roof (the set-up of tests/shell_scordelis_lo.rs, regular particles): free-edge
-/// vertical deflection with `ppc × ppc` Gauss points per cell and VCI of `order`.
+/// Scordelis–Lo roof (`common::scordelis_lo_deflection`, regular particles, supports of 3
+/// spacings, cells of one spacing): free-edge vertical deflection with `ppc × ppc` Gauss points
+/// per cell and VCI of `order`.
 fn scordelis_lo(n: usize, ppc: usize, order: VciOrder) -> f64 {
-    use shelldsa::meshfree::transform::edge_particles;
-    let surface = Surface::CylinderSector(
-        CylinderSector::new(
-            V3::zeros(),
-            V3::x(),
-            V3::z(),
-            25.0,
-            [(-40f64).to_radians(), 40f64.to_radians()],
-            [0.0, 50.0],
-        )
-        .unwrap(),
-    );
-    let spec = common::ModelSpec {
-        thickness: 0.25,
-        young: 4.32e8,
-        n_u: n,
-        n_v: n,
-        support: 3.0,
-        sub: 1,
-        ppc,
-    };
-    let mut model = common::elastic_model(&surface, &spec);
-    let rule = boundary_rule(&model, ParamBox::unit()).unwrap();
-    apply_vci(&mut model, order, &rule).unwrap();
-    let nd = model.n_dofs();
-    let c = model.contributions(&vec![0.0; nd], true).unwrap();
-    let k = model.dense_tangent(&c);
-    let mut f = vec![0.0; nd];
-    for p in &model.points {
-        let da = p.surface.x_a[0].cross(&p.surface.x_a[1]).norm() * p.weight;
-        for (&i, s) in p.neighbours.iter().zip(&p.shape) {
-            f[5 * i + 2] -= 90.0 * s.psi * da;
-        }
-    }
-    let uv = &model.particle_uv;
-    let mut ends = edge_particles(uv, &ParamBox::unit(), Edge::VMin, 1e-12);
-    let first_end = ends.clone();
-    ends.extend(edge_particles(uv, &ParamBox::unit(), Edge::VMax, 1e-12));
-    let t = Transformation::new(&model.shape_functions, &ends).unwrap();
-    let mut fixed: Vec<usize> = ends.iter().flat_map(|&i| [5 * i + 1, 5 * i + 2]).collect();
-    fixed.push(5 * first_end[first_end.len() / 2]);
-    let minus_f: Vec<f64> = f.iter().map(|v| -v).collect();
-    let q = common::solve_with_fixed(&t, &k, &minus_f, &fixed);
-    let mut sv = ShapeValues::new();
-    model.shape_functions.evaluate([1.0, 0.5], &mut sv).unwrap();
-    -sv.iter().map(|(i, psi, _)| psi * q[5 * i + 2]).sum::<f64>()
+    common::scordelis_lo_deflection(n, 3.0, 1, ppc, order)
 }
 
 /// Scordelis–Lo with the recommended integration (2 × 2 Gauss points per cell of one particle

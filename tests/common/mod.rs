@@ -175,3 +175,70 @@ impl ExternalLoad for GeneralisedLoad {
         Ok(())
     }
 }
+
+/// Scordelis–Lo roof, linear (reference-values §2: R = 25, L = 50, half-angle 40°, t = 0.25,
+/// E = 4.32e8, ν = 0, self-weight 90 per unit area; diaphragms u_y = u_z = 0 at the curved ends
+/// by the transformation method, one axial nodal value fixed): vertical deflection (downward
+/// positive) at the middle of the free edge θ = +40°, with `n × n` particles, supports of
+/// `support` spacings, `sub` cells per spacing of `ppc × ppc` Gauss points and VCI of `vci`.
+pub fn scordelis_lo_deflection(
+    n: usize,
+    support: f64,
+    sub: usize,
+    ppc: usize,
+    vci: shelldsa::meshfree::vci::VciOrder,
+) -> f64 {
+    use shelldsa::geometry::CylinderSector;
+    let surface = Surface::CylinderSector(
+        CylinderSector::new(
+            Vector3::zeros(),
+            Vector3::x(),
+            Vector3::z(),
+            25.0,
+            [(-40f64).to_radians(), 40f64.to_radians()],
+            [0.0, 50.0],
+        )
+        .unwrap(),
+    );
+    let spec = ModelSpec {
+        thickness: 0.25,
+        young: 4.32e8,
+        n_u: n,
+        n_v: n,
+        support,
+        sub,
+        ppc,
+    };
+    let mut model = elastic_model(&surface, &spec);
+    if vci != shelldsa::meshfree::vci::VciOrder::Off {
+        let rule = shelldsa::shell::integration::boundary_rule(&model, ParamBox::unit()).unwrap();
+        shelldsa::shell::integration::apply_vci(&mut model, vci, &rule).unwrap();
+    }
+    let nd = model.n_dofs();
+    let c = model.contributions(&vec![0.0; nd], true).unwrap();
+    let k = model.dense_tangent(&c);
+
+    // Self-weight: f_I = −90 ∫ Ψ_I dA ẑ, dA = |x̄,1 × x̄,2| dξ at the model's quadrature points.
+    let mut f = vec![0.0; nd];
+    for p in &model.points {
+        let da = p.surface.x_a[0].cross(&p.surface.x_a[1]).norm() * p.weight;
+        for (&i, s) in p.neighbours.iter().zip(&p.shape) {
+            f[5 * i + 2] -= 90.0 * s.psi * da;
+        }
+    }
+
+    // Diaphragms at v = 0 and v = 1: nodal u_y = u_z = 0; one nodal u_x = 0.
+    let uv = &model.particle_uv;
+    let mut ends = edge_particles(uv, &ParamBox::unit(), Edge::VMin, 1e-12);
+    let first_end = ends.clone();
+    ends.extend(edge_particles(uv, &ParamBox::unit(), Edge::VMax, 1e-12));
+    let t = Transformation::new(&model.shape_functions, &ends).unwrap();
+    let mut fixed: Vec<usize> = ends.iter().flat_map(|&i| [5 * i + 1, 5 * i + 2]).collect();
+    fixed.push(5 * first_end[first_end.len() / 2]);
+    // K q = f, i.e. K Δq = −r with r = −f.
+    let minus_f: Vec<f64> = f.iter().map(|v| -v).collect();
+    let q = solve_with_fixed(&t, &k, &minus_f, &fixed);
+    let mut sv = ShapeValues::new();
+    model.shape_functions.evaluate([1.0, 0.5], &mut sv).unwrap();
+    -sv.iter().map(|(i, psi, _)| psi * q[5 * i + 2]).sum::<f64>()
+}
