@@ -108,6 +108,7 @@ fn lu_and_cholesky_match_dense_lu_on_random_sparse_matrices() {
         (false, Method::Lu),
         (true, Method::Lu),
         (true, Method::Cholesky),
+        (false, Method::DenseLu),
     ] {
         // The shift keeps cond(A) moderate (< 1e4 for these sizes), so the dense and sparse
         // solutions must agree to ~cond·ε ≈ 1e-12; the backward error of a stable factorisation
@@ -151,7 +152,7 @@ fn symbolic_reuse_equals_fresh_factorisation_bit_for_bit() {
     let v1 = random_values(&p, &mut rng, false, 3.0);
     let v2 = random_values(&p, &mut rng, false, 3.0);
     let b: Vec<f64> = (0..n).map(|_| rng.next()).collect();
-    for method in [Method::Lu, Method::Cholesky] {
+    for method in [Method::Lu, Method::Cholesky, Method::DenseLu] {
         let (v1, v2) = if method == Method::Cholesky {
             (
                 random_values(&p, &mut rng, true, 1.0),
@@ -174,6 +175,28 @@ fn symbolic_reuse_equals_fresh_factorisation_bit_for_bit() {
 }
 
 #[test]
+fn auto_method_is_dense_only_for_nearly_full_patterns() {
+    // A chain (3n − 2 of n² entries stored) stays sparse; 40 unknowns all coupled in one cell
+    // are full (100 %); 40 unknowns in overlapping cells of 8 store
+    // (n·(2·7+1) − 7·8) / n² ≈ 34 % ≥ DENSE_FILL (25 %), cells of 4 about 17 % < DENSE_FILL.
+    let chain: Vec<Vec<usize>> = (0..39).map(|i| vec![i, i + 1]).collect();
+    let p = SparsityPattern::from_cells(40, &chain).unwrap();
+    assert_eq!(Method::auto(&p), Method::Lu);
+    let full = SparsityPattern::from_cells(40, &[(0..40).collect::<Vec<_>>()]).unwrap();
+    assert_eq!(Method::auto(&full), Method::DenseLu);
+    let banded: Vec<Vec<usize>> = (0..33).map(|i| (i..i + 8).collect()).collect();
+    let b = SparsityPattern::from_cells(40, &banded).unwrap();
+    let fill = b.nnz() as f64 / 1600.0;
+    assert!(fill >= Method::DENSE_FILL, "{fill}");
+    assert_eq!(Method::auto(&b), Method::DenseLu);
+    let narrow: Vec<Vec<usize>> = (0..37).map(|i| (i..i + 4).collect()).collect();
+    let b = SparsityPattern::from_cells(40, &narrow).unwrap();
+    let fill = b.nnz() as f64 / 1600.0;
+    assert!(fill < Method::DENSE_FILL, "{fill}");
+    assert_eq!(Method::auto(&b), Method::Lu);
+}
+
+#[test]
 fn multi_rhs_equals_single_solves() {
     let mut rng = Rng(11);
     let n = 150;
@@ -181,12 +204,17 @@ fn multi_rhs_equals_single_solves() {
     let values = random_values(&p, &mut rng, false, 4.0);
     let k = 5;
     let b: Vec<f64> = (0..n * k).map(|_| rng.next()).collect();
-    for par in [Parallelism::Sequential, Parallelism::Rayon(0)] {
+    for (par, method) in [
+        (Parallelism::Sequential, Method::Lu),
+        (Parallelism::Rayon(0), Method::Lu),
+        (Parallelism::Sequential, Method::DenseLu),
+        (Parallelism::Rayon(0), Method::DenseLu),
+    ] {
         let opts = SolverOptions {
             parallelism: par,
             ..Default::default()
         };
-        let mut solver = LinearSolver::new(&p, Method::Lu, opts).unwrap();
+        let mut solver = LinearSolver::new(&p, method, opts).unwrap();
         solver.factorize(&values).unwrap();
         let mut multi = b.clone();
         solver.solve_columns_in_place(&mut multi, k).unwrap();
@@ -202,7 +230,7 @@ fn multi_rhs_equals_single_solves() {
                 assert_eq!(mat[(i, j)], multi[j * n + i]);
             }
         }
-        println!("{par:?}: multi vs single max relative difference {worst:.2e}");
+        println!("{method:?} {par:?}: multi vs single max relative difference {worst:.2e}");
         // Blocked and single-column triangular solves may sum in a different order: allow a
         // few ulps relative to the solution norm.
         assert!(worst <= 1e-14, "{worst:e}");
@@ -346,6 +374,12 @@ fn singular_and_non_finite_matrices_are_errors_not_panics() {
         matches!(err, SolverError::Singular { dof: Some(_), .. }),
         "{err:?}"
     );
+    // The dense LU divides by the round-off pivot too: the probe catches it.
+    let mut dense = LinearSolver::new(&p, Method::DenseLu, SolverOptions::default()).unwrap();
+    let err = dense.factorize(&values).unwrap_err();
+    println!("dense: {err}");
+    assert!(matches!(err, SolverError::Singular { .. }), "{err:?}");
+    assert!(!dense.is_factorized());
     assert!(!solver.is_factorized());
     assert_eq!(
         solver.solve_in_place(&mut [0.0; 6]),
@@ -847,6 +881,7 @@ fn secant_predictor_is_exact_on_a_linear_path_even_when_steps_grow() {
                     assert!(acc.is_some());
                 }
                 Predictor::Zero => assert_eq!(its, 1, "λ = {load}"),
+                Predictor::Quadratic => unreachable!("not in this loop"),
             }
         }
         // u_N = λ P / k_s summed: exact for linear springs.
@@ -884,6 +919,294 @@ fn secant_predictor_saves_iterations_on_a_softening_chain() {
         totals.push(total);
     }
     assert!(totals[1] < totals[0], "{totals:?}");
+}
+
+/// Uncoupled linear springs under a load growing as `λ²`: `r_i = k_i u_i − λ² f_i`, so the
+/// path `u(λ) = λ² f/k` is a parabola (the tangent is `k`, independent of `λ`).
+struct ParabolicPath {
+    pattern: SparsityPattern,
+    tangents: usize,
+    residuals: usize,
+}
+
+impl ParabolicPath {
+    const N: usize = 3;
+    fn new() -> Self {
+        let cells: Vec<Vec<usize>> = (0..Self::N).map(|i| vec![i]).collect();
+        ParabolicPath {
+            pattern: SparsityPattern::from_cells(Self::N, &cells).unwrap(),
+            tangents: 0,
+            residuals: 0,
+        }
+    }
+    fn k(i: usize) -> f64 {
+        1.0 + i as f64
+    }
+    fn f(i: usize) -> f64 {
+        2.0 - 0.5 * i as f64
+    }
+}
+
+impl NonlinearProblem for ParabolicPath {
+    fn n_dofs(&self) -> usize {
+        Self::N
+    }
+    fn residual(&mut self, u: &[f64], lam: f64, r: &mut [f64]) -> Result<(), ProblemError> {
+        self.residuals += 1;
+        for (i, ri) in r.iter_mut().enumerate() {
+            *ri = Self::k(i) * u[i] - lam * lam * Self::f(i);
+        }
+        Ok(())
+    }
+    fn tangent(&mut self, _u: &[f64], _lam: f64, values: &mut [f64]) -> Result<(), ProblemError> {
+        self.tangents += 1;
+        for (i, v) in values.iter_mut().enumerate() {
+            *v = Self::k(i); // one entry per column: the diagonal
+        }
+        Ok(())
+    }
+    fn force_norm(&self, lam: f64) -> f64 {
+        lam * lam * (0..Self::N).map(|i| Self::f(i).powi(2)).sum::<f64>().sqrt()
+    }
+    fn commit(&mut self, _u: &[f64], _lam: f64) {}
+    fn restore(&mut self) {}
+}
+
+#[test]
+fn quadratic_predictor_is_exact_on_a_parabolic_path() {
+    // u(λ) = λ² f/k: three converged states determine the parabola, so from the third step on
+    // the quadratic extrapolation is the solution to round-off (0 Newton updates), while the
+    // secant's error is (Δλ)² f/k and needs one update per step. Unequal steps (growth 1.7).
+    for predictor in [Predictor::Quadratic, Predictor::Secant] {
+        let mut prob = ParabolicPath::new();
+        let pattern = prob.pattern.clone();
+        let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+        let newton = NewtonSolver {
+            options: NewtonOptions::default(),
+            stepping: LoadStepping {
+                initial_step: 0.05,
+                grow_factor: 1.7,
+                predictor,
+                ..Default::default()
+            },
+        };
+        let report = newton
+            .run(&mut prob, &pattern, &mut solver, &[0.0; 3])
+            .unwrap();
+        let steps = steps_summary(&report);
+        println!("{predictor:?}: {steps:?}");
+        assert!(steps.len() >= 4, "{steps:?}");
+        assert_eq!(steps[0].1, Predictor::Zero, "no previous increment");
+        assert_eq!(steps[1].1, Predictor::Secant, "one previous increment");
+        for &(load, p, its, _) in &steps[2..] {
+            assert_eq!(p, predictor, "λ = {load}");
+            let expected = if predictor == Predictor::Quadratic {
+                0
+            } else {
+                1
+            };
+            assert_eq!(its, expected, "λ = {load}");
+        }
+        for i in 0..3 {
+            let exact = ParabolicPath::f(i) / ParabolicPath::k(i);
+            assert!((report.u[i] - exact).abs() <= 1e-13 * exact, "{i}");
+        }
+    }
+}
+
+#[test]
+fn quadratic_predictor_saves_iterations_on_a_softening_chain() {
+    // The softening chain of the secant test, equal steps: the quadratic extrapolation's error
+    // is third order in the step, the secant's second order.
+    let mut totals = Vec::new();
+    for predictor in [Predictor::Secant, Predictor::Quadratic] {
+        let mut prob = SpringChain::new(10, 0.05, 2.0, None);
+        let pattern = prob.pattern.clone();
+        let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+        let newton = NewtonSolver {
+            options: NewtonOptions {
+                residual_rtol: 1e-12,
+                ..Default::default()
+            },
+            stepping: LoadStepping {
+                initial_step: 0.05,
+                max_step: 0.05,
+                predictor,
+                ..Default::default()
+            },
+        };
+        let report = newton
+            .run(&mut prob, &pattern, &mut solver, &[0.0; 11])
+            .unwrap();
+        let total: usize = report.converged_steps().map(|s| s.iterations).sum();
+        println!("{predictor:?}: {total} iterations in 20 steps");
+        totals.push(total);
+    }
+    assert!(totals[1] < totals[0], "{totals:?}");
+}
+
+/// [`SpringChain`] declaring that its convergence hook does not need the converged tangent,
+/// counting tangent assemblies.
+struct NoHook {
+    chain: SpringChain,
+    tangents: usize,
+    hooks: Vec<FactorisedAt>,
+}
+
+impl NonlinearProblem for NoHook {
+    fn n_dofs(&self) -> usize {
+        self.chain.n_dofs()
+    }
+    fn residual(&mut self, u: &[f64], l: f64, r: &mut [f64]) -> Result<(), ProblemError> {
+        self.chain.residual(u, l, r)
+    }
+    fn tangent(&mut self, u: &[f64], l: f64, v: &mut [f64]) -> Result<(), ProblemError> {
+        self.tangents += 1;
+        self.chain.tangent(u, l, v)
+    }
+    fn residual_and_tangent(
+        &mut self,
+        u: &[f64],
+        l: f64,
+        r: &mut [f64],
+        v: &mut [f64],
+    ) -> Result<(), ProblemError> {
+        self.tangents += 1;
+        self.chain.residual_and_tangent(u, l, r, v)
+    }
+    fn essential(&self, l: f64) -> Vec<(usize, f64)> {
+        self.chain.essential(l)
+    }
+    fn force_norm(&self, l: f64) -> f64 {
+        self.chain.force_norm(l)
+    }
+    fn converged_tangent(&self) -> ConvergedTangent {
+        ConvergedTangent::NotNeeded
+    }
+    fn on_converged(&mut self, s: &ConvergedStep<'_>) -> Result<(), ProblemError> {
+        self.hooks.push(s.factorised_at);
+        Ok(())
+    }
+    fn commit(&mut self, u: &[f64], l: f64) {
+        self.chain.commit(u, l)
+    }
+    fn restore(&mut self) {
+        self.chain.restore()
+    }
+}
+
+#[test]
+fn residual_first_acceptance_saves_tangents_and_keeps_the_converged_states() {
+    // The same softening chain twice: with the default (converged tangent required) every
+    // accepted iterate has its tangent assembled and factorised; declaring `NotNeeded` lets the
+    // driver accept from the residual alone once quadratic contraction predicts convergence.
+    // Both must accept the same iterates (the same Newton sequence, so the same unknowns to
+    // the bit), with fewer tangents in the second run.
+    let run = |not_needed: bool| {
+        let chain = SpringChain::new(10, 0.05, 2.0, None);
+        let pattern = chain.pattern.clone();
+        let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+        let newton = NewtonSolver {
+            options: NewtonOptions::default(),
+            stepping: LoadStepping {
+                initial_step: 0.1,
+                max_step: 0.1,
+                ..Default::default()
+            },
+        };
+        if not_needed {
+            let mut prob = NoHook {
+                chain,
+                tangents: 0,
+                hooks: Vec::new(),
+            };
+            let report = newton.run(&mut prob, &pattern, &mut solver, &[0.0; 11]);
+            (report.unwrap(), prob.tangents, prob.hooks)
+        } else {
+            let mut prob = Counting {
+                chain,
+                tangents: 0,
+                hooks: Vec::new(),
+            };
+            let report = newton.run(&mut prob, &pattern, &mut solver, &[0.0; 11]);
+            (report.unwrap(), prob.tangents, prob.hooks)
+        }
+    };
+    let (full, t_full, h_full) = run(false);
+    let (first, t_first, h_first) = run(true);
+    println!("tangents: {t_full} (required) vs {t_first} (not needed); hooks {h_first:?}");
+    assert!(h_full.iter().all(|&f| f == FactorisedAt::Converged));
+    let saved = h_first
+        .iter()
+        .filter(|&&f| f == FactorisedAt::PreviousIterate)
+        .count();
+    assert!(saved > 0, "{h_first:?}");
+    assert_eq!(
+        t_full - t_first,
+        saved,
+        "one tangent saved per residual-first step"
+    );
+    assert_eq!(full.u, first.u, "the same accepted iterates");
+    let its = |r: &NewtonReport| {
+        r.converged_steps()
+            .map(|s| s.iterations)
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(its(&full), its(&first));
+    for s in first.converged_steps() {
+        let accepted_only = s.factorised_at == Some(FactorisedAt::PreviousIterate);
+        assert_eq!(
+            accepted_only,
+            s.residual_only.last().map(|&(k, _)| k) == Some(s.residual_norms.len() - 1),
+            "{s:?}"
+        );
+    }
+}
+
+/// [`SpringChain`] with the default hook policy, counting tangents and recording the hooks.
+struct Counting {
+    chain: SpringChain,
+    tangents: usize,
+    hooks: Vec<FactorisedAt>,
+}
+
+impl NonlinearProblem for Counting {
+    fn n_dofs(&self) -> usize {
+        self.chain.n_dofs()
+    }
+    fn residual(&mut self, u: &[f64], l: f64, r: &mut [f64]) -> Result<(), ProblemError> {
+        self.chain.residual(u, l, r)
+    }
+    fn tangent(&mut self, u: &[f64], l: f64, v: &mut [f64]) -> Result<(), ProblemError> {
+        self.tangents += 1;
+        self.chain.tangent(u, l, v)
+    }
+    fn residual_and_tangent(
+        &mut self,
+        u: &[f64],
+        l: f64,
+        r: &mut [f64],
+        v: &mut [f64],
+    ) -> Result<(), ProblemError> {
+        self.tangents += 1;
+        self.chain.residual_and_tangent(u, l, r, v)
+    }
+    fn essential(&self, l: f64) -> Vec<(usize, f64)> {
+        self.chain.essential(l)
+    }
+    fn force_norm(&self, l: f64) -> f64 {
+        self.chain.force_norm(l)
+    }
+    fn on_converged(&mut self, s: &ConvergedStep<'_>) -> Result<(), ProblemError> {
+        self.hooks.push(s.factorised_at);
+        Ok(())
+    }
+    fn commit(&mut self, u: &[f64], l: f64) {
+        self.chain.commit(u, l)
+    }
+    fn restore(&mut self) {
+        self.chain.restore()
+    }
 }
 
 /// A spring chain whose residual carries deterministic noise of size `noise` (a stand-in for

@@ -31,9 +31,9 @@ use crate::shell::point::DOFS_PER_PARTICLE;
 use crate::shell::problem::ShellProblem;
 use crate::shell::symmetry::SymmetryPlane;
 use crate::solver::{
-    ConvergedStep, LinearSolver, LoadStepping, Method, NewtonOptions, NewtonSolver,
-    NonlinearProblem, Predictor, ProblemError, SolverError, SolverOptions, SparsityPattern,
-    StepRecord,
+    ConvergedStep, ConvergedTangent, LinearSolver, LoadStepping, Method, NewtonOptions,
+    NewtonSolver, NonlinearProblem, Parallelism, Predictor, ProblemError, SolverError,
+    SolverOptions, SparsityPattern, StepRecord,
 };
 use nalgebra::Vector3;
 use serde_json::json;
@@ -337,6 +337,7 @@ pub fn driver(case: &ShellCase) -> Result<NewtonSolver, BuildError> {
         stepping.predictor = match p {
             PredictorKind::Zero => Predictor::Zero,
             PredictorKind::Secant => Predictor::Secant,
+            PredictorKind::Quadratic => Predictor::Quadratic,
         };
     }
     Ok(NewtonSolver { options, stepping })
@@ -470,6 +471,9 @@ where
     fn residual_scale(&self) -> f64 {
         self.inner.residual_scale()
     }
+    fn converged_tangent(&self) -> ConvergedTangent {
+        self.inner.converged_tangent()
+    }
     fn on_converged(&mut self, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
         self.inner.on_converged(step)?;
         self.record = Some(step.record.clone());
@@ -520,7 +524,29 @@ pub fn run(
     output.initial(problem_model(&built.problem), &case.surface)?;
 
     let pattern = problem_pattern(&built.problem).clone();
-    let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default())?;
+    let method = Method::auto(&pattern);
+    let parallelism = match (method, std::env::var("SHELLDSA_LU_THREADS").ok()) {
+        (_, Some(t)) => match t.trim().parse::<usize>() {
+            Ok(1) => Parallelism::Sequential,
+            Ok(n) => Parallelism::Rayon(n),
+            Err(_) => Parallelism::Sequential,
+        },
+        // The blocked dense kernel scales on 2 cores; the sparse one did not (linear.rs).
+        (Method::DenseLu, None) => Parallelism::Rayon(0),
+        (_, None) => Parallelism::Sequential,
+    };
+    let mut solver = LinearSolver::new(
+        &pattern,
+        method,
+        SolverOptions {
+            parallelism,
+            ..SolverOptions::default()
+        },
+    )?;
+    output.set_info(
+        "linear_solver",
+        json!(format!("{method:?} ({parallelism:?})")),
+    );
     let surface = &case.surface;
     let mut obs = Observed {
         inner: &mut built.problem,

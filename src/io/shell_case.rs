@@ -372,6 +372,8 @@ pub enum PredictorKind {
     Zero,
     /// Start from the previous step's increment scaled by the step ratio.
     Secant,
+    /// Extrapolate quadratically through the last three converged states.
+    Quadratic,
 }
 
 /// `[steps]`: load stepping from 0 to `final_load` and Newton tolerances.
@@ -1245,11 +1247,12 @@ impl Checker<'_> {
             None => None,
             Some("zero") => Some(PredictorKind::Zero),
             Some("secant") => Some(PredictorKind::Secant),
+            Some("quadratic") => Some(PredictorKind::Quadratic),
             Some(other) => {
                 return Err(self.err(
                     "steps.predictor",
                     format!("{other:?}"),
-                    "\"zero\" or \"secant\"",
+                    "\"zero\", \"secant\" or \"quadratic\"",
                 ))
             }
         };

@@ -57,7 +57,7 @@ use crate::meshfree::quadrature::CellQuadrature;
 use crate::meshfree::ParamBox;
 use crate::shell::model::ShellModel;
 use crate::shell::ShellError;
-use crate::solver::StepRecord;
+use crate::solver::{FactorisedAt, StepRecord};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
@@ -409,6 +409,12 @@ pub struct StepSummary {
     pub iterations: usize,
     /// Residual norms of every evaluation.
     pub residual_norms: Vec<f64>,
+    /// Residual-only evaluations `(k, ‖r_k‖)` of the residual-first acceptance
+    /// ([`crate::solver::StepRecord::residual_only`]).
+    pub residual_only: Vec<(usize, f64)>,
+    /// Whether the converged iterate was accepted from its residual alone (no tangent assembled
+    /// or factorised there).
+    pub accepted_residual_only: bool,
     /// Monitor displacements, in the case's monitor order.
     pub monitors: Vec<[f64; 3]>,
     /// The VTU written for this step (relative to the output directory), if any.
@@ -536,6 +542,8 @@ impl ShellOutput {
             load_factor: record.load,
             iterations: record.iterations,
             residual_norms: record.residual_norms.clone(),
+            residual_only: record.residual_only.clone(),
+            accepted_residual_only: record.factorised_at == Some(FactorisedAt::PreviousIterate),
             monitors,
             vtu,
         });
@@ -582,6 +590,8 @@ impl ShellOutput {
             "load_factor": s.load_factor,
             "iterations": s.iterations,
             "residual_norms": s.residual_norms,
+            "residual_only": s.residual_only,
+            "accepted_residual_only": s.accepted_residual_only,
             "converged": true,
             "monitors": self.monitors_json(&s.monitors),
             "vtu": s.vtu,

@@ -34,8 +34,8 @@ use super::model::ShellModel;
 use super::point::{PointHistory, DOFS_PER_PARTICLE};
 use super::ShellError;
 use crate::solver::{
-    assemble_vector, assemble_with, AssemblyBuffers, AssemblyError, Execution, NonlinearProblem,
-    ProblemError, SparsityPattern,
+    assemble_vector, assemble_with, AssemblyBuffers, AssemblyError, ConvergedTangent, Execution,
+    NonlinearProblem, ProblemError, SparsityPattern,
 };
 use nalgebra::DVector;
 use std::sync::OnceLock;
@@ -539,6 +539,11 @@ impl NonlinearProblem for ShellProblem {
     }
     fn force_norm(&self, load: f64) -> f64 {
         load.abs() * self.load_norm
+    }
+    /// The analysis has no convergence hook: residual-first acceptance is allowed (a design
+    /// sensitivity wrapper that solves with the converged tangent declares `Required`).
+    fn converged_tangent(&self) -> ConvergedTangent {
+        ConvergedTangent::NotNeeded
     }
     fn commit(&mut self, u: &[f64], load: f64) {
         let cached = matches!(&self.cache, Some((uc, _)) if uc == u);

@@ -28,8 +28,9 @@ pub use assembly::{
 pub use dirichlet::EssentialBc;
 pub use linear::{LinearSolver, Method, Parallelism, SolverOptions};
 pub use newton::{
-    Acceptance, ConvergedStep, FailureReason, LoadStepping, NewtonFailure, NewtonOptions,
-    NewtonReport, NewtonSolver, NonlinearProblem, Predictor, ProblemError, StepRecord,
+    Acceptance, ConvergedStep, ConvergedTangent, FactorisedAt, FailureReason, LoadStepping,
+    NewtonFailure, NewtonOptions, NewtonReport, NewtonSolver, NonlinearProblem, Predictor,
+    ProblemError, StepRecord,
 };
 pub use pattern::SparsityPattern;
 

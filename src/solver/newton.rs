@@ -3,7 +3,8 @@
 //! One step goes from the committed state at load factor `λ_n` to `λ = λ_n + Δλ`. It starts
 //! from the committed unknowns, or, with [`Predictor::Secant`], from
 //! `u_n + (Δλ/Δλ_prev) (u_n − u_{n−1})`: the previous converged increment scaled by the ratio of
-//! the load steps. Every iteration `k` evaluates the residual `r(u_k, λ)` and the tangent
+//! the load steps, or, with [`Predictor::Quadratic`], from the parabola through the last three
+//! converged states. Every iteration `k` evaluates the residual `r(u_k, λ)` and the tangent
 //! `K = ∂r/∂u` (one call, [`NonlinearProblem::residual_and_tangent`]), eliminates the essential
 //! conditions with the increments `g − u_c` (so a prescribed motion enters through the consistent
 //! linear predictor `−K_fc Δg` at `k = 0` and is satisfied exactly afterwards), factorises and
@@ -40,6 +41,18 @@
 //! equation needs (the paper's eq. 65 reuses the decomposed tangent without iteration).
 //! [`NonlinearProblem::on_converged`] is called at that point, before
 //! [`NonlinearProblem::commit`].
+//!
+//! **Residual-first acceptance.** A problem whose convergence hook does not use the converged
+//! tangent ([`NonlinearProblem::converged_tangent`] = [`ConvergedTangent::NotNeeded`], the
+//! plain analysis) lets the driver skip the tangent at the iterate it accepts: from `k ≥ 2`,
+//! when the last two residuals predict convergence under quadratic contraction
+//! (`‖r_{k−1}‖³/‖r_{k−2}‖² ≤ 100 · tol`), it evaluates the residual alone, and accepts if the
+//! residual tolerance holds and either the energy test with `Δu = K_{k−1}⁻¹ r_k` (the previous
+//! iterate's factorisation, one solve) or the round-off floor (with the previous `S`) does.
+//! Otherwise it evaluates residual and tangent at the same iterate as usual (one residual
+//! wasted). Accepted iterates and unknowns are the same as without it
+//! (`tests/solver.rs`); one tangent assembly and one factorisation per step are saved. The
+//! converged step then reports [`FactorisedAt::PreviousIterate`].
 //!
 //! A step fails on a non-finite or diverging residual (`‖r_k‖` or the energy growing by more
 //! than `divergence_factor` over iteration 0), too many iterations, a singular tangent, or a
@@ -113,10 +126,37 @@ pub trait NonlinearProblem {
     fn on_converged(&mut self, _step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
         Ok(())
     }
+    /// Whether [`NonlinearProblem::on_converged`] needs the tangent factorised at the converged
+    /// state (default [`ConvergedTangent::Required`]: the design sensitivity equation does).
+    /// With [`ConvergedTangent::NotNeeded`] the driver may accept an iterate from its residual
+    /// alone, saving one tangent assembly and one factorisation per step (module
+    /// documentation, "residual-first acceptance").
+    fn converged_tangent(&self) -> ConvergedTangent {
+        ConvergedTangent::Required
+    }
     /// Accept the converged state `u` at `load` (trial history becomes committed).
     fn commit(&mut self, u: &[f64], load: f64);
     /// Reject the current trial state (back to the committed history).
     fn restore(&mut self);
+}
+
+/// Whether a problem's convergence hook needs the tangent at the converged state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ConvergedTangent {
+    /// Factorise the tangent at the accepted iterate (design sensitivity).
+    #[default]
+    Required,
+    /// The hook does not use the factorisation: residual-first acceptance is allowed.
+    NotNeeded,
+}
+
+/// Which tangent the solver of a [`ConvergedStep`] holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FactorisedAt {
+    /// The tangent at the converged unknowns.
+    Converged,
+    /// The tangent of the previous iterate (residual-first acceptance).
+    PreviousIterate,
 }
 
 /// What [`NonlinearProblem::on_converged`] sees.
@@ -130,8 +170,12 @@ pub struct ConvergedStep<'a> {
     pub u: &'a [f64],
     /// Iteration record of the step.
     pub record: &'a StepRecord,
-    /// Solver holding the factorised tangent at `u`, essential conditions eliminated.
+    /// Solver holding the factorised tangent, essential conditions eliminated: at `u` unless
+    /// `factorised_at` says otherwise (only when the problem declared
+    /// [`ConvergedTangent::NotNeeded`]).
     pub solver: &'a LinearSolver,
+    /// Where the tangent in `solver` was evaluated.
+    pub factorised_at: FactorisedAt,
     /// The essential conditions eliminated in `solver` (zero their entries in sensitivity
     /// right-hand sides).
     pub essential: &'a EssentialBc,
@@ -195,6 +239,13 @@ pub enum Predictor {
     /// softening spring chain 59 against 77 (tests/solver.rs). Hence the default.
     #[default]
     Secant,
+    /// Quadratic extrapolation through the last three converged states `(λ, u)`:
+    /// `u_n + s d₁/h₁ + s (s + h₁)(d₁/h₁ − d₂/h₂)/(h₁ + h₂)` with `s = Δλ`, `d₁ = u_n − u_{n−1}`,
+    /// `h₁ = λ_n − λ_{n−1}`, `d₂ = u_{n−1} − u_{n−2}`, `h₂ = λ_{n−1} − λ_{n−2}` (Newton's
+    /// divided differences). It falls back to the secant on the second step and to zero on the
+    /// first. For paths that bend (an inextensional mode whose membrane strains are quadratic
+    /// in the displacement) the secant's error is of order `s²` and the quadratic's `s³`.
+    Quadratic,
 }
 
 /// Load stepping from `start` to `end` (load factors, `end ≥ start`), landing exactly on every
@@ -334,6 +385,12 @@ pub struct StepRecord {
     pub acceptance: Option<Acceptance>,
     /// The round-off floor `roundoff_factor · ε · S_k` for every evaluation `k`.
     pub roundoff_floors: Vec<f64>,
+    /// Residual-only evaluations (residual-first acceptance): `(k, ‖r_k‖)` for every one, also
+    /// those that did not accept (the iterate was then re-evaluated with the tangent, and
+    /// `residual_norms[k]` holds that evaluation).
+    pub residual_only: Vec<(usize, f64)>,
+    /// Where the converged step's factorised tangent was evaluated (`None` until converged).
+    pub factorised_at: Option<FactorisedAt>,
     /// Why it failed, if it did.
     pub failure: Option<FailureReason>,
 }
@@ -485,8 +542,10 @@ impl NewtonSolver {
         };
         let mut step = st.initial_step.min(st.max_step);
         let mut n_converged = 0;
-        // The last converged increment and its load step (for the secant predictor).
+        // The last two converged increments and their load steps (most recent first), for the
+        // secant and quadratic predictors.
         let mut last: Option<(Vec<f64>, f64)> = None;
+        let mut before_last: Option<(Vec<f64>, f64)> = None;
         let scale = st.end.abs().max(st.start.abs()).max(1.0);
         while st.end - report.load > 1e-12 * scale {
             if report.attempts.len() >= st.max_attempts {
@@ -512,8 +571,17 @@ impl NewtonSolver {
                 (step, report.load + step)
             };
             let mut u = report.u.clone();
-            let predictor = match (st.predictor, &last) {
-                (Predictor::Secant, Some((du, dl_prev))) => {
+            let predictor = match (st.predictor, &last, &before_last) {
+                (Predictor::Quadratic, Some((d1, h1)), Some((d2, h2))) => {
+                    let (h1, h2) = (*h1, *h2);
+                    let c = dl * (dl + h1) / (h1 + h2);
+                    for ((x, a), b) in u.iter_mut().zip(d1).zip(d2) {
+                        let (s1, s2) = (a / h1, b / h2);
+                        *x += dl * s1 + c * (s1 - s2);
+                    }
+                    Predictor::Quadratic
+                }
+                (Predictor::Secant | Predictor::Quadratic, Some((du, dl_prev)), _) => {
                     let ratio = dl / dl_prev;
                     for (x, d) in u.iter_mut().zip(du) {
                         *x += ratio * d;
@@ -533,21 +601,25 @@ impl NewtonSolver {
                 predictor,
                 acceptance: None,
                 roundoff_floors: Vec::new(),
+                residual_only: Vec::new(),
+                factorised_at: None,
                 failure: None,
             };
             let outcome = self.attempt(
                 problem, pattern, solver, &report.u, &mut u, target, &mut rec, &mut work,
             );
             match outcome {
-                Ok((bc, acceptance)) => {
+                Ok((bc, acceptance, factorised_at)) => {
                     rec.converged = true;
                     rec.acceptance = Some(acceptance);
+                    rec.factorised_at = Some(factorised_at);
                     let hook = problem.on_converged(&ConvergedStep {
                         step: n_converged,
                         load: target,
                         u: &u,
                         record: &rec,
                         solver,
+                        factorised_at,
                         essential: &bc,
                     });
                     if let Err(e) = hook {
@@ -564,7 +636,7 @@ impl NewtonSolver {
                     problem.commit(&u, target);
                     n_converged += 1;
                     let du = u.iter().zip(&report.u).map(|(a, b)| a - b).collect();
-                    last = Some((du, dl));
+                    before_last = last.replace((du, dl));
                     report.u = u;
                     report.load = target;
                     progress(&rec);
@@ -603,20 +675,45 @@ impl NewtonSolver {
         load: f64,
         rec: &mut StepRecord,
         w: &mut Work,
-    ) -> Result<(EssentialBc, Acceptance), FailureReason> {
+    ) -> Result<(EssentialBc, Acceptance, FactorisedAt), FailureReason> {
         let o = self.options;
+        let residual_first = problem.converged_tangent() == ConvergedTangent::NotNeeded;
+        let mut unknowns_terms = 0.0;
         let bc = EssentialBc::new(u.len(), &problem.essential(load))
             .map_err(|e| FailureReason::Setup(e.to_string()))?;
-        let predicted = rec.predictor == Predictor::Secant;
+        let predicted = rec.predictor != Predictor::Zero;
         let mut r_ref = 0.0;
         let mut e0 = 0.0;
         let mut r_prev = f64::INFINITY;
         let mut r_prev2 = f64::INFINITY;
         for k in 0..=o.max_iterations {
+            // Residual-first acceptance: when the last two residuals predict convergence under
+            // quadratic contraction, try the residual alone and test it with the previous
+            // iterate's factorisation (module documentation).
+            if residual_first && k >= 2 {
+                let predicted_next = r_prev.powi(3) / (r_prev2 * r_prev2);
+                let tol = (o.residual_rtol * r_ref).max(o.residual_atol);
+                if predicted_next.is_finite() && predicted_next <= 100.0 * tol {
+                    if let Some(how) = self.residual_only(
+                        problem,
+                        solver,
+                        u,
+                        load,
+                        &bc,
+                        r_ref,
+                        e0,
+                        unknowns_terms,
+                        rec,
+                        w,
+                    )? {
+                        return Ok((bc, how, FactorisedAt::PreviousIterate));
+                    }
+                }
+            }
             problem
                 .residual_and_tangent(u, load, &mut w.r, &mut w.values)
                 .map_err(FailureReason::Problem)?;
-            let unknowns_terms = unknowns_term_scale(pattern, &w.values, u, u_n, &bc, &mut w.s);
+            unknowns_terms = unknowns_term_scale(pattern, &w.values, u, u_n, &bc, &mut w.s);
             w.g.clear();
             w.g.extend(bc.dofs().iter().zip(bc.values()).map(|(&d, &v)| v - u[d]));
             for (x, r) in w.rhs.iter_mut().zip(&w.r) {
@@ -658,10 +755,10 @@ impl NewtonSolver {
                 } else {
                     Acceptance::RoundoffFloor
                 };
-                return Ok((bc, how));
+                return Ok((bc, how, FactorisedAt::Converged));
             }
             if res_ok && k == 0 {
-                return Ok((bc, Acceptance::Tolerance));
+                return Ok((bc, Acceptance::Tolerance, FactorisedAt::Converged));
             }
             w.du.copy_from_slice(&w.rhs);
             solver
@@ -682,7 +779,7 @@ impl NewtonSolver {
             }
             let energy_ok = e <= (o.energy_rtol * e0).max(o.energy_atol);
             if res_ok && energy_ok {
-                return Ok((bc, Acceptance::Tolerance));
+                return Ok((bc, Acceptance::Tolerance, FactorisedAt::Converged));
             }
             // Two consecutive iterations without progress: round-off, not a slow approach.
             let stalled = |a: f64, b: f64| a >= o.stagnation_ratio * b;
@@ -694,7 +791,7 @@ impl NewtonSolver {
                 && stalled(r_prev, r_prev2)
                 && rnorm <= o.residual_rtol.sqrt() * r_ref;
             if stagnated {
-                return Ok((bc, Acceptance::Stagnation));
+                return Ok((bc, Acceptance::Stagnation, FactorisedAt::Converged));
             }
             if k == o.max_iterations {
                 return Err(FailureReason::MaxIterations(o.max_iterations));
@@ -710,6 +807,62 @@ impl NewtonSolver {
             r_prev = rnorm;
         }
         unreachable!("the loop returns at k = max_iterations")
+    }
+}
+
+impl NewtonSolver {
+    /// One residual-only evaluation at `u` tested with the factorisation of the previous
+    /// iterate: accepted by the tolerances (residual, and energy with `Δu = K_prev⁻¹ r`) or the
+    /// round-off floor (with the previous `S`). `None`: not accepted, or the essential
+    /// conditions are not met; the caller then evaluates residual and tangent as usual.
+    #[allow(clippy::too_many_arguments)]
+    fn residual_only<P: NonlinearProblem>(
+        &self,
+        problem: &mut P,
+        solver: &mut LinearSolver,
+        u: &[f64],
+        load: f64,
+        bc: &EssentialBc,
+        r_ref: f64,
+        e0: f64,
+        unknowns_terms: f64,
+        rec: &mut StepRecord,
+        w: &mut Work,
+    ) -> Result<Option<Acceptance>, FailureReason> {
+        let o = self.options;
+        if bc.dofs().iter().zip(bc.values()).any(|(&d, &v)| v != u[d]) {
+            return Ok(None);
+        }
+        problem
+            .residual(u, load, &mut w.r)
+            .map_err(FailureReason::Problem)?;
+        for (x, r) in w.rhs.iter_mut().zip(&w.r) {
+            *x = -r;
+        }
+        bc.zero_constrained(&mut w.rhs);
+        let rnorm = free_dot(bc, &w.rhs, &w.rhs).sqrt();
+        let k = rec.residual_norms.len();
+        rec.residual_only.push((k, rnorm));
+        if !rnorm.is_finite() || rnorm > (o.residual_rtol * r_ref).max(o.residual_atol) {
+            return Ok(None);
+        }
+        let floor = o.roundoff_factor
+            * f64::EPSILON
+            * r_ref.max(problem.residual_scale()).max(unknowns_terms);
+        w.du.copy_from_slice(&w.rhs);
+        solver
+            .solve_in_place(&mut w.du)
+            .map_err(FailureReason::LinearSolver)?;
+        let e = free_dot(bc, &w.du, &w.rhs).abs();
+        // As in the full path: the residual tolerance holds, and either the energy test or the
+        // round-off floor (where the energy product is round-off too).
+        if e > (o.energy_rtol * e0).max(o.energy_atol) && rnorm > floor {
+            return Ok(None);
+        }
+        rec.residual_norms.push(rnorm);
+        rec.roundoff_floors.push(floor);
+        rec.energy_norms.push(e);
+        Ok(Some(Acceptance::Tolerance))
     }
 }
 
