@@ -6,6 +6,7 @@
 //! through the same generic kernels, and finite differences ([`verification`]).
 
 pub mod cli;
+pub mod contact;
 pub mod geometry;
 pub mod io;
 pub mod kinematics;

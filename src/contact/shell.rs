@@ -1,0 +1,695 @@
+//! Penalty contact between the shell's faces and rigid tools, as an external follower load.
+//!
+//! **Slave points** sit at the in-plane quadrature points on the top (`ζ = +1`) and/or bottom
+//! (`ζ = −1`) face: `x = x̄ + ζ (t/2) d` with the RK-interpolated current mid-surface and
+//! director, exactly as the shell kinematics place the faces (`docs/shell-formulation.md` §1):
+//!
+//! `x̄ = x̄⁰ + Σ_J Ψ_J (ū_J + Δū_J)`, `d = n⁰ + Σ_J Ψ_J (d_J(α_J) − d⁰_J)`, *not normalised*
+//! (the internal force puts the material point of layer `ζ` at the same `x̄ + ζ t/2 d`).
+//!
+//! **Weight:** the initial area of the face at the point, `w |x⁰,1 × x⁰,2|` with
+//! `x⁰,α = x̄⁰,α + ζ t/2 n⁰,α` (the penalty integral of eq 69 over the initial face; for a flat
+//! sheet this is the mid-surface area, on a curved one it differs by `O(t/R)`).
+//!
+//! **Force** on the generalised DOFs (the variation `δx = Σ_J Ψ_J (δū_J + ζ t/2 ∂d_J/∂α_β δα_Jβ)`
+//! of eq 70): `f_J = Ψ_J f`, `m_Jβ = Ψ_J ζ t/2 (∂d_J/∂α_β)·f`, with `f` the point's penalty force
+//! ([`super::penalty_force`]) against the nearest tool. **Stiffness** (eq 72, hand-derived):
+//! with `v_a = ∂x/∂q_a` (`Ψ_J e_c` for a translation, `Ψ_J ζ t/2 ∂d_J/∂α_β` for a rotation) and
+//! `K = ∂f/∂x` ([`super::penalty_tangent`]),
+//! `∂f_a/∂q_b = v_a·K v_b + δ_JK Ψ_J ζ t/2 (∂²d_J/∂α_β∂α_γ)·f` (the second term for two
+//! rotations of the same particle).
+//!
+//! **Pseudo-time and sign.** The tools move with the solver's load factor, and the penalty force
+//! is not scaled by it. [`crate::shell::problem::ShellProblem`] forms `r = f_int − λ f_ext` by
+//! calling [`ExternalLoad::add_force`] with `factor = −λ` (and `+1` once at set-up), so the
+//! contact reads `factor` as *pseudo-time `t = |factor|` and sign `sign(factor)`*: it adds
+//! `sign(factor) · f_c(q; t)` (and likewise the stiffness). For `factor ≥ 0` this is "the
+//! contact force at pseudo-time `factor`".
+//!
+//! **Checks.** Evaluations through [`ExternalLoad`] track the gaps: when the pseudo-time changes
+//! (a new step), a slave point whose gap to a tool goes from `> 0` at the previous pseudo-time
+//! to `< −thickness` is a [`ContactError::PathCrossesSheet`] (the tool passed through the sheet
+//! in one step). [`ShellContact::check_engaged`] reports the tools that never touched the sheet
+//! (not an error at the point level). Both reset with [`ShellContact::reset_tracking`] (call it
+//! after building a `ShellProblem`, whose set-up evaluates the loads at `t = 1`).
+
+use super::penalty::{penalty_force, penalty_tangent};
+use super::projection::{closest_point, ContactPoint};
+use super::tool::RigidTool;
+use super::{invalid, ContactError};
+use crate::geometry::Surface;
+use crate::scalar::Real;
+use crate::shell::load::{ExternalLoad, GatherMap, GenericLoad};
+use crate::shell::model::ShellModel;
+use crate::shell::point::{director_first_derivatives, ParticleState, DOFS_PER_PARTICLE};
+use crate::shell::rotation::{director_derivatives, rotate_director};
+use crate::shell::ShellError;
+use nalgebra::{DMatrix, Vector3};
+use std::sync::Mutex;
+
+type V3<T> = Vector3<T>;
+
+/// Default penalty factor `c` of `ω = c E / t` ([`ShellContact::default_penalty`]), from the
+/// penalty study of `tests/contact_shell.rs` (`docs/contact.md` §5): the penetration is
+/// `p t/(c E)`; on the cylinder pressed 1.5 t into a clamped plate (R/t = 10) the final tool
+/// force changes by 1.1e-4 from c = 1 to 100 and by 1.4e-5 from c = 10 to 100, while the run
+/// takes 9 s, 27 s and 97 s (more load-step cuts as the contact stiffens). c = 10 keeps the
+/// penalty error of the force near 1e-5 at a third of the cost of c = 100. Above c ≈ 1e3 the
+/// round-off of the gap (`ε |x|`) times `ω` limits the resolution of the pressure (§5).
+pub const DEFAULT_PENALTY_FACTOR: f64 = 10.0;
+
+/// Which faces of the sheet carry slave points.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ContactFaces {
+    /// `ζ = +1` (the side the mid-surface normal `n⁰` points to).
+    Top,
+    /// `ζ = −1`.
+    Bottom,
+    /// Both faces.
+    Both,
+}
+
+impl ContactFaces {
+    fn zetas(self) -> &'static [f64] {
+        match self {
+            ContactFaces::Top => &[1.0],
+            ContactFaces::Bottom => &[-1.0],
+            ContactFaces::Both => &[1.0, -1.0],
+        }
+    }
+}
+
+/// Slave points of one in-plane quadrature point.
+#[derive(Clone, Debug, PartialEq)]
+struct Site {
+    point: usize,
+    x0: V3<f64>,
+    n0: V3<f64>,
+    /// `(ζ, initial face area weight)`.
+    faces: Vec<(f64, f64)>,
+}
+
+/// Gaps of the last tracked evaluation: per slave point (site-major, face-minor), per tool.
+#[derive(Debug, Default)]
+struct Tracker {
+    last: Option<(f64, Vec<Vec<Option<f64>>>)>,
+    touched: Vec<bool>,
+}
+
+/// One tool in a [`ContactReport`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct ToolReport {
+    /// Tool name.
+    pub name: String,
+    /// Translation `a(t)` of the tool.
+    pub position: [f64; 3],
+    /// Rotation vector `θ(t)` of the tool.
+    pub rotation: [f64; 3],
+    /// Force the sheet exerts on the tool, `−Σ f` over its active slave points (what a load
+    /// cell in the press measures; equal and opposite to the contact force on the sheet).
+    pub force: [f64; 3],
+    /// Number of active (penetrating) slave points.
+    pub active_points: usize,
+}
+
+/// One slave point in a [`ContactReport`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct SlaveReport {
+    /// Quadrature point index.
+    pub point: usize,
+    /// Face, `+1` or `−1`.
+    pub zeta: f64,
+    /// Parameter coordinates.
+    pub uv: [f64; 2],
+    /// Nearest tool (interior projection), if any.
+    pub tool: Option<usize>,
+    /// Gap to it (eq 68).
+    pub gap: Option<f64>,
+    /// Contact pressure `−ω g` (zero when not penetrating).
+    pub pressure: f64,
+}
+
+/// Contact state at `(q, t)`: per tool and per slave point.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ContactReport {
+    /// Per tool.
+    pub tools: Vec<ToolReport>,
+    /// Per slave point (quadrature-point-major, top face first).
+    pub slaves: Vec<SlaveReport>,
+    /// Contact pressure per quadrature point of the model, `[top, bottom]` (zero where there is
+    /// no slave point or no contact): for output.
+    pub pressure: Vec<[f64; 2]>,
+}
+
+/// Frictionless penalty contact of the shell with rigid tools (eqs 69–72); an
+/// [`ExternalLoad`] (follower) and a [`GenericLoad`].
+#[derive(Debug)]
+pub struct ShellContact {
+    tools: Vec<RigidTool>,
+    penalty: f64,
+    sites: Vec<Site>,
+    n_dofs: usize,
+    n_points: usize,
+    thickness: f64,
+    tracker: Mutex<Tracker>,
+}
+
+/// The evaluated kinematics of one site (generic).
+struct SiteEval<T> {
+    /// Local DOF increments (5 per neighbour) and states, from `gather_local`.
+    parts: Vec<ParticleState<T>>,
+    local: Vec<T>,
+    /// Per face: slave position and per-tool interior projections.
+    faces: Vec<FaceEval<T>>,
+}
+
+struct FaceEval<T> {
+    zeta: f64,
+    area: f64,
+    contacts: Vec<Option<ContactPoint<T>>>,
+}
+
+impl<T: Real> FaceEval<T> {
+    /// The nearest tool: the interior projection with the smallest gap.
+    fn nearest(&self) -> Option<(usize, &ContactPoint<T>)> {
+        self.contacts
+            .iter()
+            .enumerate()
+            .filter_map(|(i, c)| c.as_ref().map(|c| (i, c)))
+            .min_by(|a, b| a.1.gap.value().total_cmp(&b.1.gap.value()))
+    }
+}
+
+/// Pseudo-time and sign from the load factor (module documentation).
+fn decode(factor: f64) -> (f64, f64) {
+    (
+        factor.abs(),
+        if factor.is_sign_negative() { -1.0 } else { 1.0 },
+    )
+}
+
+impl ShellContact {
+    /// Contact of `model` (built on `surface`) with `tools` on the given faces, penalty `ω`
+    /// (force per length³, > 0; see [`Self::default_penalty`]).
+    pub fn new(
+        model: &ShellModel,
+        surface: &Surface<f64>,
+        tools: Vec<RigidTool>,
+        faces: ContactFaces,
+        penalty: f64,
+    ) -> Result<Self, ContactError> {
+        if !(penalty.is_finite() && penalty > 0.0) {
+            return Err(invalid(
+                "penalty",
+                penalty,
+                "a finite penalty > 0 (force per length³)",
+            ));
+        }
+        if tools.is_empty() {
+            return Err(invalid("tools", "[]", "at least one tool"));
+        }
+        for (i, t) in tools.iter().enumerate() {
+            if tools[..i].iter().any(|o| o.name == t.name) {
+                return Err(invalid(
+                    format!("tools[{i}].name"),
+                    &t.name,
+                    "a name not used by another tool",
+                ));
+            }
+        }
+        let h = model.thickness / 2.0;
+        let mut sites = Vec::with_capacity(model.points.len());
+        for (k, p) in model.points.iter().enumerate() {
+            let sd = surface.eval(p.uv[0], p.uv[1]);
+            let n0 = sd.normal().map_err(|e| ContactError::InvalidInput {
+                field: format!("surface normal at quadrature point {k} {:?}", p.uv),
+                value: e.to_string(),
+                expected: "a regular mid-surface point".into(),
+            })?;
+            let s = &p.surface;
+            let faces = faces
+                .zetas()
+                .iter()
+                .map(|&z| {
+                    let a1 = s.x_a[0] + s.n_a[0] * (z * h);
+                    let a2 = s.x_a[1] + s.n_a[1] * (z * h);
+                    (z, a1.cross(&a2).norm() * p.weight)
+                })
+                .collect();
+            sites.push(Site {
+                point: k,
+                x0: sd.x,
+                n0,
+                faces,
+            });
+        }
+        let n_tools = tools.len();
+        Ok(ShellContact {
+            tools,
+            penalty,
+            sites,
+            n_dofs: model.n_dofs(),
+            n_points: model.points.len(),
+            thickness: model.thickness,
+            tracker: Mutex::new(Tracker {
+                last: None,
+                touched: vec![false; n_tools],
+            }),
+        })
+    }
+
+    /// `ω = DEFAULT_PENALTY_FACTOR · E / t` for `model`'s material and thickness.
+    pub fn default_penalty(model: &ShellModel) -> f64 {
+        DEFAULT_PENALTY_FACTOR * model.material.young / model.thickness
+    }
+
+    /// The tools.
+    pub fn tools(&self) -> &[RigidTool] {
+        &self.tools
+    }
+
+    /// The penalty `ω`.
+    pub fn penalty(&self) -> f64 {
+        self.penalty
+    }
+
+    fn check_model(
+        &self,
+        model: &ShellModel,
+        q: usize,
+        f: Option<usize>,
+    ) -> Result<(), ShellError> {
+        if model.n_dofs() != self.n_dofs || model.points.len() != self.n_points {
+            return Err(ShellError::InvalidInput(format!(
+                "contact built for a model with {} DOFs and {} points, used with one of {} and {}",
+                self.n_dofs,
+                self.n_points,
+                model.n_dofs(),
+                model.points.len()
+            )));
+        }
+        for got in std::iter::once(q).chain(f) {
+            if got != self.n_dofs {
+                return Err(ShellError::Dimension {
+                    expected: self.n_dofs,
+                    got,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Slave positions and projections of every site at `(q, t)`, generic.
+    fn evaluate<T: Real>(
+        &self,
+        model: &ShellModel,
+        q: &[T],
+        t: f64,
+        surfaces: &[Surface<T>],
+    ) -> Result<Vec<SiteEval<T>>, ContactError> {
+        let motions: Vec<_> = self
+            .tools
+            .iter()
+            .map(|tl| tl.motion(t).lift::<T>())
+            .collect();
+        let h = model.thickness / 2.0;
+        let mut out = Vec::with_capacity(self.sites.len());
+        for site in &self.sites {
+            let (parts, local) = model.gather_local(site.point, q);
+            let p = &model.points[site.point];
+            let mut xbar = site.x0.map(T::cst);
+            let mut d = site.n0.map(T::cst);
+            for (n, (s, st)) in p.shape.iter().zip(&parts).enumerate() {
+                let x = &local[DOFS_PER_PARTICLE * n..DOFS_PER_PARTICLE * (n + 1)];
+                xbar += (st.u + V3::new(x[0], x[1], x[2])) * T::cst(s.psi);
+                let dj = rotate_director(&st.d, &st.e[0], &st.e[1], [x[3], x[4]]);
+                d += (dj - st.d0) * T::cst(s.psi);
+            }
+            let mut faces = Vec::with_capacity(site.faces.len());
+            for &(zeta, area) in &site.faces {
+                let xs = xbar + d * T::cst(zeta * h);
+                let mut contacts = Vec::with_capacity(self.tools.len());
+                for ((tool, surf), motion) in self.tools.iter().zip(surfaces).zip(&motions) {
+                    let cp = closest_point(surf, motion, tool.side, &tool.grid, &xs, &tool.name)?;
+                    contacts.push(cp.is_interior().then_some(cp));
+                }
+                faces.push(FaceEval {
+                    zeta,
+                    area,
+                    contacts,
+                });
+            }
+            out.push(SiteEval {
+                parts,
+                local,
+                faces,
+            });
+        }
+        Ok(out)
+    }
+
+    /// Add `sign · f_c` from evaluated sites (generic).
+    fn scatter_forces<T: Real>(
+        &self,
+        model: &ShellModel,
+        evals: &[SiteEval<T>],
+        sign: f64,
+        f: &mut [T],
+    ) {
+        let h = model.thickness / 2.0;
+        for (site, ev) in self.sites.iter().zip(evals) {
+            let p = &model.points[site.point];
+            let mut total: Option<(V3<T>, V3<T>)> = None; // (Σ f, Σ ζ f)
+            for face in &ev.faces {
+                let Some((_, cp)) = face.nearest() else {
+                    continue;
+                };
+                if !cp.is_active() {
+                    continue;
+                }
+                let fc = penalty_force(cp, self.penalty, face.area) * T::cst(sign);
+                let (a, b) = total.get_or_insert((V3::zeros(), V3::zeros()));
+                *a += fc;
+                *b += fc * T::cst(face.zeta * h);
+            }
+            let Some((fsum, msum)) = total else {
+                continue;
+            };
+            let mut local = Vec::with_capacity(DOFS_PER_PARTICLE * p.shape.len());
+            for (n, (s, st)) in p.shape.iter().zip(&ev.parts).enumerate() {
+                let x = &ev.local[DOFS_PER_PARTICLE * n..DOFS_PER_PARTICLE * (n + 1)];
+                let da = director_first_derivatives(st, [x[3], x[4]]);
+                let fp = fsum * T::cst(s.psi);
+                local.extend_from_slice(&[
+                    fp[0],
+                    fp[1],
+                    fp[2],
+                    da[0].dot(&msum) * s.psi,
+                    da[1].dot(&msum) * s.psi,
+                ]);
+            }
+            model.scatter_local(site.point, &local, f);
+        }
+    }
+
+    /// Record the gaps of an f64 evaluation at `t` and check for a tool crossing the sheet.
+    fn track(
+        &self,
+        model: &ShellModel,
+        evals: &[SiteEval<f64>],
+        t: f64,
+    ) -> Result<(), ContactError> {
+        let gaps: Vec<Vec<Option<f64>>> = evals
+            .iter()
+            .flat_map(|ev| {
+                ev.faces
+                    .iter()
+                    .map(|fe| fe.contacts.iter().map(|c| c.map(|c| c.gap)).collect())
+            })
+            .collect();
+        let mut tr = self.tracker.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((t_prev, prev)) = &tr.last {
+            if *t_prev != t {
+                let mut slave = 0;
+                for (site, ev) in self.sites.iter().zip(evals) {
+                    for fe in &ev.faces {
+                        for (i, (before, after)) in prev[slave].iter().zip(&gaps[slave]).enumerate()
+                        {
+                            if let (Some(b), Some(a)) = (before, after) {
+                                if *b > 0.0 && *a < -self.thickness {
+                                    return Err(ContactError::PathCrossesSheet {
+                                        tool: self.tools[i].name.clone(),
+                                        point: site.point,
+                                        zeta: fe.zeta,
+                                        uv: model.points[site.point].uv,
+                                        gap_before: *b,
+                                        gap_after: *a,
+                                        t_before: *t_prev,
+                                        t_after: t,
+                                        thickness: self.thickness,
+                                    });
+                                }
+                            }
+                        }
+                        slave += 1;
+                    }
+                }
+            }
+        }
+        for ev in evals {
+            for fe in &ev.faces {
+                if let Some((i, cp)) = fe.nearest() {
+                    if cp.is_active() {
+                        tr.touched[i] = true;
+                    }
+                }
+            }
+        }
+        tr.last = Some((t, gaps));
+        Ok(())
+    }
+
+    /// The f64 evaluation of the [`ExternalLoad`] methods (tracked).
+    fn evaluate_tracked(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        t: f64,
+    ) -> Result<Vec<SiteEval<f64>>, ContactError> {
+        let surfaces: Vec<Surface<f64>> = self.tools.iter().map(|tl| tl.surface.clone()).collect();
+        let evals = self.evaluate(model, q, t, &surfaces)?;
+        self.track(model, &evals, t)?;
+        Ok(evals)
+    }
+
+    /// Forget the tracked gaps and the touched tools (call after a `ShellProblem` is built: its
+    /// set-up evaluates the loads at `t = 1`).
+    pub fn reset_tracking(&self) {
+        let mut tr = self.tracker.lock().unwrap_or_else(|e| e.into_inner());
+        tr.last = None;
+        tr.touched.iter_mut().for_each(|b| *b = false);
+    }
+
+    /// `Err(ToolsNeverTouched)` naming the tools that had no penetrating slave point in any
+    /// tracked evaluation since the last [`Self::reset_tracking`] (a tool path that misses the
+    /// sheet; not an error at the point level, so the run decides when to ask).
+    pub fn check_engaged(&self) -> Result<(), ContactError> {
+        let tr = self.tracker.lock().unwrap_or_else(|e| e.into_inner());
+        let tools: Vec<String> = self
+            .tools
+            .iter()
+            .zip(&tr.touched)
+            .filter(|(_, &t)| !t)
+            .map(|(tl, _)| tl.name.clone())
+            .collect();
+        if tools.is_empty() {
+            Ok(())
+        } else {
+            Err(ContactError::ToolsNeverTouched { tools })
+        }
+    }
+
+    /// The contact state at the increment `q` and pseudo-time `t` (not tracked): per tool its
+    /// position, the force the sheet exerts on it and its active points; per slave point the
+    /// nearest tool, gap and pressure; the pressure per quadrature point.
+    pub fn report(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        t: f64,
+    ) -> Result<ContactReport, ContactError> {
+        self.check_model(model, q.len(), None)?;
+        let surfaces: Vec<Surface<f64>> = self.tools.iter().map(|tl| tl.surface.clone()).collect();
+        let evals = self.evaluate(model, q, t, &surfaces)?;
+        let mut tools: Vec<ToolReport> = self
+            .tools
+            .iter()
+            .map(|tl| {
+                let (a, th) = tl.path.position(t);
+                ToolReport {
+                    name: tl.name.clone(),
+                    position: a,
+                    rotation: th,
+                    force: [0.0; 3],
+                    active_points: 0,
+                }
+            })
+            .collect();
+        let mut slaves = Vec::new();
+        let mut pressure = vec![[0.0; 2]; model.points.len()];
+        for (site, ev) in self.sites.iter().zip(&evals) {
+            for fe in &ev.faces {
+                let near = fe.nearest();
+                let mut pr = 0.0;
+                if let Some((i, cp)) = near {
+                    if cp.is_active() {
+                        pr = -self.penalty * cp.gap;
+                        let fc = penalty_force(cp, self.penalty, fe.area);
+                        for c in 0..3 {
+                            tools[i].force[c] -= fc[c];
+                        }
+                        tools[i].active_points += 1;
+                    }
+                }
+                pressure[site.point][if fe.zeta > 0.0 { 0 } else { 1 }] = pr;
+                slaves.push(SlaveReport {
+                    point: site.point,
+                    zeta: fe.zeta,
+                    uv: model.points[site.point].uv,
+                    tool: near.map(|(i, _)| i),
+                    gap: near.map(|(_, c)| c.gap),
+                    pressure: pr,
+                });
+            }
+        }
+        Ok(ContactReport {
+            tools,
+            slaves,
+            pressure,
+        })
+    }
+}
+
+impl GenericLoad for ShellContact {
+    /// Adds `sign(factor) · f_c(q; t = |factor|)` (module documentation), in scalar `T`; the
+    /// tools' surfaces are lifted as constants (derivatives with respect to `q` only). Not
+    /// tracked.
+    fn force_generic<T: Real>(
+        &self,
+        model: &ShellModel,
+        q: &[T],
+        factor: f64,
+        f: &mut [T],
+    ) -> Result<(), ShellError> {
+        self.check_model(model, q.len(), Some(f.len()))?;
+        let (t, sign) = decode(factor);
+        let surfaces: Vec<Surface<T>> = self.tools.iter().map(|tl| tl.surface.lift()).collect();
+        let evals = self.evaluate(model, q, t, &surfaces)?;
+        self.scatter_forces(model, &evals, sign, f);
+        Ok(())
+    }
+}
+
+impl ExternalLoad for ShellContact {
+    /// Adds `sign(factor) · f_c(q; t = |factor|)`: the penalty forces at pseudo-time `|factor|`,
+    /// not scaled by it (module documentation). Tracked (tool crossing check).
+    fn add_force(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        factor: f64,
+        f: &mut [f64],
+    ) -> Result<(), ShellError> {
+        self.check_model(model, q.len(), Some(f.len()))?;
+        let (t, sign) = decode(factor);
+        let evals = self.evaluate_tracked(model, q, t)?;
+        self.scatter_forces(model, &evals, sign, f);
+        Ok(())
+    }
+
+    fn is_follower(&self) -> bool {
+        true
+    }
+
+    /// Adds `sign(factor) · ∂f_c/∂q` at pseudo-time `|factor|` (hand-derived, module
+    /// documentation). The entries lie in the cells of the quadrature points, which every
+    /// `ShellProblem` pattern holds, so the active set may change freely.
+    fn add_stiffness(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        factor: f64,
+        out: &mut Vec<(usize, usize, f64)>,
+    ) -> Result<(), ShellError> {
+        self.check_model(model, q.len(), None)?;
+        let (t, sign) = decode(factor);
+        let evals = self.evaluate_tracked(model, q, t)?;
+        let h = model.thickness / 2.0;
+        let mut map = GatherMap::new(model);
+        for (site, ev) in self.sites.iter().zip(&evals) {
+            let active: Vec<(&FaceEval<f64>, &ContactPoint<f64>)> = ev
+                .faces
+                .iter()
+                .filter_map(|fe| fe.nearest().map(|(_, cp)| (fe, cp)))
+                .filter(|(_, cp)| cp.is_active())
+                .collect();
+            if active.is_empty() {
+                continue;
+            }
+            let p = &model.points[site.point];
+            let n = p.shape.len();
+            let dirs: Vec<_> = ev
+                .parts
+                .iter()
+                .enumerate()
+                .map(|(j, st)| {
+                    let x = &ev.local[DOFS_PER_PARTICLE * j..DOFS_PER_PARTICLE * (j + 1)];
+                    director_derivatives(&st.d, &st.e[0], &st.e[1], [x[3], x[4]])
+                })
+                .collect();
+            let mut kl = DMatrix::zeros(DOFS_PER_PARTICLE * n, DOFS_PER_PARTICLE * n);
+            for (fe, cp) in active {
+                let zh = fe.zeta * h;
+                let k = penalty_tangent(cp, self.penalty, fe.area) * sign;
+                let fc = penalty_force(cp, self.penalty, fe.area) * sign;
+                // v_a = ∂x/∂q_a as the columns of V (3 × 5n).
+                let mut v = DMatrix::zeros(3, DOFS_PER_PARTICLE * n);
+                for (j, (s, dj)) in p.shape.iter().zip(&dirs).enumerate() {
+                    let b = DOFS_PER_PARTICLE * j;
+                    for c in 0..3 {
+                        v[(c, b + c)] = s.psi;
+                    }
+                    for be in 0..2 {
+                        for c in 0..3 {
+                            v[(c, b + 3 + be)] = s.psi * zh * dj.d_a[be][c];
+                        }
+                    }
+                }
+                let kd = DMatrix::from_column_slice(3, 3, k.as_slice());
+                kl += v.transpose() * kd * &v;
+                for (j, (s, dj)) in p.shape.iter().zip(&dirs).enumerate() {
+                    let b = DOFS_PER_PARTICLE * j + 3;
+                    for be in 0..2 {
+                        for ga in 0..2 {
+                            kl[(b + be, b + ga)] += dj.d_ab[be][ga].dot(&fc) * (s.psi * zh);
+                        }
+                    }
+                }
+            }
+            let local: Vec<(usize, usize)> = p
+                .neighbours
+                .iter()
+                .flat_map(|&j| (0..DOFS_PER_PARTICLE).map(move |c| (j, c)))
+                .collect();
+            map.add_triplets(model, &local, &kl, out);
+        }
+        Ok(())
+    }
+}
+
+/// A shared contact (keep an `Arc` clone to call [`ShellContact::report`],
+/// [`ShellContact::check_engaged`] or [`ShellContact::reset_tracking`] while a problem owns the
+/// load): delegates to the contact.
+impl ExternalLoad for std::sync::Arc<ShellContact> {
+    fn add_force(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        factor: f64,
+        f: &mut [f64],
+    ) -> Result<(), ShellError> {
+        self.as_ref().add_force(model, q, factor, f)
+    }
+    fn is_follower(&self) -> bool {
+        true
+    }
+    fn add_stiffness(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        factor: f64,
+        out: &mut Vec<(usize, usize, f64)>,
+    ) -> Result<(), ShellError> {
+        self.as_ref().add_stiffness(model, q, factor, out)
+    }
+}
