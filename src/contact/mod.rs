@@ -116,6 +116,10 @@ impl From<ContactError> for ShellError {
     fn from(e: ContactError) -> Self {
         match e {
             ContactError::Shell(s) => s,
+            e @ (ContactError::PathCrossesSheet { .. }
+            | ContactError::ProjectionNotConverged { .. }) => {
+                ShellError::StepTooLarge(format!("contact: {e}"))
+            }
             other => ShellError::InvalidInput(format!("contact: {other}")),
         }
     }

@@ -19,12 +19,10 @@
 //! `∂f_a/∂q_b = v_a·K v_b + δ_JK Ψ_J ζ t/2 (∂²d_J/∂α_β∂α_γ)·f` (the second term for two
 //! rotations of the same particle).
 //!
-//! **Pseudo-time and sign.** The tools move with the solver's load factor, and the penalty force
-//! is not scaled by it. [`crate::shell::problem::ShellProblem`] forms `r = f_int − λ f_ext` by
-//! calling [`ExternalLoad::add_force`] with `factor = −λ` (and `+1` once at set-up), so the
-//! contact reads `factor` as *pseudo-time `t = |factor|` and sign `sign(factor)`*: it adds
-//! `sign(factor) · f_c(q; t)` (and likewise the stiffness). For `factor ≥ 0` this is "the
-//! contact force at pseudo-time `factor`".
+//! **Pseudo-time.** The tools move with the solver's load factor `λ` (the pseudo-time `t`), and
+//! the penalty force is not scaled by it: the contact is a [`LoadScaling::Prescribed`] load, so
+//! [`ExternalLoad::add_force`] receives `factor = t` and adds `f_c(q; t)` (and likewise the
+//! stiffness); [`crate::shell::problem::ShellProblem`] subtracts it from the residual.
 //!
 //! **Checks.** Evaluations through [`ExternalLoad`] track the gaps: when the pseudo-time changes
 //! (a new step), a slave point whose gap to a tool goes from `> 0` at the previous pseudo-time
@@ -39,7 +37,7 @@ use super::tool::RigidTool;
 use super::{invalid, ContactError};
 use crate::geometry::Surface;
 use crate::scalar::Real;
-use crate::shell::load::{ExternalLoad, GatherMap, GenericLoad};
+use crate::shell::load::{ExternalLoad, GatherMap, GenericLoad, LoadScaling};
 use crate::shell::model::ShellModel;
 use crate::shell::point::{director_first_derivatives, ParticleState, DOFS_PER_PARTICLE};
 use crate::shell::rotation::{director_derivatives, rotate_director};
@@ -178,14 +176,6 @@ impl<T: Real> FaceEval<T> {
             .filter_map(|(i, c)| c.as_ref().map(|c| (i, c)))
             .min_by(|a, b| a.1.gap.value().total_cmp(&b.1.gap.value()))
     }
-}
-
-/// Pseudo-time and sign from the load factor (module documentation).
-fn decode(factor: f64) -> (f64, f64) {
-    (
-        factor.abs(),
-        if factor.is_sign_negative() { -1.0 } else { 1.0 },
-    )
 }
 
 impl ShellContact {
@@ -348,14 +338,8 @@ impl ShellContact {
         Ok(out)
     }
 
-    /// Add `sign · f_c` from evaluated sites (generic).
-    fn scatter_forces<T: Real>(
-        &self,
-        model: &ShellModel,
-        evals: &[SiteEval<T>],
-        sign: f64,
-        f: &mut [T],
-    ) {
+    /// Add `f_c` from evaluated sites (generic).
+    fn scatter_forces<T: Real>(&self, model: &ShellModel, evals: &[SiteEval<T>], f: &mut [T]) {
         let h = model.thickness / 2.0;
         for (site, ev) in self.sites.iter().zip(evals) {
             let p = &model.points[site.point];
@@ -367,7 +351,7 @@ impl ShellContact {
                 if !cp.is_active() {
                     continue;
                 }
-                let fc = penalty_force(cp, self.penalty, face.area) * T::cst(sign);
+                let fc = penalty_force(cp, self.penalty, face.area);
                 let (a, b) = total.get_or_insert((V3::zeros(), V3::zeros()));
                 *a += fc;
                 *b += fc * T::cst(face.zeta * h);
@@ -551,7 +535,7 @@ impl ShellContact {
 }
 
 impl GenericLoad for ShellContact {
-    /// Adds `sign(factor) · f_c(q; t = |factor|)` (module documentation), in scalar `T`; the
+    /// Adds `f_c(q; t = factor)` (module documentation), in scalar `T`; the
     /// tools' surfaces are lifted as constants (derivatives with respect to `q` only). Not
     /// tracked.
     fn force_generic<T: Real>(
@@ -562,17 +546,17 @@ impl GenericLoad for ShellContact {
         f: &mut [T],
     ) -> Result<(), ShellError> {
         self.check_model(model, q.len(), Some(f.len()))?;
-        let (t, sign) = decode(factor);
+        let t = factor;
         let surfaces: Vec<Surface<T>> = self.tools.iter().map(|tl| tl.surface.lift()).collect();
         let evals = self.evaluate(model, q, t, &surfaces)?;
-        self.scatter_forces(model, &evals, sign, f);
+        self.scatter_forces(model, &evals, f);
         Ok(())
     }
 }
 
 impl ExternalLoad for ShellContact {
-    /// Adds `sign(factor) · f_c(q; t = |factor|)`: the penalty forces at pseudo-time `|factor|`,
-    /// not scaled by it (module documentation). Tracked (tool crossing check).
+    /// Adds `f_c(q; t = factor)`: the penalty forces at pseudo-time `factor`, not scaled by it
+    /// (module documentation). Tracked (tool crossing check).
     fn add_force(
         &self,
         model: &ShellModel,
@@ -581,17 +565,20 @@ impl ExternalLoad for ShellContact {
         f: &mut [f64],
     ) -> Result<(), ShellError> {
         self.check_model(model, q.len(), Some(f.len()))?;
-        let (t, sign) = decode(factor);
+        let t = factor;
         let evals = self.evaluate_tracked(model, q, t)?;
-        self.scatter_forces(model, &evals, sign, f);
+        self.scatter_forces(model, &evals, f);
         Ok(())
     }
 
     fn is_follower(&self) -> bool {
         true
     }
+    fn scaling(&self) -> LoadScaling {
+        LoadScaling::Prescribed
+    }
 
-    /// Adds `sign(factor) · ∂f_c/∂q` at pseudo-time `|factor|` (hand-derived, module
+    /// Adds `∂f_c/∂q` at pseudo-time `factor` (hand-derived, module
     /// documentation). The entries lie in the cells of the quadrature points, which every
     /// `ShellProblem` pattern holds, so the active set may change freely.
     fn add_stiffness(
@@ -602,7 +589,7 @@ impl ExternalLoad for ShellContact {
         out: &mut Vec<(usize, usize, f64)>,
     ) -> Result<(), ShellError> {
         self.check_model(model, q.len(), None)?;
-        let (t, sign) = decode(factor);
+        let t = factor;
         let evals = self.evaluate_tracked(model, q, t)?;
         let h = model.thickness / 2.0;
         let mut map = GatherMap::new(model);
@@ -630,8 +617,8 @@ impl ExternalLoad for ShellContact {
             let mut kl = DMatrix::zeros(DOFS_PER_PARTICLE * n, DOFS_PER_PARTICLE * n);
             for (fe, cp) in active {
                 let zh = fe.zeta * h;
-                let k = penalty_tangent(cp, self.penalty, fe.area) * sign;
-                let fc = penalty_force(cp, self.penalty, fe.area) * sign;
+                let k = penalty_tangent(cp, self.penalty, fe.area);
+                let fc = penalty_force(cp, self.penalty, fe.area);
                 // v_a = ∂x/∂q_a as the columns of V (3 × 5n).
                 let mut v = DMatrix::zeros(3, DOFS_PER_PARTICLE * n);
                 for (j, (s, dj)) in p.shape.iter().zip(&dirs).enumerate() {
@@ -682,6 +669,9 @@ impl ExternalLoad for std::sync::Arc<ShellContact> {
     }
     fn is_follower(&self) -> bool {
         true
+    }
+    fn scaling(&self) -> LoadScaling {
+        LoadScaling::Prescribed
     }
     fn add_stiffness(
         &self,

@@ -40,9 +40,22 @@ use std::fmt::Debug;
 type V3<T> = Vector3<T>;
 
 /// An external load.
+/// How a load depends on the load factor `λ` of the nonlinear driver.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum LoadScaling {
+    /// `λ f_ext(q)`: the driver's `factor` multiplies the load (forces, pressure, moments).
+    #[default]
+    Proportional,
+    /// `f_ext(q; λ)`: the load is a given function of the level `λ` and is not scaled by it
+    /// (contact with rigid tools moving along a path in the pseudo-time `λ`). Its
+    /// [`ExternalLoad::add_force`] and [`ExternalLoad::add_stiffness`] receive `factor = λ`.
+    Prescribed,
+}
+
 pub trait ExternalLoad: Send + Sync + Debug {
     /// Add `factor · f_ext(q)` into `f` (global generalised DOFs; `q` is the generalised
-    /// increment from the committed state).
+    /// increment from the committed state); for a [`LoadScaling::Prescribed`] load,
+    /// `f_ext(q; λ)` with `λ = factor`.
     fn add_force(
         &self,
         model: &ShellModel,
@@ -55,7 +68,12 @@ pub trait ExternalLoad: Send + Sync + Debug {
     fn is_follower(&self) -> bool {
         false
     }
-    /// Add `factor · ∂f_ext/∂q` as global `(row, column, value)` entries (default: a dead load).
+    /// How the load depends on the load factor (default [`LoadScaling::Proportional`]).
+    fn scaling(&self) -> LoadScaling {
+        LoadScaling::Proportional
+    }
+    /// Add `factor · ∂f_ext/∂q` (for a [`LoadScaling::Prescribed`] load `∂f_ext(q; λ)/∂q` with
+    /// `λ = factor`) as global `(row, column, value)` entries (default: a dead load).
     fn add_stiffness(
         &self,
         _model: &ShellModel,

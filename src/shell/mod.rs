@@ -42,6 +42,11 @@ pub enum ShellError {
     /// Invalid model input (geometry, particles, parameters).
     #[error("{0}")]
     InvalidInput(String),
+    /// A load could not be evaluated at this state, but a smaller load step may succeed (a
+    /// rigid tool that crossed the sheet in one step, a closest-point projection that did not
+    /// converge): the nonlinear driver cuts the step.
+    #[error("{0}")]
+    StepTooLarge(String),
     /// Kinematics failure.
     #[error(transparent)]
     Kinematics(#[from] KinematicsError),

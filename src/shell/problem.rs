@@ -29,7 +29,7 @@
 //! zero): its entries at `q = 0` enter the pattern.
 
 use super::constraints::{ConstraintError, LinearConstraint, RowKind};
-use super::load::ExternalLoad;
+use super::load::{ExternalLoad, LoadScaling};
 use super::model::ShellModel;
 use super::point::{PointHistory, DOFS_PER_PARTICLE};
 use super::ShellError;
@@ -80,10 +80,21 @@ pub struct ShellProblem {
     committed: Vec<f64>,
     cache: Option<(Vec<f64>, Histories)>,
     load_norm: f64,
+    /// `‖f_ext(q; λ)‖` of the prescribed loads at the last evaluation (their force scale).
+    prescribed_norm: f64,
     execution: Execution,
     redundant: Vec<String>,
     /// Cell buffers of the tangent assembly, reused over the Newton iterations.
     buffers: AssemblyBuffers,
+}
+
+/// A load's error: [`ShellError::StepTooLarge`] lets the driver cut the step, anything else
+/// stops the run.
+fn load_error(e: ShellError) -> ProblemError {
+    match e {
+        ShellError::StepTooLarge(m) => ProblemError::Recoverable(m),
+        other => fatal(other),
+    }
 }
 
 fn fatal<E: std::fmt::Display>(e: E) -> ProblemError {
@@ -267,7 +278,12 @@ impl ShellProblem {
         let zeros = vec![0.0; n_q];
         let mut entries = Vec::new();
         for l in loads.iter().filter(|l| l.is_follower()) {
-            l.add_stiffness(&model, &zeros, 1.0, &mut entries)?;
+            // A prescribed load (a tool on its path) is probed at the start level 0.
+            let level = match l.scaling() {
+                LoadScaling::Proportional => 1.0,
+                LoadScaling::Prescribed => 0.0,
+            };
+            l.add_stiffness(&model, &zeros, level, &mut entries)?;
         }
         let mut missing: Vec<Vec<usize>> = entries
             .iter()
@@ -300,7 +316,10 @@ impl ShellProblem {
             })
             .collect::<Result<Vec<_>, _>>()?;
         let mut f = vec![0.0; n_q];
-        for l in &loads {
+        for l in loads
+            .iter()
+            .filter(|l| l.scaling() == LoadScaling::Proportional)
+        {
             l.add_force(&model, &zeros, 1.0, &mut f)?;
         }
         let load_norm = (f.iter().map(|v| v * v).sum::<f64>()
@@ -323,6 +342,7 @@ impl ShellProblem {
             committed: vec![0.0; n],
             cache: None,
             load_norm,
+            prescribed_norm: 0.0,
             execution: options.execution,
             redundant,
             buffers: AssemblyBuffers::new(),
@@ -470,8 +490,20 @@ impl ShellProblem {
                 }
                 let mut trip = Vec::new();
                 for l in self.loads.iter().filter(|l| l.is_follower()) {
-                    l.add_stiffness(model, &q, -load, &mut trip)
-                        .map_err(fatal)?;
+                    match l.scaling() {
+                        LoadScaling::Proportional => {
+                            l.add_stiffness(model, &q, -load, &mut trip)
+                                .map_err(load_error)?;
+                        }
+                        LoadScaling::Prescribed => {
+                            let from = trip.len();
+                            l.add_stiffness(model, &q, load, &mut trip)
+                                .map_err(load_error)?;
+                            for e in &mut trip[from..] {
+                                e.2 = -e.2;
+                            }
+                        }
+                    }
                 }
                 for (i, j, v) in trip {
                     let s = pattern.slot(i, j).ok_or_else(|| {
@@ -496,10 +528,23 @@ impl ShellProblem {
             .map(|h| h.into_inner())
             .collect::<Option<Histories>>()
             .ok_or_else(|| fatal("a quadrature point was not evaluated"))?;
+        let mut prescribed = Vec::new();
         for l in &self.loads {
-            l.add_force(model, &q, -load, &mut r[..n_q])
-                .map_err(fatal)?;
+            match l.scaling() {
+                LoadScaling::Proportional => l
+                    .add_force(model, &q, -load, &mut r[..n_q])
+                    .map_err(load_error)?,
+                LoadScaling::Prescribed => {
+                    prescribed.resize(n_q, 0.0);
+                    l.add_force(model, &q, load, &mut prescribed)
+                        .map_err(load_error)?;
+                }
+            }
         }
+        for (ri, f) in r.iter_mut().zip(&prescribed) {
+            *ri -= f;
+        }
+        self.prescribed_norm = prescribed.iter().map(|v| v * v).sum::<f64>().sqrt();
         for (c, (row, &k)) in self.constraints.iter().zip(&self.scales).enumerate() {
             let mu = u[n_q + c];
             let mut g = -load * row.value;
@@ -538,7 +583,9 @@ impl NonlinearProblem for ShellProblem {
         self.fixed.iter().map(|&d| (d, 0.0)).collect()
     }
     fn force_norm(&self, load: f64) -> f64 {
-        load.abs() * self.load_norm
+        // The prescribed loads' force (contact) at the last evaluation: at the driver's first
+        // evaluation of a step, the predicted state.
+        load.abs() * self.load_norm + self.prescribed_norm
     }
     /// The analysis has no convergence hook: residual-first acceptance is allowed (a design
     /// sensitivity wrapper that solves with the converged tangent declares `Required`).
