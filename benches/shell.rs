@@ -164,7 +164,8 @@ fn bench(c: &mut Criterion) {
 /// The elastoplastic hemisphere of `verification/hemisphere-plastic/case.toml` as the CLI builds
 /// it (quarter model, 17 × 17 particles, 2 × 2 Gauss points per cell, image particles), on 1 and
 /// on 2 threads (a local rayon pool; faer's LU runs serial on 1 thread and on the pool on 2):
-/// assembly of the residual and of residual + tangent (throughput per particle), numeric LU,
+/// assembly of the residual and of residual + tangent (throughput per particle), the point
+/// kernels of that assembly alone (`point_kernels_into_cells`), numeric LU,
 /// one solve, and the whole run to P = 100 without output (sample size 10: about 10–25 s per
 /// sample). Run: `cargo bench --bench shell -- hemisphere_plastic` (the whole run alone:
 /// `-- hemisphere_plastic/run`).
@@ -220,6 +221,32 @@ fn bench_plastic(c: &mut Criterion) {
                 pool.install(|| {
                     p.residual_and_tangent(black_box(&u), 10.0, &mut r, &mut values)
                         .unwrap()
+                })
+            })
+        });
+        // The point kernels alone (`ShellModel::add_to_cell`, residual + tangent of every
+        // in-plane point into a per-thread cell buffer reused from point to point): the part of
+        // `residual_and_tangent` before the solver's zeroing and scatter of the cell buffers.
+        let model = &p.model;
+        let q: Vec<f64> = u[..nq].to_vec();
+        g.bench_function(BenchmarkId::new("point_kernels_into_cells", &t), |b| {
+            b.iter(|| {
+                pool.install(|| {
+                    (0..model.points.len())
+                        .into_par_iter()
+                        .map_init(
+                            || (Vec::new(), Vec::new()),
+                            |(kb, fb): &mut (Vec<f64>, Vec<f64>), k| {
+                                let nc = 5 * model.points[k].sources.len();
+                                kb.clear();
+                                kb.resize(nc * nc, 0.0);
+                                fb.clear();
+                                fb.resize(nc, 0.0);
+                                model.add_to_cell(k, black_box(&q), fb, Some(kb)).unwrap();
+                                kb[0] + fb[0]
+                            },
+                        )
+                        .sum::<f64>()
                 })
             })
         });

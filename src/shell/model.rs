@@ -18,7 +18,7 @@ use super::point::{
 };
 use super::rotation::rotate_director;
 use super::symmetry::{SymmetryLayout, SymmetryPlane};
-use super::tangent::ThicknessTangent;
+use super::tangent::{CellSlot, ThicknessTangent};
 use super::ShellError;
 use crate::geometry::Surface;
 use crate::material::{MaterialParams, MaterialState};
@@ -465,23 +465,14 @@ impl ShellModel {
         }
     }
 
-    /// Map a point's neighbour-local residual (5 per neighbour) and tangent to its cell
-    /// (5 per source): `r_c = Σ T_aᵀ r_a`, `K_c = Σ T_aᵀ K_ab T_b`. Only the images' rows and
-    /// columns are transformed (in place, `K T` then `Tᵀ K`), then entries of neighbours sharing a
-    /// source are summed. Without images nothing is done.
-    fn to_cell(
-        &self,
-        p: &QuadraturePoint,
-        mut residual: Vec<f64>,
-        tangent: Option<DMatrix<f64>>,
-    ) -> (Vec<f64>, Option<DMatrix<f64>>) {
+    /// Map a point's neighbour-local residual (5 per neighbour) to its cell (5 per source):
+    /// `r_c = Σ T_aᵀ r_a`. Without images nothing is done.
+    fn residual_to_cell(&self, p: &QuadraturePoint, mut residual: Vec<f64>) -> Vec<f64> {
         const D: usize = DOFS_PER_PARTICLE;
         let maps = self.image_maps(p);
         if maps.is_empty() {
-            return (residual, tangent);
+            return residual;
         }
-        let nl = residual.len();
-        let nc = D * p.sources.len();
         // Tᵀ r on the images' blocks.
         for &(a, q, det) in &maps {
             let r = &mut residual[D * a..D * a + D];
@@ -490,36 +481,14 @@ impl ShellModel {
             r[3] *= det;
             r[4] *= det;
         }
-        let mut rc = vec![0.0; nc];
+        let mut rc = vec![0.0; D * p.sources.len()];
         for (a, r) in residual.chunks_exact(D).enumerate() {
             let s = D * p.source_slot[a];
             for (x, v) in rc[s..s + D].iter_mut().zip(r) {
                 *x += v;
             }
         }
-        let kc = tangent.map(|mut k| {
-            transform_images(&maps, k.as_mut_slice(), nl);
-            if nc == nl {
-                // Distinct sources in neighbour order: the transformed matrix is the cell's.
-                return k;
-            }
-            let mut kc = DMatrix::zeros(nc, nc);
-            for b in 0..p.neighbours.len() {
-                let sb = D * p.source_slot[b];
-                for cb in 0..D {
-                    let src = k.column(D * b + cb);
-                    let mut dst = kc.column_mut(sb + cb);
-                    for a in 0..p.neighbours.len() {
-                        let sa = D * p.source_slot[a];
-                        for ca in 0..D {
-                            dst[sa + ca] += src[D * a + ca];
-                        }
-                    }
-                }
-            }
-            kc
-        });
-        (rc, kc)
+        rc
     }
 
     /// Contribution of in-plane point `k` for the global DOF increment `dofs`.
@@ -530,22 +499,35 @@ impl ShellModel {
         tangent: bool,
     ) -> Result<LocalContribution, ShellError> {
         let p = &self.points[k];
-        let n_loc = DOFS_PER_PARTICLE * p.neighbours.len();
-        let mut k_loc = tangent.then(|| DMatrix::zeros(n_loc, n_loc));
-        let mut add = |ks: &ThicknessTangent<'_>| match k_loc.as_mut() {
-            Some(km) => ks.add_to(km),
+        let nc = DOFS_PER_PARTICLE * p.sources.len();
+        let mut k_cell = tangent.then(|| DMatrix::zeros(nc, nc));
+        let mut add = |ks: &ThicknessTangent<'_>| match k_cell.as_mut() {
+            Some(km) => ks.add_to_cell(&self.cell_slots(p), p.sources.len(), km.as_mut_slice()),
             None => Ok(()),
         };
         let layers = self.layers(k, dofs, tangent.then_some(&mut add as &mut TangentSink<'_>))?;
-        let (residual, k_loc) = self.to_cell(p, layers.residual, k_loc);
+        let residual = self.residual_to_cell(p, layers.residual);
         let (history, plastic_layers) = (layers.history, layers.plastic_layers);
         Ok(LocalContribution {
             dofs: self.point_dofs(k),
             residual,
-            tangent: k_loc,
+            tangent: k_cell,
             history,
             plastic_layers,
         })
+    }
+
+    /// The cell slots of the neighbours of `p`: their source's block and, for an image, its
+    /// DOF map ([`ThicknessTangent::add_to_cell`]).
+    fn cell_slots(&self, p: &QuadraturePoint) -> Vec<CellSlot> {
+        p.neighbours
+            .iter()
+            .zip(&p.source_slot)
+            .map(|(&j, &slot)| CellSlot {
+                slot,
+                image: self.dof_map(j).map,
+            })
+            .collect()
     }
 
     /// The layers of in-plane point `k`: local residual summed over the thickness (5 per
@@ -640,38 +622,17 @@ impl ShellModel {
                 });
             }
         }
-        let n_loc = D * p.neighbours.len();
         let tangent_requested = tangent.is_some();
         let mut tangent = tangent;
         let mut add = |ks: &ThicknessTangent<'_>| -> Result<(), ShellError> {
             let Some(kc) = tangent.as_deref_mut() else {
                 return Ok(());
             };
-            let maps = self.image_maps(p);
-            if maps.is_empty() {
+            if p.neighbours.len() == p.sources.len() && self.image_maps(p).is_empty() {
                 // No images: the neighbours are the sources, in order.
                 return ks.add_to_slice(kc);
             }
-            LOCAL_TANGENT.with(|buf| -> Result<(), ShellError> {
-                let mut kl = buf.borrow_mut();
-                kl.clear();
-                kl.resize(n_loc * n_loc, 0.0);
-                ks.add_to_slice(&mut kl)?;
-                transform_images(&maps, &mut kl, n_loc);
-                for (b, col) in kl.chunks_exact(D * n_loc).enumerate() {
-                    let sb = D * p.source_slot[b];
-                    for (cb, col) in col.chunks_exact(n_loc).enumerate() {
-                        let dst = &mut kc[(sb + cb) * nc..(sb + cb + 1) * nc];
-                        for (a, blk) in col.chunks_exact(D).enumerate() {
-                            let sa = D * p.source_slot[a];
-                            for (d, v) in dst[sa..sa + D].iter_mut().zip(blk) {
-                                *d += v;
-                            }
-                        }
-                    }
-                }
-                Ok(())
-            })
+            ks.add_to_cell(&self.cell_slots(p), p.sources.len(), kc)
         };
         let with_tangent = tangent_requested;
         let Layers {
@@ -683,7 +644,7 @@ impl ShellModel {
             dofs,
             with_tangent.then_some(&mut add as &mut TangentSink<'_>),
         )?;
-        let (r_cell, _) = self.to_cell(p, r_loc, None);
+        let r_cell = self.residual_to_cell(p, r_loc);
         for (a, b) in residual.iter_mut().zip(&r_cell) {
             *a += b;
         }
@@ -789,45 +750,6 @@ impl ShellModel {
             }
         }
     }
-}
-
-/// The image part of the map to a cell, in place on a column-major `nl × nl` neighbour-local
-/// matrix: `K T` on the columns of the images (`(K T)[:, c] = Σ_r K[:, r] Q[r, c]`, rotations
-/// × det), then `Tᵀ K` on their rows.
-fn transform_images(maps: &[(usize, Matrix3<f64>, f64)], k: &mut [f64], nl: usize) {
-    const D: usize = DOFS_PER_PARTICLE;
-    for &(b, q, det) in maps {
-        let c0 = D * b;
-        let (_, tail) = k.split_at_mut(c0 * nl);
-        let (c0c, rest) = tail.split_at_mut(nl);
-        let (c1c, rest) = rest.split_at_mut(nl);
-        let (c2c, rest) = rest.split_at_mut(nl);
-        for row in 0..nl {
-            let x = [c0c[row], c1c[row], c2c[row]];
-            c0c[row] = x[0] * q[(0, 0)] + x[1] * q[(1, 0)] + x[2] * q[(2, 0)];
-            c1c[row] = x[0] * q[(0, 1)] + x[1] * q[(1, 1)] + x[2] * q[(2, 1)];
-            c2c[row] = x[0] * q[(0, 2)] + x[1] * q[(1, 2)] + x[2] * q[(2, 2)];
-        }
-        for v in &mut rest[..2 * nl] {
-            *v *= det;
-        }
-    }
-    for &(a, q, det) in maps {
-        let r0 = D * a;
-        for col in k.chunks_exact_mut(nl) {
-            let x = [col[r0], col[r0 + 1], col[r0 + 2]];
-            for c in 0..3 {
-                col[r0 + c] = x[0] * q[(0, c)] + x[1] * q[(1, c)] + x[2] * q[(2, c)];
-            }
-            col[r0 + 3] *= det;
-            col[r0 + 4] *= det;
-        }
-    }
-}
-
-thread_local! {
-    /// Per-thread neighbour-local tangent of [`ShellModel::add_to_cell`] (points with images).
-    static LOCAL_TANGENT: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
 fn mf(e: MeshfreeError) -> ShellError {
