@@ -37,7 +37,7 @@ fn main() {
         pattern.nnz(),
         pattern.nnz() as f64 / (n * n) as f64
     );
-    let reps = 4;
+    let reps = 8;
     let mut solver = LinearSolver::new(
         &pattern,
         Method::Lu,
@@ -94,5 +94,21 @@ fn main() {
             "dense partial-piv LU {par:?}: {:.1} ms",
             t.elapsed().as_secs_f64() * 1e3 / reps as f64
         );
+        if std::env::var("LU_TUNE").is_ok() {
+            use faer::linalg::lu::partial_pivoting::factor::PartialPivLuParams;
+            for (rt, bs) in [(16, 64), (32, 64), (16, 128), (32, 128), (64, 128), (16, 256), (8, 32)] {
+                let mut prm: PartialPivLuParams = faer::Auto::<f64>::auto();
+                prm.recursion_threshold = rt;
+                prm.block_size = bs;
+                let t = Instant::now();
+                for _ in 0..reps {
+                    lu.copy_from(&a);
+                    faer::linalg::lu::partial_pivoting::factor::lu_in_place(
+                        lu.as_mut(), &mut fwd, &mut bwd, par, MemStack::new(&mut buf), prm.into(),
+                    );
+                }
+                println!("  rt {rt} bs {bs}: {:.1} ms", t.elapsed().as_secs_f64() * 1e3 / reps as f64);
+            }
+        }
     }
 }
