@@ -149,7 +149,10 @@ fn assert_invalid(t: &str, key: &str, value: &str, expected: &str) {
     let (k, v, e) = invalid(t);
     assert_eq!(k, key, "key (value {v}, expected {e})");
     assert_eq!(v, value, "value of {k}");
-    assert!(e.contains(expected), "`{k}`: expected {e:?} to contain {expected:?}");
+    assert!(
+        e.contains(expected),
+        "`{k}`: expected {e:?} to contain {expected:?}"
+    );
     // The message names all three.
     let msg = parse(t).unwrap_err().to_string();
     assert!(msg.contains(key) && msg.contains(value), "{msg}");
@@ -168,7 +171,12 @@ fn penalty_must_be_positive() {
         assert_invalid(&t, key, v, "a finite number > 0");
     }
     let t = text("[contact]\npenalty = 1.0\npenalty_factor = 2.0", GOOD_PATH);
-    assert_invalid(&t, "contact.penalty", "(given with `penalty_factor`)", "not both");
+    assert_invalid(
+        &t,
+        "contact.penalty",
+        "(given with `penalty_factor`)",
+        "not both",
+    );
 }
 
 #[test]
@@ -176,13 +184,23 @@ fn unknown_release_tool_and_faces() {
     let t = text("[contact]\nrelease = \"ram\"", GOOD_PATH);
     assert_invalid(&t, "contact.release", "\"ram\"", "[\"punch\", \"die\"]");
     let t = text("[contact]\nfaces = \"upper\"", GOOD_PATH);
-    assert_invalid(&t, "contact.faces", "\"upper\"", "\"top\", \"bottom\" or \"both\"");
+    assert_invalid(
+        &t,
+        "contact.faces",
+        "\"upper\"",
+        "\"top\", \"bottom\" or \"both\"",
+    );
 }
 
 #[test]
 fn duplicate_and_empty_tool_names() {
     let t = text("", GOOD_PATH).replace("name = \"die\"", "name = \"punch\"");
-    assert_invalid(&t, "tool[1].name", "\"punch\"", "not used by an earlier tool (tool[0])");
+    assert_invalid(
+        &t,
+        "tool[1].name",
+        "\"punch\"",
+        "not used by an earlier tool (tool[0])",
+    );
     let t = text("", GOOD_PATH).replace("name = \"die\"", "name = \" \"");
     assert_invalid(&t, "tool[1].name", "\" \"", "a non-empty name");
 }
@@ -198,13 +216,38 @@ fn path_times_must_increase() {
         "a time greater than tool[0].path.keys[1].t = 1",
     );
     let p = "keys = [{ t = 0.5, translation = [0.0, 0.0, 0.0] }, { t = 0.2, translation = [0.0, 0.0, -0.2] }]";
-    assert_invalid(&text("", p), "tool[0].path.keys[1].t", "0.2", "strictly increasing");
-    assert_invalid(&text("", "keys = []"), "tool[0].path.keys", "[]", "at least one key");
+    assert_invalid(
+        &text("", p),
+        "tool[0].path.keys[1].t",
+        "0.2",
+        "strictly increasing",
+    );
+    assert_invalid(
+        &text("", "keys = []"),
+        "tool[0].path.keys",
+        "[]",
+        "at least one key",
+    );
     let p = "stroke = [0.0, 0.0, -1.0]\nkeys = [{ t = 0.0, translation = [0.0, 0.0, 0.0] }]";
-    assert_invalid(&text("", p), "tool[0].path.stroke", "(given with `keys`)", "not both");
-    assert_invalid(&text("", "pivot = [0.0, 0.0, 0.0]"), "tool[0].path", "(no `stroke` or `keys`)", "`stroke = [dx, dy, dz]`");
+    assert_invalid(
+        &text("", p),
+        "tool[0].path.stroke",
+        "(given with `keys`)",
+        "not both",
+    );
+    assert_invalid(
+        &text("", "pivot = [0.0, 0.0, 0.0]"),
+        "tool[0].path",
+        "(no `stroke` or `keys`)",
+        "`stroke = [dx, dy, dz]`",
+    );
     let p = "stroke = [0.0, 0.0, -1.0]\npivot = [1.0, 0.0, 0.0]";
-    assert_invalid(&text("", p), "tool[0].path.pivot", "[1, 0, 0]", "no `pivot` with `stroke`");
+    assert_invalid(
+        &text("", p),
+        "tool[0].path.pivot",
+        "[1, 0, 0]",
+        "no `pivot` with `stroke`",
+    );
 }
 
 #[test]
@@ -218,7 +261,12 @@ fn side_surface_contact_without_tools_and_load_scaling() {
     let t = &full[..full.find("[[tool]]").unwrap()];
     assert_invalid(t, "contact", "(given)", "at least one [[tool]]");
     let t = text("", GOOD_PATH).replace("scaling = \"constant\"", "scaling = \"fixed\"");
-    assert_invalid(&t, "load[0].scaling", "\"fixed\"", "\"proportional\" (default) or \"constant\"");
+    assert_invalid(
+        &t,
+        "load[0].scaling",
+        "\"fixed\"",
+        "\"proportional\" (default) or \"constant\"",
+    );
     // Unknown keys in the new tables are TOML errors naming the key.
     let t = text("", GOOD_PATH).replace("side = \"positive\"", "side = \"positive\"\nsid = 1");
     let msg = parse(&t).unwrap_err().to_string();

@@ -266,7 +266,9 @@ fn cylindrical_bending_springback_reduced() {
     }
     for stop in [0.2, 0.5, 0.8, 1.0, 1.24, 1.4] {
         assert!(
-            steps.iter().any(|s| s["load_factor"].as_f64() == Some(stop)),
+            steps
+                .iter()
+                .any(|s| s["load_factor"].as_f64() == Some(stop)),
             "no converged step at t = {stop}"
         );
     }
