@@ -86,13 +86,14 @@ fn describe(c: &Case) -> String {
         ),
         Case::Shell(s) => format!(
             "shell on a {} surface, {} × {} particles, {} basis, {} boundary condition(s), {} \
-             load(s), {} monitor(s), load factor to {}",
+             load(s), {} tool(s), {} monitor(s), load factor to {}",
             s.surface.kind(),
             s.particles.counts[0],
             s.particles.counts[1],
             s.kernel.basis,
             s.boundary.len(),
             s.loads.len(),
+            s.tools.len(),
             s.monitors.len(),
             s.steps.final_load
         ),
@@ -132,6 +133,21 @@ fn step_line(c: &ShellCase, s: &StepSummary) -> String {
         line.push_str(&format!(
             "  {} = ({:.5e}, {:.5e}, {:.5e})",
             m.name, d[0], d[1], d[2]
+        ));
+    }
+    if let Some(ct) = &s.contact {
+        for t in &ct.tools {
+            line.push_str(&format!(
+                "  {} F = ({:.4e}, {:.4e}, {:.4e}) on {} pt",
+                t.name, t.force[0], t.force[1], t.force[2], t.active_points
+            ));
+        }
+        line.push_str(&format!("  active {}", ct.active_points));
+    }
+    if let Some(sep) = &s.separation {
+        line.push_str(&format!(
+            "\nseparation: tool `{}` carries no force at step {} (t = {}; last in contact at t = {})",
+            sep.tool, sep.step, sep.t, sep.t_before
         ));
     }
     line
@@ -188,6 +204,14 @@ fn run_shell(c: &ShellCase, out: &Path, quiet: bool) -> i32 {
             if quiet {
                 if let Some(s) = last {
                     println!("{}", step_line(c, s));
+                }
+            }
+            for w in &summary.warnings {
+                println!("warning: {w}");
+            }
+            if let (Some(cs), None) = (&c.contact, &summary.separation) {
+                if let Some(r) = &cs.release {
+                    println!("warning: the release tool `{r}` did not separate from the sheet");
                 }
             }
             println!(

@@ -14,9 +14,10 @@
 //!   using it fails before any computation, naming what is missing.
 
 use super::shell_case::{
-    Boundary, CellLayout, Component, Load, Location, PredictorKind, ShellCase,
+    Boundary, CellLayout, Component, Load, LoadScalingSpec, Location, PredictorKind, ShellCase,
 };
-use super::shell_output::{OutputError, OutputGrid, ShellOutput, StepSummary};
+use super::shell_output::{OutputError, OutputGrid, Separation, ShellOutput, StepSummary};
+use crate::contact::ShellContact;
 use crate::meshfree::quadrature::{CellQuadrature, QuadratureError};
 use crate::meshfree::transform::Edge;
 use crate::meshfree::vci::VciOrder;
@@ -25,11 +26,13 @@ use crate::shell::constraints::{
     edge_constraints, ConstraintError, EdgeCondition, LinearConstraint, RowKind,
 };
 use crate::shell::integration::{apply_vci, boundary_rule};
+use crate::shell::load::LoadScaling;
 use crate::shell::load::{ExternalLoad, Gravity, Moment, PointForce, Pressure};
 use crate::shell::model::{Discretisation, ShellModel};
 use crate::shell::point::DOFS_PER_PARTICLE;
 use crate::shell::problem::ShellProblem;
 use crate::shell::symmetry::SymmetryPlane;
+use crate::shell::ShellError;
 use crate::solver::{
     ConvergedStep, ConvergedTangent, LinearSolver, LoadStepping, Method, NewtonOptions,
     NewtonSolver, NonlinearProblem, Parallelism, Predictor, ProblemError, SolverError,
@@ -38,6 +41,7 @@ use crate::solver::{
 use nalgebra::Vector3;
 use serde_json::json;
 use std::path::Path;
+use std::sync::Arc;
 use std::time::Instant;
 use thiserror::Error;
 
@@ -206,7 +210,50 @@ fn symmetry_planes(case: &ShellCase) -> Result<Vec<SymmetryPlane>, BuildError> {
 /// Build the model and the shell problem: surface, discretisation (symmetry planes, VCI),
 /// essential conditions (exact linear constraints) and loads. Rejects what [`unsupported`]
 /// lists.
-pub fn connect(case: &ShellCase, mut disc: Discretisation) -> Result<ShellProblem, BuildError> {
+pub fn connect(case: &ShellCase, disc: Discretisation) -> Result<ShellProblem, BuildError> {
+    connect_with_contact(case, disc).map(|(p, _)| p)
+}
+
+/// A load applied at its full value at every load factor (`[[load]] scaling = "constant"`):
+/// a [`LoadScaling::Prescribed`] load that ignores the level, so `f(q; λ) = f(q)` (the inner
+/// load evaluated at factor 1).
+#[derive(Debug)]
+pub struct ConstantLoad(pub Box<dyn ExternalLoad>);
+
+impl ExternalLoad for ConstantLoad {
+    fn add_force(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        _factor: f64,
+        f: &mut [f64],
+    ) -> Result<(), ShellError> {
+        self.0.add_force(model, q, 1.0, f)
+    }
+    fn is_follower(&self) -> bool {
+        self.0.is_follower()
+    }
+    fn scaling(&self) -> LoadScaling {
+        LoadScaling::Prescribed
+    }
+    fn add_stiffness(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        _factor: f64,
+        out: &mut Vec<(usize, usize, f64)>,
+    ) -> Result<(), ShellError> {
+        self.0.add_stiffness(model, q, 1.0, out)
+    }
+}
+
+/// As [`connect`], also returning a handle on the contact with the case's tools (a
+/// [`ShellContact`] owned by the problem as a prescribed load, `docs/contact.md` §4), for the
+/// per-step reports. Its gap tracking is reset after the problem's set-up evaluations.
+pub fn connect_with_contact(
+    case: &ShellCase,
+    mut disc: Discretisation,
+) -> Result<(ShellProblem, Option<Arc<ShellContact>>), BuildError> {
     if let Some(e) = unsupported(case).into_iter().next() {
         return Err(e);
     }
@@ -306,7 +353,7 @@ pub fn connect(case: &ShellCase, mut disc: Discretisation) -> Result<ShellProble
     for (k, l) in case.loads.iter().enumerate() {
         let key = format!("load[{k}]");
         let err = |e: crate::shell::ShellError| model_err(&key, e);
-        loads.push(match l {
+        let load: Box<dyn ExternalLoad> = match l {
             Load::PointForce { at, force } => Box::new(PointForce {
                 uv: *at,
                 force: *force,
@@ -325,9 +372,31 @@ pub fn connect(case: &ShellCase, mut disc: Discretisation) -> Result<ShellProble
                         .map_err(err)?,
                 )
             }
-        });
+        };
+        loads.push(
+            match case.load_scaling.get(k).copied().unwrap_or_default() {
+                LoadScalingSpec::Proportional => load,
+                LoadScalingSpec::Constant => Box::new(ConstantLoad(load)),
+            },
+        );
     }
-    ShellProblem::new(model, loads, constraints).map_err(|e| model_err("boundary", e))
+    let contact = match &case.contact {
+        Some(spec) if !case.tools.is_empty() => {
+            let omega = spec.penalty.omega(case.material.young, case.thickness);
+            let c = ShellContact::new(&model, &case.surface, case.tools.clone(), spec.faces, omega)
+                .map_err(|e| model_err("contact", e))?;
+            let c = Arc::new(c);
+            loads.push(Box::new(c.clone()));
+            Some(c)
+        }
+        _ => None,
+    };
+    let problem =
+        ShellProblem::new(model, loads, constraints).map_err(|e| model_err("boundary", e))?;
+    if let Some(c) = &contact {
+        c.reset_tracking();
+    }
+    Ok((problem, contact))
 }
 
 /// The Newton driver of `[steps]`.
@@ -367,6 +436,8 @@ pub struct BuiltShell {
     pub newton: NewtonSolver,
     /// Number of particles.
     pub n_particles: usize,
+    /// The contact with the case's tools (shared with the problem, which owns it as a load).
+    pub contact: Option<Arc<ShellContact>>,
 }
 
 /// Build everything for `case` (no output written).
@@ -375,12 +446,13 @@ pub fn build(case: &ShellCase) -> Result<BuiltShell, BuildError> {
     let cq = cell_quadrature(case, &grid)?;
     let disc = discretisation(case, &grid, &cq)?;
     let newton = driver(case)?;
-    let problem = connect(case, disc)?;
+    let (problem, contact) = connect_with_contact(case, disc)?;
     Ok(BuiltShell {
         problem,
         quadrature: cq,
         newton,
         n_particles: grid.len(),
+        contact,
     })
 }
 
@@ -414,6 +486,10 @@ pub struct RunSummary {
     pub attempts: usize,
     /// Wall time of the whole run, model building included.
     pub wall_time_s: f64,
+    /// Separation of the `[contact] release` tool, if detected.
+    pub separation: Option<Separation>,
+    /// Warnings (tools that never touched the sheet), also in results.json.
+    pub warnings: Vec<String>,
 }
 
 /// The problem as the driver sees it, plus a hook after every commit: `on_commit` sees the
@@ -521,6 +597,14 @@ pub fn run(
     output.set_info("n_particles", json!(built.n_particles));
     output.set_info("n_unknowns", json!(n));
     output.set_info("final_load", json!(case.steps.final_load));
+    if let Some(c) = &built.contact {
+        let names: Vec<String> = c.tools().iter().map(|t| t.name.clone()).collect();
+        output.set_contact(
+            &names,
+            case.contact.as_ref().and_then(|s| s.release.clone()),
+        );
+        output.set_info("penalty", json!(c.penalty()));
+    }
     output.initial(problem_model(&built.problem), &case.surface)?;
 
     let pattern = problem_pattern(&built.problem).clone();
@@ -548,12 +632,22 @@ pub fn run(
         json!(format!("{method:?} ({parallelism:?})")),
     );
     let surface = &case.surface;
+    let contact = built.contact.clone();
     let mut obs = Observed {
         inner: &mut built.problem,
         record: None,
         error: None,
         on_commit: |p: &ShellProblem, rec: &StepRecord| {
-            let s = output.converged(problem_model(p), surface, rec)?;
+            let model = problem_model(p);
+            // The committed state: a zero increment at the step's tool time.
+            let report = match &contact {
+                Some(c) => Some(
+                    c.report(model, &vec![0.0; model.n_dofs()], rec.load)
+                        .map_err(|e| OutputError::Model(e.into()))?,
+                ),
+                None => None,
+            };
+            let s = output.converged_with_contact(model, surface, rec, report.as_ref())?;
             progress(s);
             Ok::<(), OutputError>(())
         },
@@ -586,5 +680,7 @@ pub fn run(
         steps: output.steps().to_vec(),
         attempts: attempts.len(),
         wall_time_s: start.elapsed().as_secs_f64(),
+        separation: output.separation().cloned(),
+        warnings: output.warnings().to_vec(),
     })
 }

@@ -10,6 +10,7 @@
 //! Nothing here builds the model: [`crate::io::shell_build`] does that from a [`ShellCase`].
 
 use super::{material_from_spec, CaseError, MaterialSpec};
+use crate::contact::{ContactFaces, PathKey, RigidTool, Side, ToolPath, DEFAULT_PENALTY_FACTOR};
 use crate::geometry::{Surface, SurfaceSpec};
 use crate::material::MaterialParams;
 use crate::meshfree::quadrature::{ThicknessRule, MAX_GAUSS_POINTS, MAX_LOBATTO_POINTS};
@@ -42,6 +43,10 @@ struct ShellFile {
     monitor: Vec<MonitorFile>,
     #[serde(default)]
     output: Option<OutputFile>,
+    #[serde(default)]
+    tool: Vec<ToolFile>,
+    #[serde(default)]
+    contact: Option<ContactFile>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -108,6 +113,50 @@ struct LoadFile {
     per_area: Option<[f64; 3]>,
     edge: Option<String>,
     per_length: Option<[f64; 3]>,
+    #[serde(default)]
+    scaling: Option<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ToolFile {
+    name: String,
+    surface: SurfaceSpec,
+    side: String,
+    path: ToolPathFile,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ToolPathFile {
+    #[serde(default)]
+    pivot: Option<[f64; 3]>,
+    #[serde(default)]
+    keys: Option<Vec<PathKeyFile>>,
+    #[serde(default)]
+    stroke: Option<[f64; 3]>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PathKeyFile {
+    t: f64,
+    translation: [f64; 3],
+    #[serde(default)]
+    rotation: Option<[f64; 3]>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ContactFile {
+    #[serde(default)]
+    faces: Option<String>,
+    #[serde(default)]
+    penalty: Option<f64>,
+    #[serde(default)]
+    penalty_factor: Option<f64>,
+    #[serde(default)]
+    release: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -443,6 +492,50 @@ impl Default for OutputSpec {
     }
 }
 
+/// How a `[[load]]` entry depends on the load factor `λ` (`scaling` key).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum LoadScalingSpec {
+    /// `λ · f` (default): the load grows with the load factor.
+    #[default]
+    Proportional,
+    /// `f` at every load factor, from the first step on (e.g. the self-weight that keeps a
+    /// sheet on a die while tools move with `λ`; docs/case-format.md, `[contact]`).
+    Constant,
+}
+
+/// The contact penalty `ω` of `[contact]`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum PenaltySpec {
+    /// `penalty_factor = c`: `ω = c E / t` (default `c` =
+    /// [`crate::contact::DEFAULT_PENALTY_FACTOR`]).
+    Factor(f64),
+    /// `penalty = ω` (force per length³).
+    Value(f64),
+}
+
+impl PenaltySpec {
+    /// `ω` for Young's modulus `young` and thickness `thickness`.
+    pub fn omega(&self, young: f64, thickness: f64) -> f64 {
+        match *self {
+            PenaltySpec::Factor(c) => c * young / thickness,
+            PenaltySpec::Value(w) => w,
+        }
+    }
+}
+
+/// `[contact]`: settings of the frictionless penalty contact with the `[[tool]]`s
+/// (docs/contact.md).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ContactSpec {
+    /// Faces of the sheet that carry slave points.
+    pub faces: ContactFaces,
+    /// Penalty.
+    pub penalty: PenaltySpec,
+    /// A tool whose separation from the sheet is detected and reported (the punch on the way
+    /// up), by name (checked to exist).
+    pub release: Option<String>,
+}
+
 /// A checked shell case.
 #[derive(Clone, Debug)]
 pub struct ShellCase {
@@ -470,6 +563,13 @@ pub struct ShellCase {
     pub boundary: Vec<Boundary>,
     /// Loads, in file order (`load[i]`).
     pub loads: Vec<Load>,
+    /// How each load depends on the load factor (same order as `loads`).
+    pub load_scaling: Vec<LoadScalingSpec>,
+    /// Rigid tools (`[[tool]]`), in file order; their motion is driven by the load factor.
+    pub tools: Vec<RigidTool>,
+    /// Contact settings: `Some` exactly when there are tools (defaults when `[contact]` is
+    /// absent).
+    pub contact: Option<ContactSpec>,
     /// Load stepping and Newton settings.
     pub steps: StepsSpec,
     /// Monitors, in file order.
@@ -739,8 +839,29 @@ impl Checker<'_> {
             .enumerate()
             .map(|(k, l)| self.load(k, l, &param_box))
             .collect::<Result<Vec<_>, _>>()?;
+        let load_scaling = f
+            .load
+            .iter()
+            .enumerate()
+            .map(|(k, l)| match l.scaling.as_deref() {
+                None | Some("proportional") => Ok(LoadScalingSpec::Proportional),
+                Some("constant") => Ok(LoadScalingSpec::Constant),
+                Some(other) => Err(self.err(
+                    format!("load[{k}].scaling"),
+                    format!("{other:?}"),
+                    "\"proportional\" (default) or \"constant\"",
+                )),
+            })
+            .collect::<Result<Vec<_>, _>>()?;
         self.check_everywhere(&boundary)?;
         let steps = self.steps(&f.steps)?;
+        let tools = f
+            .tool
+            .iter()
+            .enumerate()
+            .map(|(k, t)| self.tool(k, t, &f.tool[..k]))
+            .collect::<Result<Vec<_>, _>>()?;
+        let contact = self.contact(f.contact.as_ref(), &tools)?;
 
         let mut monitors: Vec<Monitor> = Vec::with_capacity(f.monitor.len());
         for (k, m) in f.monitor.iter().enumerate() {
@@ -788,10 +909,198 @@ impl Checker<'_> {
             material,
             boundary,
             loads,
+            load_scaling,
+            tools,
+            contact,
             steps,
             monitors,
             output,
         })
+    }
+
+    /// One `[[tool]]`: name (non-empty, unique), side, surface and path, validated as a
+    /// [`RigidTool`] (a normal at every sample of its coarse grid).
+    fn tool(&self, k: usize, t: &ToolFile, earlier: &[ToolFile]) -> Result<RigidTool, CaseError> {
+        let key = format!("tool[{k}]");
+        if t.name.trim().is_empty() {
+            return Err(self.err(
+                format!("{key}.name"),
+                format!("{:?}", t.name),
+                "a non-empty name",
+            ));
+        }
+        if let Some(j) = earlier.iter().position(|o| o.name == t.name) {
+            return Err(self.err(
+                format!("{key}.name"),
+                format!("{:?}", t.name),
+                format!("a name not used by an earlier tool (tool[{j}])"),
+            ));
+        }
+        let side = match t.side.as_str() {
+            "positive" => Side::Positive,
+            "negative" => Side::Negative,
+            other => {
+                return Err(self.err(
+                    format!("{key}.side"),
+                    format!("{other:?}"),
+                    "\"positive\" (the solid lies behind the surface normal x_u × x_v, \
+                     which is then the tool's outward normal) or \"negative\"",
+                ))
+            }
+        };
+        let surface = t.surface.build().map_err(|e| {
+            self.err(
+                format!("{key}.surface"),
+                "(table)",
+                format!("a valid surface: {e}"),
+            )
+        })?;
+        let path = self.tool_path(&key, &t.path)?;
+        let kind = surface.kind();
+        RigidTool::new(t.name.clone(), surface, side, path).map_err(|e| {
+            self.err(
+                format!("{key}.surface"),
+                format!("(type = {kind:?})"),
+                format!(
+                    "a regular surface with a normal everywhere (a sphere zone may not reach \
+                     a pole): {e}"
+                ),
+            )
+        })
+    }
+
+    /// `[tool.path]`: `stroke = [dx, dy, dz]` (0 at t = 0 to the stroke at t = 1), or `keys`
+    /// (strictly increasing `t`, finite translations and rotations) with an optional `pivot`.
+    fn tool_path(&self, key: &str, p: &ToolPathFile) -> Result<ToolPath, CaseError> {
+        let pk = format!("{key}.path");
+        match (&p.stroke, &p.keys) {
+            (Some(stroke), None) => {
+                if let Some(pv) = p.pivot {
+                    return Err(self.err(
+                        format!("{pk}.pivot"),
+                        fmt_arr(&pv),
+                        "no `pivot` with `stroke` (a pure translation; use `keys` with \
+                         `rotation` to rotate about a pivot)",
+                    ));
+                }
+                self.finite_vec(&format!("{pk}.stroke"), stroke)?;
+                ToolPath::linear_stroke(*stroke)
+                    .map_err(|e| self.err(format!("{pk}.stroke"), fmt_arr(stroke), e.to_string()))
+            }
+            (None, Some(keys)) => {
+                let pivot = p.pivot.unwrap_or([0.0; 3]);
+                self.finite_vec(&format!("{pk}.pivot"), &pivot)?;
+                if keys.is_empty() {
+                    return Err(self.err(
+                        format!("{pk}.keys"),
+                        "[]",
+                        "at least one key {t, translation, rotation?}",
+                    ));
+                }
+                let mut out = Vec::with_capacity(keys.len());
+                for (i, kf) in keys.iter().enumerate() {
+                    let kk = format!("{pk}.keys[{i}]");
+                    if !kf.t.is_finite() {
+                        return Err(self.err(format!("{kk}.t"), kf.t.to_string(), "a finite time"));
+                    }
+                    if i > 0 && kf.t <= keys[i - 1].t {
+                        return Err(self.err(
+                            format!("{kk}.t"),
+                            kf.t.to_string(),
+                            format!(
+                                "a time greater than {pk}.keys[{}].t = {} (strictly increasing)",
+                                i - 1,
+                                keys[i - 1].t
+                            ),
+                        ));
+                    }
+                    self.finite_vec(&format!("{kk}.translation"), &kf.translation)?;
+                    let rotation = kf.rotation.unwrap_or([0.0; 3]);
+                    self.finite_vec(&format!("{kk}.rotation"), &rotation)?;
+                    out.push(PathKey {
+                        t: kf.t,
+                        translation: kf.translation,
+                        rotation,
+                    });
+                }
+                ToolPath::new(pivot, out)
+                    .map_err(|e| self.err(format!("{pk}.keys"), "(table)", e.to_string()))
+            }
+            (Some(_), Some(_)) => Err(self.err(
+                format!("{pk}.stroke"),
+                "(given with `keys`)",
+                "either `stroke` or `keys`, not both",
+            )),
+            (None, None) => Err(self.err(
+                pk,
+                "(no `stroke` or `keys`)",
+                "`stroke = [dx, dy, dz]` or `keys = [{t, translation, rotation?}, ...]`",
+            )),
+        }
+    }
+
+    /// `[contact]`: only with tools; faces, one of `penalty` / `penalty_factor` (> 0), and a
+    /// `release` tool that exists.
+    fn contact(
+        &self,
+        c: Option<&ContactFile>,
+        tools: &[RigidTool],
+    ) -> Result<Option<ContactSpec>, CaseError> {
+        if tools.is_empty() {
+            return match c {
+                Some(_) => Err(self.err(
+                    "contact",
+                    "(given)",
+                    "at least one [[tool]] table (contact is with rigid tools)",
+                )),
+                None => Ok(None),
+            };
+        }
+        let default = ContactFile {
+            faces: None,
+            penalty: None,
+            penalty_factor: None,
+            release: None,
+        };
+        let c = c.unwrap_or(&default);
+        let faces = match c.faces.as_deref().unwrap_or("both") {
+            "top" => ContactFaces::Top,
+            "bottom" => ContactFaces::Bottom,
+            "both" => ContactFaces::Both,
+            other => {
+                return Err(self.err(
+                    "contact.faces",
+                    format!("{other:?}"),
+                    "\"top\", \"bottom\" or \"both\" (default \"both\")",
+                ))
+            }
+        };
+        let penalty = match (c.penalty, c.penalty_factor) {
+            (Some(_), Some(_)) => return Err(self.err(
+                "contact.penalty",
+                "(given with `penalty_factor`)",
+                "either `penalty` (ω, force per length³) or `penalty_factor` (c of ω = c E/t), \
+                     not both",
+            )),
+            (Some(w), None) => PenaltySpec::Value(self.positive("contact.penalty", w)?),
+            (None, Some(f)) => PenaltySpec::Factor(self.positive("contact.penalty_factor", f)?),
+            (None, None) => PenaltySpec::Factor(DEFAULT_PENALTY_FACTOR),
+        };
+        if let Some(r) = &c.release {
+            if !tools.iter().any(|t| &t.name == r) {
+                let names: Vec<&str> = tools.iter().map(|t| t.name.as_str()).collect();
+                return Err(self.err(
+                    "contact.release",
+                    format!("{r:?}"),
+                    format!("the name of a [[tool]]: one of {names:?}"),
+                ));
+            }
+        }
+        Ok(Some(ContactSpec {
+            faces,
+            penalty,
+            release: c.release.clone(),
+        }))
     }
 
     /// Reject keys that do not belong to an entry of this kind.

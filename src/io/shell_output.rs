@@ -50,6 +50,7 @@
 
 use super::shell_case::{Monitor, OutputSpec};
 use super::vtu::{PvdCollection, VtuError, VtuMesh, VtuWriter};
+use crate::contact::{ContactReport, ToolReport};
 use crate::geometry::Surface;
 use crate::kinematics::{global_stress, local_stress, stress_from_vec5};
 use crate::material::von_mises;
@@ -347,11 +348,58 @@ pub fn director_rotation(n0: &Vector3<f64>, d: &Vector3<f64>) -> Vector3<f64> {
     }
 }
 
+/// Contact pressure `[top, bottom]` per integration cell: the area-weighted mean (weights
+/// `w_k |x̄⁰,1 × x̄⁰,2|`, as the other cell data) of the per-quadrature-point pressures of a
+/// [`ContactReport`] (`−ω g` at a penetrating slave point, zero elsewhere).
+pub fn cell_contact_pressure(
+    model: &ShellModel,
+    grid: &OutputGrid,
+    pressure: &[[f64; 2]],
+) -> Result<Vec<[f64; 2]>, OutputError> {
+    grid.check_model(model)?;
+    if pressure.len() != model.points.len() {
+        return Err(OutputError::Grid(format!(
+            "{} contact pressures for {} quadrature points",
+            pressure.len(),
+            model.points.len()
+        )));
+    }
+    let nc = grid.n_cells();
+    let mut sum = vec![[0.0; 2]; nc];
+    let mut area = vec![0.0; nc];
+    for (k, &c) in grid.point_cell.iter().enumerate() {
+        let p = &model.points[k];
+        let w = p.weight * p.surface.x_a[0].cross(&p.surface.x_a[1]).norm();
+        for f in 0..2 {
+            sum[c][f] += w * pressure[k][f];
+        }
+        area[c] += w;
+    }
+    Ok(sum
+        .into_iter()
+        .zip(area)
+        .map(|(s, a)| if a > 0.0 { s.map(|v| v / a) } else { [0.0; 2] })
+        .collect())
+}
+
 /// The VTU of the committed state of `model` on `grid` (see the module documentation).
 pub fn shell_vtu(
     model: &ShellModel,
     surface: &Surface<f64>,
     grid: &OutputGrid,
+) -> Result<VtuWriter, OutputError> {
+    shell_vtu_with_contact(model, surface, grid, None)
+}
+
+/// As [`shell_vtu`], plus, with the per-quadrature-point contact pressures of a
+/// [`ContactReport`], the cell data `contact_pressure_top` / `contact_pressure_bottom`
+/// ([`cell_contact_pressure`]) and the same as point data (each grid node the mean of the
+/// visualisation quads around it).
+pub fn shell_vtu_with_contact(
+    model: &ShellModel,
+    surface: &Surface<f64>,
+    grid: &OutputGrid,
+    pressure: Option<&[[f64; 2]]>,
 ) -> Result<VtuWriter, OutputError> {
     let cells = cell_resultants(model, grid)?;
     let nodes = grid.nodes();
@@ -372,7 +420,7 @@ pub fn shell_vtu(
     let per = |f: &dyn Fn(&CellResultants) -> Vec<f64>| -> Vec<f64> {
         qc.iter().flat_map(|&c| f(&cells[c])).collect()
     };
-    Ok(VtuWriter::new(mesh)
+    let mut w = VtuWriter::new(mesh)
         .point_vector("displacement", &disp)
         .point_vector("director", &dir)
         .point_vector("director_rotation", &rot)
@@ -383,7 +431,42 @@ pub fn shell_vtu(
         .cell_scalar("eps_p_mid", &per(&|r| vec![r.eps_p[1]]))
         .cell_scalar("eps_p_bottom", &per(&|r| vec![r.eps_p[2]]))
         .cell_scalar("von_mises_top", &per(&|r| vec![r.von_mises[0]]))
-        .cell_scalar("von_mises_bottom", &per(&|r| vec![r.von_mises[1]])))
+        .cell_scalar("von_mises_bottom", &per(&|r| vec![r.von_mises[1]]));
+    if let Some(pr) = pressure {
+        let cp = cell_contact_pressure(model, grid, pr)?;
+        // Point values: mean of the (up to four) visualisation quads around each node.
+        let mut node = vec![[0.0; 2]; n[0] * n[1]];
+        let mut count = vec![0.0; n[0] * n[1]];
+        for a in 0..n[0] - 1 {
+            for b in 0..n[1] - 1 {
+                let c = qc[a * (n[1] - 1) + b];
+                for (i, j) in [(a, b), (a + 1, b), (a, b + 1), (a + 1, b + 1)] {
+                    let k = i * n[1] + j;
+                    node[k][0] += cp[c][0];
+                    node[k][1] += cp[c][1];
+                    count[k] += 1.0;
+                }
+            }
+        }
+        let face = |f: usize| -> Vec<f64> {
+            node.iter()
+                .zip(&count)
+                .map(|(v, &m)| if m > 0.0 { v[f] / m } else { 0.0 })
+                .collect()
+        };
+        w = w
+            .point_scalar("contact_pressure_top", &face(0))
+            .point_scalar("contact_pressure_bottom", &face(1))
+            .cell_scalar(
+                "contact_pressure_top",
+                &qc.iter().map(|&c| cp[c][0]).collect::<Vec<_>>(),
+            )
+            .cell_scalar(
+                "contact_pressure_bottom",
+                &qc.iter().map(|&c| cp[c][1]).collect::<Vec<_>>(),
+            );
+    }
+    Ok(w)
 }
 
 /// Displacement `ū(ξ)` of the committed state at each monitor.
@@ -419,6 +502,34 @@ pub struct StepSummary {
     pub monitors: Vec<[f64; 3]>,
     /// The VTU written for this step (relative to the output directory), if any.
     pub vtu: Option<String>,
+    /// Contact with rigid tools at this step (cases with `[[tool]]`).
+    pub contact: Option<StepContact>,
+    /// Set on the step at which the `[contact] release` tool separated from the sheet.
+    pub separation: Option<Separation>,
+}
+
+/// The tools at one converged step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepContact {
+    /// Per tool: position, rotation, the force the sheet exerts on it, active slave points.
+    pub tools: Vec<ToolReport>,
+    /// Active (penetrating) slave points over all tools.
+    pub active_points: usize,
+}
+
+/// The separation of the `[contact] release` tool: the first converged step at which it
+/// carries no force (no active slave point) after it had carried some.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Separation {
+    /// Tool name.
+    pub tool: String,
+    /// Load factor (tool time) of that step.
+    pub t: f64,
+    /// Converged step number.
+    pub step: usize,
+    /// Load factor of the last converged step with the tool in contact (the separation lies in
+    /// `(t_before, t]`).
+    pub t_before: f64,
 }
 
 /// Writes the results of a shell run into one directory: `shell.pvd` with `steps/step_NNNN.vtu`
@@ -436,6 +547,22 @@ pub struct ShellOutput {
     steps: Vec<StepSummary>,
     start: Instant,
     info: serde_json::Map<String, Value>,
+    contact: Option<ContactTracking>,
+}
+
+/// What [`ShellOutput`] tracks of the contact over the run.
+#[derive(Clone, Debug, Default)]
+struct ContactTracking {
+    /// The tool whose separation is detected.
+    release: Option<String>,
+    /// Load factor of the last step at which the release tool was in contact.
+    release_in_contact: Option<f64>,
+    separation: Option<Separation>,
+    /// Per tool (case order): name, whether it had an active point at a converged step.
+    touched: Vec<(String, bool)>,
+    /// Per-quadrature-point pressure of the last converged step (for a VTU written at the end).
+    last_pressure: Option<Vec<[f64; 2]>>,
+    warnings: Vec<String>,
 }
 
 /// File of the PVD collection inside the output directory.
@@ -444,6 +571,10 @@ pub const PVD_FILE: &str = "shell.pvd";
 pub const RESULTS_FILE: &str = "results.json";
 /// Plot file inside the output directory.
 pub const PLOT_FILE: &str = "load_displacement.png";
+/// Tool force table inside the output directory (cases with tools).
+pub const TOOL_FORCES_FILE: &str = "tool_forces.csv";
+/// Force–stroke plot inside the output directory (cases with tools).
+pub const TOOL_PLOT_FILE: &str = "force_stroke.png";
 
 impl ShellOutput {
     /// Output into `dir` (created if missing). `case` names the case (e.g. its file),
@@ -477,7 +608,29 @@ impl ShellOutput {
             steps: Vec::new(),
             start,
             info: serde_json::Map::new(),
+            contact: None,
         })
+    }
+
+    /// Record contact with the named tools (in case order): per-step tool positions, forces
+    /// and active points in results.json, the contact pressure in the VTUs, `tool_forces.csv`
+    /// and `force_stroke.png` at the end, and the separation of the tool `release`.
+    pub fn set_contact(&mut self, tools: &[String], release: Option<String>) {
+        self.contact = Some(ContactTracking {
+            release,
+            touched: tools.iter().map(|t| (t.clone(), false)).collect(),
+            ..ContactTracking::default()
+        });
+    }
+
+    /// The separation of the release tool, once detected.
+    pub fn separation(&self) -> Option<&Separation> {
+        self.contact.as_ref().and_then(|c| c.separation.as_ref())
+    }
+
+    /// Warnings of the run (tools that never touched the sheet; set by [`Self::finish`]).
+    pub fn warnings(&self) -> &[String] {
+        self.contact.as_ref().map_or(&[], |c| &c.warnings)
     }
 
     /// Extra top-level entries of results.json (model size, settings).
@@ -503,7 +656,13 @@ impl ShellOutput {
         time: f64,
     ) -> Result<String, OutputError> {
         let rel = format!("steps/step_{step:04}.vtu");
-        shell_vtu(model, surface, &self.grid)?.write(&self.dir.join(&rel))?;
+        let pressure = self.contact.as_ref().map(|c| {
+            c.last_pressure
+                .clone()
+                .unwrap_or_else(|| vec![[0.0; 2]; model.points.len()])
+        });
+        shell_vtu_with_contact(model, surface, &self.grid, pressure.as_deref())?
+            .write(&self.dir.join(&rel))?;
         self.pvd.add_and_write(time, &rel)?;
         Ok(rel)
     }
@@ -529,7 +688,53 @@ impl ShellOutput {
         surface: &Surface<f64>,
         record: &StepRecord,
     ) -> Result<&StepSummary, OutputError> {
+        self.converged_with_contact(model, surface, record, None)
+    }
+
+    /// As [`Self::converged`], with the contact state of the committed step (cases with tools,
+    /// after [`Self::set_contact`]): tools, active points, pressure, separation.
+    pub fn converged_with_contact(
+        &mut self,
+        model: &ShellModel,
+        surface: &Surface<f64>,
+        record: &StepRecord,
+        report: Option<&ContactReport>,
+    ) -> Result<&StepSummary, OutputError> {
         let step = self.steps.len() + 1;
+        let mut contact = None;
+        let mut separation = None;
+        if let (Some(track), Some(rep)) = (self.contact.as_mut(), report) {
+            for (k, t) in rep.tools.iter().enumerate() {
+                if t.active_points > 0 {
+                    if let Some(e) = track.touched.get_mut(k) {
+                        e.1 = true;
+                    }
+                }
+            }
+            if let Some(name) = &track.release {
+                if let Some(t) = rep.tools.iter().find(|t| &t.name == name) {
+                    if t.active_points > 0 {
+                        track.release_in_contact = Some(record.load);
+                    } else if let (None, Some(before)) =
+                        (&track.separation, track.release_in_contact)
+                    {
+                        let s = Separation {
+                            tool: name.clone(),
+                            t: record.load,
+                            step,
+                            t_before: before,
+                        };
+                        track.separation = Some(s.clone());
+                        separation = Some(s);
+                    }
+                }
+            }
+            track.last_pressure = Some(rep.pressure.clone());
+            contact = Some(StepContact {
+                tools: rep.tools.clone(),
+                active_points: rep.tools.iter().map(|t| t.active_points).sum(),
+            });
+        }
         let monitors = monitor_displacements(model, surface, &self.monitors)?;
         let last = (self.final_load - record.load).abs() <= 1e-12 * self.final_load.abs().max(1.0);
         let vtu = if self.spec.vtu && (step % self.spec.every == 0 || last) {
@@ -546,6 +751,8 @@ impl ShellOutput {
             accepted_residual_only: record.factorised_at == Some(FactorisedAt::PreviousIterate),
             monitors,
             vtu,
+            contact,
+            separation,
         });
         self.write_results("running", None)?;
         Ok(self.steps.last().expect("just pushed"))
@@ -569,11 +776,119 @@ impl ShellOutput {
                 }
             }
         }
+        if let Some(track) = self.contact.as_mut() {
+            let never: Vec<&str> = track
+                .touched
+                .iter()
+                .filter(|t| !t.1)
+                .map(|t| t.0.as_str())
+                .collect();
+            if !never.is_empty() && !self.steps.is_empty() {
+                track.warnings.push(format!(
+                    "tool(s) {never:?} never touched the sheet at a converged step \
+                     (no active slave point): check the tool position, path and side"
+                ));
+            }
+        }
         self.write_results(status, Some(attempts))?;
         if self.spec.plot && !self.monitors.is_empty() {
             self.plot(&self.dir.join(PLOT_FILE))?;
         }
+        if self.contact.is_some() {
+            self.write_tool_forces(&self.dir.join(TOOL_FORCES_FILE))?;
+            if self.spec.plot {
+                self.plot_tool_forces(&self.dir.join(TOOL_PLOT_FILE))?;
+            }
+        }
         Ok(())
+    }
+
+    /// The tool whose translation defines the stroke: the release tool, else the first.
+    fn stroke_tool(&self) -> usize {
+        let Some(track) = &self.contact else { return 0 };
+        track
+            .release
+            .as_ref()
+            .and_then(|r| track.touched.iter().position(|t| &t.0 == r))
+            .unwrap_or(0)
+    }
+
+    /// `tool_forces.csv`: one row per converged step (and the unloaded start), `step, t,
+    /// stroke` (the length `|a(t)|` of the stroke tool's translation) and per tool its
+    /// translation, the force the sheet exerts on it and its active slave points.
+    fn write_tool_forces(&self, path: &Path) -> Result<(), OutputError> {
+        let Some(track) = &self.contact else {
+            return Ok(());
+        };
+        let st = self.stroke_tool();
+        let mut text = String::from("step,t,stroke");
+        for (name, _) in &track.touched {
+            for c in ["x", "y", "z", "fx", "fy", "fz", "active_points"] {
+                text.push_str(&format!(",{name}_{c}"));
+            }
+        }
+        text.push('\n');
+        for s in &self.steps {
+            let Some(c) = &s.contact else { continue };
+            let stroke = c.tools.get(st).map_or(0.0, |t| {
+                (t.position[0].powi(2) + t.position[1].powi(2) + t.position[2].powi(2)).sqrt()
+            });
+            text.push_str(&format!("{},{:e},{:e}", s.step, s.load_factor, stroke));
+            for t in &c.tools {
+                for v in t.position.iter().chain(&t.force) {
+                    text.push_str(&format!(",{v:e}"));
+                }
+                text.push_str(&format!(",{}", t.active_points));
+            }
+            text.push('\n');
+        }
+        std::fs::write(path, text).map_err(io_err(path))
+    }
+
+    /// `force_stroke.png`: the magnitude of each tool's force against the stroke (the
+    /// translation length of the release tool, else the first tool), in the order of the steps
+    /// (loading and unloading branches both drawn).
+    fn plot_tool_forces(&self, path: &Path) -> Result<(), OutputError> {
+        use super::plot::{figure, Panel, Scale, Series};
+        let Some(track) = &self.contact else {
+            return Ok(());
+        };
+        let st = self.stroke_tool();
+        let labels: Vec<String> = track
+            .touched
+            .iter()
+            .map(|t| format!("|force| on {}", t.0))
+            .collect();
+        let series: Vec<Series> = (0..track.touched.len())
+            .map(|k| Series {
+                label: &labels[k],
+                points: std::iter::once((0.0, 0.0))
+                    .chain(self.steps.iter().filter_map(|s| {
+                        let c = s.contact.as_ref()?;
+                        let p = c.tools.get(st)?.position;
+                        let f = c.tools.get(k)?.force;
+                        Some((
+                            (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt(),
+                            (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt(),
+                        ))
+                    }))
+                    .collect(),
+                markers: false,
+            })
+            .collect();
+        let title = format!("{}: tool forces", self.title);
+        let x_label = format!(
+            "stroke of {} (length of its translation)",
+            track.touched.get(st).map_or("", |t| t.0.as_str())
+        );
+        let panel = Panel {
+            title: &title,
+            x_label: &x_label,
+            y_label: "force",
+            y_scale: Scale::Linear,
+            series,
+        };
+        figure(path, 900, 480, &[panel]).map_err(OutputError::Plot)
     }
 
     fn monitors_json(&self, values: &[[f64; 3]]) -> Value {
@@ -585,7 +900,7 @@ impl ShellOutput {
     }
 
     fn step_json(&self, s: &StepSummary) -> Value {
-        json!({
+        let mut v = json!({
             "step": s.step,
             "load_factor": s.load_factor,
             "iterations": s.iterations,
@@ -595,7 +910,27 @@ impl ShellOutput {
             "converged": true,
             "monitors": self.monitors_json(&s.monitors),
             "vtu": s.vtu,
-        })
+        });
+        if let (Some(c), Value::Object(o)) = (&s.contact, &mut v) {
+            let mut m = serde_json::Map::new();
+            for t in &c.tools {
+                m.insert(
+                    t.name.clone(),
+                    json!({
+                        "position": t.position,
+                        "rotation": t.rotation,
+                        "force": t.force,
+                        "active_points": t.active_points,
+                    }),
+                );
+            }
+            o.insert("tools".into(), Value::Object(m));
+            o.insert("active_contact_points".into(), json!(c.active_points));
+            if let Some(sep) = &s.separation {
+                o.insert("separation".into(), json!(sep.tool));
+            }
+        }
+        v
     }
 
     /// The results.json document.
@@ -647,6 +982,18 @@ impl ShellOutput {
         );
         for (k, v) in &self.info {
             doc.insert(k.clone(), v.clone());
+        }
+        if let Some(track) = &self.contact {
+            doc.insert(
+                "separation".into(),
+                match &track.separation {
+                    Some(s) => {
+                        json!({"tool": s.tool, "t": s.t, "step": s.step, "t_before": s.t_before})
+                    }
+                    None => Value::Null,
+                },
+            );
+            doc.insert("warnings".into(), json!(track.warnings));
         }
         doc.insert("steps".into(), Value::Array(steps));
         Value::Object(doc)
