@@ -4,7 +4,7 @@
 //! `cargo run --release --example lu_probe -- verification/hemisphere-plastic/case.toml`
 use shelldsa::io::shell_build::build;
 use shelldsa::io::shell_case::read_shell_case;
-use shelldsa::solver::{EssentialBc, LinearSolver, Method, NonlinearProblem, SolverOptions};
+use shelldsa::solver::{EssentialBc, LinearSolver, Method, NonlinearProblem, Parallelism, SolverOptions};
 use std::time::Instant;
 
 fn main() {
@@ -56,6 +56,23 @@ fn main() {
         "sparse LU (current): {:.1} ms",
         t.elapsed().as_secs_f64() * 1e3 / reps as f64
     );
+    for (probe, par) in [(None, Parallelism::Sequential), (Some(1e-2), Parallelism::Sequential), (None, Parallelism::Rayon(2)), (Some(1e-2), Parallelism::Rayon(2))] {
+        let mut dense = LinearSolver::new(
+            &pattern,
+            Method::DenseLu,
+            SolverOptions { singularity_probe: probe, parallelism: par },
+        )
+        .unwrap();
+        dense.factorize(&values).unwrap();
+        let t = Instant::now();
+        for _ in 0..reps {
+            dense.factorize(&values).unwrap();
+        }
+        println!(
+            "LinearSolver DenseLu (probe {probe:?}, {par:?}): {:.1} ms",
+            t.elapsed().as_secs_f64() * 1e3 / reps as f64
+        );
+    }
     // dense
     let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
     let mut a = faer::Mat::<f64>::zeros(n, n);
@@ -96,7 +113,15 @@ fn main() {
         );
         if std::env::var("LU_TUNE").is_ok() {
             use faer::linalg::lu::partial_pivoting::factor::PartialPivLuParams;
-            for (rt, bs) in [(16, 64), (32, 64), (16, 128), (32, 128), (64, 128), (16, 256), (8, 32)] {
+            for (rt, bs) in [
+                (16, 64),
+                (32, 64),
+                (16, 128),
+                (32, 128),
+                (64, 128),
+                (16, 256),
+                (8, 32),
+            ] {
                 let mut prm: PartialPivLuParams = faer::Auto::<f64>::auto();
                 prm.recursion_threshold = rt;
                 prm.block_size = bs;
@@ -104,10 +129,18 @@ fn main() {
                 for _ in 0..reps {
                     lu.copy_from(&a);
                     faer::linalg::lu::partial_pivoting::factor::lu_in_place(
-                        lu.as_mut(), &mut fwd, &mut bwd, par, MemStack::new(&mut buf), prm.into(),
+                        lu.as_mut(),
+                        &mut fwd,
+                        &mut bwd,
+                        par,
+                        MemStack::new(&mut buf),
+                        prm.into(),
                     );
                 }
-                println!("  rt {rt} bs {bs}: {:.1} ms", t.elapsed().as_secs_f64() * 1e3 / reps as f64);
+                println!(
+                    "  rt {rt} bs {bs}: {:.1} ms",
+                    t.elapsed().as_secs_f64() * 1e3 / reps as f64
+                );
             }
         }
     }

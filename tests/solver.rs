@@ -77,7 +77,7 @@ fn pattern_is_sorted_csc_with_diagonal_and_cell_slots() {
     assert_eq!(p.col_ptr(), &[0, 2, 4, 5, 8, 9]);
     assert_eq!(p.row_idx(), &[0, 3, 1, 3, 2, 0, 1, 3, 4]);
     // cell 1 local (i, j) at j*m + i: (row 3, col 1) is local (0, 1) -> slot of (3, 1) = 3.
-    assert_eq!(p.cell_slots(1)[3], p.slot(3, 1).unwrap());
+    assert_eq!(p.cell_slots(1)[3] as usize, p.slot(3, 1).unwrap());
     assert_eq!(p.cell_slots(1).len(), 9);
     assert_eq!(p.slot(2, 0), None);
     assert_eq!(p.diag_slot(4), 8);

@@ -58,7 +58,17 @@ use crate::meshfree::quadrature::CellQuadrature;
 use crate::meshfree::ParamBox;
 use crate::shell::model::ShellModel;
 use crate::shell::ShellError;
-use crate::solver::{FactorisedAt, StepRecord};
+use crate::solver::{FactorisedAt, StepRecord, StepTiming};
+
+/// `{"residual_and_tangent", "residual", "factorise", "solve"}` in seconds.
+fn timing_json(t: &StepTiming) -> Value {
+    json!({
+        "residual_and_tangent": t.residual_and_tangent_s,
+        "residual": t.residual_s,
+        "factorise": t.factorise_s,
+        "solve": t.solve_s,
+    })
+}
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
@@ -498,6 +508,8 @@ pub struct StepSummary {
     /// Whether the converged iterate was accepted from its residual alone (no tangent assembled
     /// or factorised there).
     pub accepted_residual_only: bool,
+    /// Wall time of the step's solver parts (the converged attempt).
+    pub timing: StepTiming,
     /// Monitor displacements, in the case's monitor order.
     pub monitors: Vec<[f64; 3]>,
     /// The VTU written for this step (relative to the output directory), if any.
@@ -749,6 +761,7 @@ impl ShellOutput {
             residual_norms: record.residual_norms.clone(),
             residual_only: record.residual_only.clone(),
             accepted_residual_only: record.factorised_at == Some(FactorisedAt::PreviousIterate),
+            timing: record.timing,
             monitors,
             vtu,
             contact,
@@ -907,6 +920,7 @@ impl ShellOutput {
             "residual_norms": s.residual_norms,
             "residual_only": s.residual_only,
             "accepted_residual_only": s.accepted_residual_only,
+            "timing_s": timing_json(&s.timing),
             "converged": true,
             "monitors": self.monitors_json(&s.monitors),
             "vtu": s.vtu,
@@ -971,6 +985,14 @@ impl ShellOutput {
             json!(self.start.elapsed().as_secs_f64()),
         );
         doc.insert("status".into(), json!(status));
+        // Solver parts summed over the converged steps (failed attempts not included).
+        let total = self.steps.iter().fold(StepTiming::default(), |a, s| StepTiming {
+            residual_and_tangent_s: a.residual_and_tangent_s + s.timing.residual_and_tangent_s,
+            residual_s: a.residual_s + s.timing.residual_s,
+            factorise_s: a.factorise_s + s.timing.factorise_s,
+            solve_s: a.solve_s + s.timing.solve_s,
+        });
+        doc.insert("solver_timing_s".into(), timing_json(&total));
         doc.insert(
             "monitors".into(),
             Value::Array(

@@ -198,25 +198,28 @@ impl AssemblyBuffers {
         Self::default()
     }
 
-    /// Zeroed buffers for the cells `cells`, in order.
-    fn take(
-        &mut self,
-        pattern: &SparsityPattern,
-        cells: std::ops::Range<usize>,
-    ) -> &mut [(Vec<f64>, Vec<f64>)] {
-        if self.cells.len() < cells.len() {
-            self.cells.resize_with(cells.len(), Default::default);
+    /// Buffers for `n` cells (their contents are set by [`zeroed`] when a cell is evaluated, on
+    /// the thread that evaluates it).
+    fn take(&mut self, n: usize) -> &mut [(Vec<f64>, Vec<f64>)] {
+        if self.cells.len() < n {
+            self.cells.resize_with(n, Default::default);
         }
-        let bufs = &mut self.cells[..cells.len()];
-        for (c, (k, f)) in cells.zip(bufs.iter_mut()) {
-            let m = pattern.cell_dofs(c).len();
-            k.clear();
-            k.resize(m * m, 0.0);
-            f.clear();
-            f.resize(m, 0.0);
-        }
-        bufs
+        &mut self.cells[..n]
     }
+}
+
+/// Size the buffer of cell `c` and zero it.
+fn zeroed<'b>(
+    pattern: &SparsityPattern,
+    c: usize,
+    (k, f): &'b mut (Vec<f64>, Vec<f64>),
+) -> (&'b mut [f64], &'b mut [f64]) {
+    let m = pattern.cell_dofs(c).len();
+    k.clear();
+    k.resize(m * m, 0.0);
+    f.clear();
+    f.resize(m, 0.0);
+    (k, f)
 }
 
 /// [`assemble`] with the cell contributions written into reused buffers:
@@ -244,7 +247,7 @@ where
     match exec {
         Execution::Serial => {
             for c in 0..n_cells {
-                let (k, f) = &mut buffers.take(pattern, c..c + 1)[0];
+                let (k, f) = zeroed(pattern, c, &mut buffers.take(1)[0]);
                 local(c, k, f).map_err(|source| AssemblyError::Cell { cell: c, source })?;
                 scatter(pattern, c, k, f, values, rhs, 0, 0..pattern.n_dofs());
             }
@@ -255,11 +258,14 @@ where
             let mut start = 0;
             while start < n_cells {
                 let end = (start + b).min(n_cells);
-                let bufs = buffers.take(pattern, start..end);
+                let bufs = buffers.take(end - start);
                 let results: Vec<Result<(), E>> = bufs
                     .par_iter_mut()
                     .enumerate()
-                    .map(|(i, (k, f))| local(start + i, k, f))
+                    .map(|(i, buf)| {
+                        let (k, f) = zeroed(pattern, start + i, buf);
+                        local(start + i, k, f)
+                    })
                     .collect();
                 // The lowest failing cell is reported, as in the serial loop.
                 for (i, res) in results.into_iter().enumerate() {
@@ -304,7 +310,7 @@ fn scatter(
         if cols.contains(&col) {
             let kcol = &kk[jj * m..(jj + 1) * m];
             for (v, &s) in kcol.iter().zip(&slots[jj * m..(jj + 1) * m]) {
-                vals[s - base] += v;
+                vals[s as usize - base] += v;
             }
             r[col - cols.start] += f[jj];
         }

@@ -30,13 +30,19 @@ pub use linear::{LinearSolver, Method, Parallelism, SolverOptions};
 pub use newton::{
     Acceptance, ConvergedStep, ConvergedTangent, FactorisedAt, FailureReason, LoadStepping,
     NewtonFailure, NewtonOptions, NewtonReport, NewtonSolver, NonlinearProblem, Predictor,
-    ProblemError, StepRecord,
+    ProblemError, StepRecord, StepTiming,
 };
 pub use pattern::SparsityPattern;
 
 /// Errors of the linear-algebra layer. Every variant names where the problem was found.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SolverError {
+    /// A pattern with more stored entries than the `u32` cell slots address.
+    #[error("the pattern stores {nnz} entries: at most u32::MAX = 4294967295 are supported")]
+    TooManyEntries {
+        /// Stored entries.
+        nnz: usize,
+    },
     /// A cell lists a DOF index outside `0..n_dofs`.
     #[error(
         "cell {cell}: local DOF {local} has global index {dof}, but there are only {n_dofs} DOFs"

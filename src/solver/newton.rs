@@ -66,6 +66,7 @@
 
 use super::{EssentialBc, LinearSolver, SolverError, SparsityPattern};
 use std::fmt;
+use std::time::Instant;
 
 /// Error reported by a problem's residual, tangent or convergence hook.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -391,8 +392,23 @@ pub struct StepRecord {
     pub residual_only: Vec<(usize, f64)>,
     /// Where the converged step's factorised tangent was evaluated (`None` until converged).
     pub factorised_at: Option<FactorisedAt>,
+    /// Wall time spent in the attempt's parts.
+    pub timing: StepTiming,
     /// Why it failed, if it did.
     pub failure: Option<FailureReason>,
+}
+
+/// Wall time of one step attempt by part, in seconds.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct StepTiming {
+    /// Residual and tangent evaluations ([`NonlinearProblem::residual_and_tangent`]).
+    pub residual_and_tangent_s: f64,
+    /// Residual-only evaluations (residual-first acceptance).
+    pub residual_s: f64,
+    /// Numeric factorisations.
+    pub factorise_s: f64,
+    /// Solves.
+    pub solve_s: f64,
 }
 
 /// Result of a run: the last converged state and every attempt.
@@ -603,6 +619,7 @@ impl NewtonSolver {
                 roundoff_floors: Vec::new(),
                 residual_only: Vec::new(),
                 factorised_at: None,
+                timing: StepTiming::default(),
                 failure: None,
             };
             let outcome = self.attempt(
@@ -710,9 +727,10 @@ impl NewtonSolver {
                     }
                 }
             }
-            problem
-                .residual_and_tangent(u, load, &mut w.r, &mut w.values)
-                .map_err(FailureReason::Problem)?;
+            let clock = Instant::now();
+            let evaluated = problem.residual_and_tangent(u, load, &mut w.r, &mut w.values);
+            rec.timing.residual_and_tangent_s += clock.elapsed().as_secs_f64();
+            evaluated.map_err(FailureReason::Problem)?;
             unknowns_terms = unknowns_term_scale(pattern, &w.values, u, u_n, &bc, &mut w.s);
             w.g.clear();
             w.g.extend(bc.dofs().iter().zip(bc.values()).map(|(&d, &v)| v - u[d]));
@@ -745,9 +763,10 @@ impl NewtonSolver {
                 * r_ref.max(problem.residual_scale()).max(unknowns_terms);
             rec.roundoff_floors.push(floor);
             let floor_ok = constraints_met && rnorm <= floor;
-            solver
-                .factorize(&w.values)
-                .map_err(FailureReason::LinearSolver)?;
+            let clock = Instant::now();
+            let factorised = solver.factorize(&w.values);
+            rec.timing.factorise_s += clock.elapsed().as_secs_f64();
+            factorised.map_err(FailureReason::LinearSolver)?;
             if floor_ok {
                 // At the floor the energy product is round-off too: the residual decides.
                 let how = if res_ok {
@@ -761,9 +780,10 @@ impl NewtonSolver {
                 return Ok((bc, Acceptance::Tolerance, FactorisedAt::Converged));
             }
             w.du.copy_from_slice(&w.rhs);
-            solver
-                .solve_in_place(&mut w.du)
-                .map_err(FailureReason::LinearSolver)?;
+            let clock = Instant::now();
+            let solved = solver.solve_in_place(&mut w.du);
+            rec.timing.solve_s += clock.elapsed().as_secs_f64();
+            solved.map_err(FailureReason::LinearSolver)?;
             let e = free_dot(&bc, &w.du, &w.rhs).abs();
             rec.energy_norms.push(e);
             if k == 0 {
@@ -833,9 +853,10 @@ impl NewtonSolver {
         if bc.dofs().iter().zip(bc.values()).any(|(&d, &v)| v != u[d]) {
             return Ok(None);
         }
-        problem
-            .residual(u, load, &mut w.r)
-            .map_err(FailureReason::Problem)?;
+        let clock = Instant::now();
+        let evaluated = problem.residual(u, load, &mut w.r);
+        rec.timing.residual_s += clock.elapsed().as_secs_f64();
+        evaluated.map_err(FailureReason::Problem)?;
         for (x, r) in w.rhs.iter_mut().zip(&w.r) {
             *x = -r;
         }
@@ -850,9 +871,10 @@ impl NewtonSolver {
             * f64::EPSILON
             * r_ref.max(problem.residual_scale()).max(unknowns_terms);
         w.du.copy_from_slice(&w.rhs);
-        solver
-            .solve_in_place(&mut w.du)
-            .map_err(FailureReason::LinearSolver)?;
+        let clock = Instant::now();
+        let solved = solver.solve_in_place(&mut w.du);
+        rec.timing.solve_s += clock.elapsed().as_secs_f64();
+        solved.map_err(FailureReason::LinearSolver)?;
         let e = free_dot(bc, &w.du, &w.rhs).abs();
         // As in the full path: the residual tolerance holds, and either the energy test or the
         // round-off floor (where the energy product is round-off too).

@@ -16,7 +16,9 @@ pub struct SparsityPattern {
     cell_ptr: Vec<usize>,
     cell_dofs: Vec<usize>,
     slot_ptr: Vec<usize>,
-    slots: Vec<usize>,
+    /// Cell slots as `u32` (half the memory traffic of the assembly's scatter); patterns with
+    /// more than `u32::MAX` stored entries are rejected.
+    slots: Vec<u32>,
     diag: Vec<usize>,
 }
 
@@ -80,6 +82,9 @@ impl SparsityPattern {
                 col_ptr[j] + rows.binary_search(&j).expect("diagonal inserted")
             })
             .collect();
+        if row_idx.len() > u32::MAX as usize {
+            return Err(SolverError::TooManyEntries { nnz: row_idx.len() });
+        }
         let mut cell_ptr = Vec::with_capacity(cells.len() + 1);
         let mut slot_ptr = Vec::with_capacity(cells.len() + 1);
         cell_ptr.push(0);
@@ -92,7 +97,7 @@ impl SparsityPattern {
                 let rows = &row_idx[col_ptr[cj]..col_ptr[cj + 1]];
                 for &ri in dofs {
                     let k = rows.binary_search(&ri).expect("cell pair in pattern");
-                    slots.push(col_ptr[cj] + k);
+                    slots.push((col_ptr[cj] + k) as u32);
                 }
             }
             cell_dofs.extend_from_slice(dofs);
@@ -192,7 +197,7 @@ impl SparsityPattern {
     }
 
     /// Slots of cell `c`: local `(i, j)` of an `m × m` cell matrix is stored at `slots[j * m + i]`.
-    pub fn cell_slots(&self, c: usize) -> &[usize] {
+    pub fn cell_slots(&self, c: usize) -> &[u32] {
         &self.slots[self.slot_ptr[c]..self.slot_ptr[c + 1]]
     }
 

@@ -186,7 +186,7 @@ impl StripProblem {
             let kt = self.transform(&k);
             let n = kt.nrows();
             for (slot, &v) in self.pattern.cell_slots(0).iter().zip(kt.as_slice()) {
-                values[*slot] = v;
+                values[*slot as usize] = v;
             }
             debug_assert_eq!(self.pattern.cell_slots(0).len(), n * n);
         }
