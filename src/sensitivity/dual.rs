@@ -200,6 +200,17 @@ pub enum SensitivityError {
     /// The analysis stopped.
     #[error("analysis: {0}")]
     Newton(Box<NewtonFailure>),
+    /// A finite-difference re-run took other load steps than the nominal run, so its
+    /// responses are not the same discrete functions of the design.
+    #[error("finite differences of `{variable}` with step {h}: {detail}")]
+    StepSequence {
+        /// Design variable.
+        variable: String,
+        /// Perturbation.
+        h: f64,
+        /// What differs.
+        detail: String,
+    },
 }
 
 /// The shell problem with the dual-number sensitivity reference in its convergence hook.
