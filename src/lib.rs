@@ -13,6 +13,7 @@ pub mod kinematics;
 pub mod material;
 pub mod meshfree;
 pub mod scalar;
+pub mod sensitivity;
 pub mod shell;
 pub mod solver;
 pub mod verification;

@@ -13,8 +13,8 @@
 //! results.
 
 use super::point::{
-    point_residual, point_residual_with, ParticleState, PointHistory, PointIncrement, PointInput,
-    ShapeData, SurfacePoint, DOFS_PER_PARTICLE,
+    point_residual_with, ParticleState, PointHistory, PointIncrement, PointInput, ShapeData,
+    SurfacePoint, DOFS_PER_PARTICLE,
 };
 use super::rotation::rotate_director;
 use super::symmetry::{SymmetryLayout, SymmetryPlane};
@@ -697,31 +697,104 @@ impl ShellModel {
         k
     }
 
-    /// Global internal force in scalar `T` (the dual-number reference of the assembled residual).
+    /// Global internal force in scalar `T` (the dual-number reference of the assembled residual),
+    /// with the committed states, material and thickness lifted as constants.
     pub fn internal_force_generic<T: Real>(&self, dofs: &[T]) -> Result<Vec<T>, ShellError> {
-        let mut f = vec![T::zero(); self.n_dofs()];
+        let particles: Vec<ParticleState<T>> = self.particles.iter().map(|p| p.lift()).collect();
+        let history: Vec<PointHistory<T>> = self.history.iter().map(|h| h.lift()).collect();
+        let (f, _) = self.internal_force_with(
+            &particles,
+            &history,
+            &self.material.lift::<T>(),
+            T::cst(self.thickness),
+            dofs,
+        )?;
+        Ok(f)
+    }
+
+    /// Global internal force (eq 32) and the trial histories (point-major, as
+    /// [`ShellModel::history`]) in scalar `T`, from `T`-valued committed states of the real
+    /// particles (images follow through the seam's fixed maps), committed histories, material
+    /// and thickness. With dual numbers whose derivative parts carry design sensitivities this
+    /// is the residual of the dual-number design sensitivity reference (`crate::sensitivity`):
+    /// the kernels of the analysis, no hand-derived derivative. Points are evaluated in
+    /// parallel and summed in point order (deterministic).
+    pub fn internal_force_with<T: Real>(
+        &self,
+        particles: &[ParticleState<T>],
+        history: &[PointHistory<T>],
+        material: &MaterialParams<T>,
+        thickness: T,
+        dofs: &[T],
+    ) -> Result<(Vec<T>, Vec<PointHistory<T>>), ShellError> {
         let nl = self.thickness_rule.len();
-        let m = self.material.lift::<T>();
-        for (k, p) in self.points.iter().enumerate() {
-            let (parts, x) = self.gather_local(k, dofs);
-            let s = p.surface.lift::<T>();
-            for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
-                let h = self.history[k * nl + l].lift::<T>();
-                let inp = PointInput {
-                    surface: &s,
-                    zeta,
-                    thickness: T::cst(self.thickness),
-                    weight: p.weight * wz,
-                    shape: &p.shape,
-                    particles: &parts,
-                    material: &m,
-                    history: &h,
-                };
-                let res = point_residual(&inp, &x)?;
-                self.scatter_local(k, &res.residual, &mut f);
+        for (expected, got) in [
+            (self.n_dofs(), dofs.len()),
+            (self.particles.len(), particles.len()),
+            (self.history.len(), history.len()),
+        ] {
+            if expected != got {
+                return Err(ShellError::Dimension { expected, got });
             }
         }
-        Ok(f)
+        let per_point = (0..self.points.len())
+            .into_par_iter()
+            .map(|k| {
+                let p = &self.points[k];
+                // The neighbours' states in T: an image is `Q` times its source's (as
+                // `particle_state`), its local DOFs `T_j q` (as `gather_local`).
+                let (_, x) = self.gather_local(k, dofs);
+                let parts: Vec<ParticleState<T>> = p
+                    .neighbours
+                    .iter()
+                    .map(|&j| {
+                        let m = self.dof_map(j);
+                        let s = particles[m.source];
+                        match m.map {
+                            None => s,
+                            Some((q, _)) => {
+                                let qt = q.map(T::cst);
+                                ParticleState {
+                                    u: qt * s.u,
+                                    d: qt * s.d,
+                                    d0: qt * s.d0,
+                                    e: [qt * s.e[0], qt * s.e[1]],
+                                }
+                            }
+                        }
+                    })
+                    .collect();
+                let inc = PointIncrement::new(&parts, &x)?;
+                let s = p.surface.lift::<T>();
+                let mut residual = vec![T::zero(); x.len()];
+                let mut trial = Vec::with_capacity(nl);
+                for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
+                    let inp = PointInput {
+                        surface: &s,
+                        zeta,
+                        thickness,
+                        weight: p.weight * wz,
+                        shape: &p.shape,
+                        particles: &parts,
+                        material,
+                        history: &history[k * nl + l],
+                    };
+                    let res = point_residual_with(&inp, &inc)?;
+                    for (r, v) in residual.iter_mut().zip(&res.residual) {
+                        *r += *v;
+                    }
+                    trial.push(res.history);
+                }
+                Ok((residual, trial))
+            })
+            .collect::<Result<Vec<_>, ShellError>>()?;
+        let mut f = vec![T::zero(); self.n_dofs()];
+        let mut trial = Vec::with_capacity(self.history.len());
+        for (k, (r, h)) in per_point.into_iter().enumerate() {
+            self.scatter_local(k, &r, &mut f);
+            trial.extend(h);
+        }
+        Ok((f, trial))
     }
 
     /// Commit a converged increment: particle coefficients and directors move, the lamina

@@ -1,0 +1,759 @@
+//! The dual-number reference of the design sensitivities (path 3 of `/work/shared/design.md`):
+//! the discrete, path-dependent solution differentiated step by step through the analysis'
+//! own generic kernels, with no hand-derived sensitivity code.
+//!
+//! At every converged step `n → n+1` with increment `Δu` (unknowns `u = [q, μ]`, generalised
+//! DOFs and scaled multipliers):
+//! 1. the residual `R(Δu; ⁿs, τ)` (eq 32 with the loads and the constraint rows) is evaluated in
+//!    a dual scalar `D`, with `Δu` constant (zero derivative part), the committed dual state
+//!    `ⁿs` (particle coefficients `ū, d, e`, histories `Q, σ, α, ē^p`, unknowns `u`, whose
+//!    derivative parts are the carried sensitivities) and the design `τ` seeded (thickness or
+//!    material parameter with unit derivative in its direction). Its derivative part is
+//!    `∂R/∂ⁿs · ⁿṡ + ∂R/∂τ`: the right-hand side of the sensitivity equation (eq 65) with the
+//!    history terms of eq (49) and the material terms, computed rather than derived;
+//! 2. `K Δu̇ = −(∂R/∂ⁿs · ⁿṡ + ∂R/∂τ)` is solved for all design variables at once with the
+//!    tangent the Newton driver holds factorised at the converged state (multi-RHS, the
+//!    essential conditions eliminated: their rows are zero);
+//! 3. `Δu̇` becomes the derivative part of the increment, and the point updates (return map,
+//!    frame update, eqs 19–27) and the particle update (Rodrigues' rotation of the director and
+//!    lamina vectors) are re-evaluated in `D`: their derivative parts are the sensitivities of
+//!    the trial histories `ⁿ⁺¹(Q̇, σ̇, α̇, ė^p)` and of the particle states, committed with the
+//!    analysis' commit.
+//!
+//! **Dual type.** [`DesignDual`] is implemented for `DualSVec64<N>` (N directions in one pass)
+//! and for `Dual64` (one direction per pass; several passes for several variables). A
+//! [`DualShellProblem<D>`] holds `⌈n_variables / D::DIRECTIONS⌉` dual states ("groups"): one for
+//! `DualSVec64<N>` with `N` = the number of variables ([`run_dual`] dispatches `N` = 1..=8),
+//! one per variable for `Dual64`. The vector dual is the default: it shares the value part
+//! (gathers, rotations, inverses, the return map's branch and its local Newton) between the
+//! directions; `Dual64` repeats all of that per variable. Both give the same derivatives to
+//! round-off; their cost is measured in `tests/dsa_dual.rs` and `docs/sensitivity.md`.
+//!
+//! **Loads.** For non-shape design variables the loads have no explicit design dependence
+//! (a pressure per unit area, a point force, a gravity load per unit area as given). A follower
+//! pressure depends on the committed displacement `ⁿū`, which carries a sensitivity: it is
+//! evaluated with the increment's derivative part set to `ⁿū̇` ([`Pressure`] depends on `ⁿū` and
+//! `Δū` only through their sum, `docs/loads.md`), which gives `∂f_ext/∂ⁿū · ⁿū̇` exactly. The
+//! problem owns its loads as trait objects, so they are handed to the reference again as
+//! [`DualLoad`]s; at every step their force is checked against the problem's
+//! ([`ShellProblem::external_force`]), so a missing or different load is an error, not a wrong
+//! derivative. Edge moments (which act through the director) and contact are not supported yet.
+//!
+//! **Constraint scales.** The rows' scales `k_c` (`E t`, `E t³/12`) are a numerical balance
+//! set when the problem is built; they are held fixed here. The generalised DOFs do not depend
+//! on them, and the physical reactions `−k_c μ_c` differentiate correctly with `k_c` fixed
+//! (a re-run with another `E` changes `k_c` and `μ_c` with the same product).
+
+use super::{validate_design, Design, DesignError, DesignKind, DesignVariable, Monitor};
+use crate::material::MaterialParams;
+use crate::scalar::Real;
+use crate::shell::load::{ExternalLoad, GenericLoad, Gravity, PointForce, Pressure};
+use crate::shell::point::{ParticleState, PointHistory, DOFS_PER_PARTICLE};
+use crate::shell::problem::ShellProblem;
+use crate::shell::rotation::rotate_director;
+use crate::shell::ShellError;
+use crate::solver::{
+    ConvergedStep, ConvergedTangent, FactorisedAt, LinearSolver, NewtonFailure, NewtonReport,
+    NewtonSolver, NonlinearProblem, ProblemError, SolverOptions,
+};
+use nalgebra::Vector3;
+use num_dual::{Derivative, Dual64, DualSVec64};
+use std::time::{Duration, Instant};
+use thiserror::Error;
+
+/// A dual scalar that carries the derivatives of `DIRECTIONS` design variables.
+pub trait DesignDual: Real {
+    /// Number of directions per value.
+    const DIRECTIONS: usize;
+    /// The value `x` with derivative parts `parts` (length [`Self::DIRECTIONS`]).
+    fn from_parts(x: f64, parts: &[f64]) -> Self;
+    /// Derivative part `k`.
+    fn part(&self, k: usize) -> f64;
+}
+
+impl DesignDual for Dual64 {
+    const DIRECTIONS: usize = 1;
+    fn from_parts(x: f64, parts: &[f64]) -> Self {
+        Dual64::new(x, parts[0])
+    }
+    fn part(&self, k: usize) -> f64 {
+        debug_assert_eq!(k, 0);
+        self.eps
+    }
+}
+
+impl<const N: usize> DesignDual for DualSVec64<N> {
+    const DIRECTIONS: usize = N;
+    fn from_parts(x: f64, parts: &[f64]) -> Self {
+        if parts.iter().all(|p| *p == 0.0) {
+            // No derivative stored: constants stay cheap in num-dual's arithmetic.
+            DualSVec64::new(x, Derivative::none())
+        } else {
+            DualSVec64::new(
+                x,
+                Derivative::some(nalgebra::SVector::<f64, N>::from_column_slice(parts)),
+            )
+        }
+    }
+    fn part(&self, k: usize) -> f64 {
+        self.eps.0.as_ref().map_or(0.0, |v| v[k])
+    }
+}
+
+/// A load of the problem as the dual reference evaluates it (the problem holds its loads as
+/// trait objects; see the module documentation).
+#[derive(Clone, Debug, PartialEq)]
+pub enum DualLoad {
+    /// Dead point force: no dependence on the state or on a non-shape design.
+    PointForce(PointForce),
+    /// Dead load per unit area: no dependence on the state or on a non-shape design.
+    Gravity(Gravity),
+    /// Follower pressure: depends on the committed displacement.
+    Pressure(Pressure),
+}
+
+impl DualLoad {
+    fn add_force_f64(
+        &self,
+        model: &crate::shell::model::ShellModel,
+        q: &[f64],
+        factor: f64,
+        f: &mut [f64],
+    ) -> Result<(), ShellError> {
+        match self {
+            DualLoad::PointForce(l) => l.add_force(model, q, factor, f),
+            DualLoad::Gravity(l) => l.add_force(model, q, factor, f),
+            DualLoad::Pressure(l) => l.add_force(model, q, factor, f),
+        }
+    }
+}
+
+/// The dual state of one group of design variables, parallel to the model's f64 state.
+#[derive(Clone, Debug)]
+pub struct DualState<D> {
+    /// Index of the first design variable of the group (its direction 0).
+    pub first: usize,
+    /// Number of variables in the group (≤ `D::DIRECTIONS`).
+    pub count: usize,
+    /// Committed particle states (real particles, as `ShellModel::particles`).
+    pub particles: Vec<ParticleState<D>>,
+    /// Committed histories (point-major, as `ShellModel::history`).
+    pub history: Vec<PointHistory<D>>,
+    /// Material, seeded.
+    pub material: MaterialParams<D>,
+    /// Thickness, seeded.
+    pub thickness: D,
+    /// Committed unknowns `[q, μ]` and their sensitivities.
+    pub unknowns: Vec<D>,
+}
+
+/// The sensitivities recorded at one converged step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DualStepRecord {
+    /// Converged step index (0-based).
+    pub step: usize,
+    /// Load factor.
+    pub load: f64,
+    /// Monitor values (f64 analysis).
+    pub values: Vec<f64>,
+    /// `derivatives[m][v]`: d(monitor m)/d(variable v).
+    pub derivatives: Vec<Vec<f64>>,
+    /// Largest difference between the value parts of the committed dual state (particles,
+    /// histories) and the f64 analysis state, relative to the largest entry of each field:
+    /// round-off if the dual state follows the analysis.
+    pub value_mismatch: f64,
+    /// Number of yielding layer points in this step (from the f64 analysis: `ē^p` increased).
+    pub plastic_points: usize,
+}
+
+/// Errors of the dual reference.
+#[derive(Debug, Error)]
+pub enum SensitivityError {
+    /// Invalid design variables or monitors.
+    #[error(transparent)]
+    Design(#[from] DesignError),
+    /// The problem is not at its initial (unloaded, virgin) state.
+    #[error(
+        "problem: committed unknowns are not zero (entry {index} = {value}); the dual \
+             reference must start with the analysis"
+    )]
+    NotInitial {
+        /// First non-zero unknown.
+        index: usize,
+        /// Its value.
+        value: f64,
+    },
+    /// More variables than the vector dual dispatch supports.
+    #[error("design variables: {count} given, the vector dual supports 1..={max}")]
+    TooManyVariables {
+        /// Given.
+        count: usize,
+        /// Supported.
+        max: usize,
+    },
+    /// Shell evaluation.
+    #[error(transparent)]
+    Shell(#[from] ShellError),
+    /// Linear solver set-up.
+    #[error(transparent)]
+    Solver(#[from] crate::solver::SolverError),
+    /// The analysis stopped.
+    #[error("analysis: {0}")]
+    Newton(Box<NewtonFailure>),
+    /// A finite-difference re-run took other load steps than the nominal run, so its
+    /// responses are not the same discrete functions of the design.
+    #[error("finite differences of `{variable}` with step {h}: {detail}")]
+    StepSequence {
+        /// Design variable.
+        variable: String,
+        /// Perturbation.
+        h: f64,
+        /// What differs.
+        detail: String,
+    },
+}
+
+/// The shell problem with the dual-number sensitivity reference in its convergence hook.
+#[derive(Debug)]
+pub struct DualShellProblem<D: DesignDual> {
+    problem: ShellProblem,
+    variables: Vec<DesignVariable>,
+    loads: Vec<DualLoad>,
+    monitors: Vec<Monitor>,
+    groups: Vec<DualState<D>>,
+    pending: Option<Vec<DualState<D>>>,
+    records: Vec<DualStepRecord>,
+    time: Duration,
+    failure: Option<String>,
+}
+
+/// `e1 = (t − d (d·t))/|…|`, `e2 = d × e1` (the model's lamina vectors), generic.
+fn lamina_vectors<T: Real>(d: &Vector3<T>, t: &Vector3<T>) -> [Vector3<T>; 2] {
+    let e1 = (t - d * d.dot(t)).normalize();
+    [e1, d.cross(&e1)]
+}
+
+/// The particle update of `ShellModel::commit_histories`, generic: `ū += Δū`, the director and
+/// the first lamina vector rotated by Rodrigues' formula, the lamina vectors re-orthogonalised.
+pub fn commit_particle<T: Real>(p: &ParticleState<T>, q: &[T]) -> ParticleState<T> {
+    let alpha = [q[3], q[4]];
+    let d = rotate_director(&p.d, &p.e[0], &p.e[1], alpha);
+    let e0 = rotate_director(&p.e[0], &p.e[0], &p.e[1], alpha);
+    ParticleState {
+        u: p.u + Vector3::new(q[0], q[1], q[2]),
+        d,
+        d0: p.d0,
+        e: lamina_vectors(&d, &e0),
+    }
+}
+
+fn fatal(e: impl std::fmt::Display) -> ProblemError {
+    ProblemError::Fatal(format!("dual sensitivity reference: {e}"))
+}
+
+impl<D: DesignDual> DualShellProblem<D> {
+    /// Wrap `problem` (at its initial state): `variables` are validated against its model,
+    /// `loads` must be the problem's loads (checked at every step), `monitors` are recorded at
+    /// every converged step.
+    pub fn new(
+        problem: ShellProblem,
+        variables: Vec<DesignVariable>,
+        loads: Vec<DualLoad>,
+        monitors: Vec<Monitor>,
+    ) -> Result<Self, SensitivityError> {
+        validate_design(&variables, &problem.model, 0.0)?;
+        if let Some((index, &value)) = problem.state().iter().enumerate().find(|(_, v)| **v != 0.0)
+        {
+            return Err(SensitivityError::NotInitial { index, value });
+        }
+        for m in &monitors {
+            m.value(&problem.model)
+                .map_err(|e| DesignError::InvalidMonitor {
+                    label: m.label.clone(),
+                    detail: e.to_string(),
+                })?;
+        }
+        let model = &problem.model;
+        let design = Design::of(model);
+        let nd = D::DIRECTIONS;
+        let groups = (0..variables.len().div_ceil(nd))
+            .map(|g| {
+                let first = g * nd;
+                let count = nd.min(variables.len() - first);
+                let mut t_parts = vec![0.0; nd];
+                let mut m_parts = vec![vec![0.0; nd]; 6];
+                for (k, v) in variables[first..first + count].iter().enumerate() {
+                    match v.kind {
+                        DesignKind::Thickness => t_parts[k] = 1.0,
+                        DesignKind::Material(p) => m_parts[p.index()][k] = 1.0,
+                    }
+                }
+                let m = design.material.to_array();
+                DualState {
+                    first,
+                    count,
+                    particles: model.particles.iter().map(|p| p.lift()).collect(),
+                    history: model.history.iter().map(|h| h.lift()).collect(),
+                    material: MaterialParams::from_array(std::array::from_fn(|i| {
+                        D::from_parts(m[i], &m_parts[i])
+                    })),
+                    thickness: D::from_parts(design.thickness, &t_parts),
+                    unknowns: problem.state().iter().map(|&v| D::cst(v)).collect(),
+                }
+            })
+            .collect();
+        Ok(DualShellProblem {
+            problem,
+            variables,
+            loads,
+            monitors,
+            groups,
+            pending: None,
+            records: Vec::new(),
+            time: Duration::ZERO,
+            failure: None,
+        })
+    }
+
+    /// The wrapped problem.
+    pub fn problem(&self) -> &ShellProblem {
+        &self.problem
+    }
+
+    /// The design variables.
+    pub fn variables(&self) -> &[DesignVariable] {
+        &self.variables
+    }
+
+    /// The records of the converged steps.
+    pub fn records(&self) -> &[DualStepRecord] {
+        &self.records
+    }
+
+    /// The committed dual states (one per group of variables).
+    pub fn groups(&self) -> &[DualState<D>] {
+        &self.groups
+    }
+
+    /// Wall time spent in the reference (right-hand sides, solve, dual updates).
+    pub fn time(&self) -> Duration {
+        self.time
+    }
+
+    /// The sensitivity `du/dτ_v` of the committed unknowns `[q, μ]` for variable `v`.
+    pub fn unknown_sensitivity(&self, v: usize) -> Option<Vec<f64>> {
+        let g = self
+            .groups
+            .iter()
+            .find(|g| (g.first..g.first + g.count).contains(&v))?;
+        Some(g.unknowns.iter().map(|x| x.part(v - g.first)).collect())
+    }
+
+    /// The dual residual `R(Δu; ⁿs, τ)` of group `g` (all unknowns' rows) at the converged
+    /// unknowns `u` and load `load`.
+    fn dual_residual(
+        &self,
+        g: &DualState<D>,
+        dq: &[D],
+        u: &[f64],
+        load: f64,
+    ) -> Result<Vec<D>, ShellError> {
+        let model = &self.problem.model;
+        let n_q = self.problem.n_generalised();
+        let (f_int, _) =
+            model.internal_force_with(&g.particles, &g.history, &g.material, g.thickness, dq)?;
+        let mut r = f_int;
+        r.resize(u.len(), D::zero());
+        // Loads: the pressure with the increment's derivative part set to ⁿū̇ (module docs).
+        let q_shift: Vec<D> = dq
+            .iter()
+            .enumerate()
+            .map(|(i, x)| {
+                let (p, c) = (i / DOFS_PER_PARTICLE, i % DOFS_PER_PARTICLE);
+                if c < 3 {
+                    *x + g.particles[p].u[c] - D::cst(g.particles[p].u[c].value())
+                } else {
+                    *x
+                }
+            })
+            .collect();
+        let mut f_ext = vec![D::zero(); n_q];
+        for l in &self.loads {
+            if let DualLoad::Pressure(p) = l {
+                p.force_generic(model, &q_shift, load, &mut f_ext)?;
+            }
+        }
+        for (ri, fi) in r.iter_mut().zip(&f_ext) {
+            *ri -= *fi;
+        }
+        // Constraint rows with the committed unknowns' sensitivities (Δu has none).
+        let ud: Vec<D> = u
+            .iter()
+            .zip(&g.unknowns)
+            .map(|(&v, c)| *c + D::cst(v - c.value()))
+            .collect();
+        for (c, (row, &k)) in self
+            .problem
+            .constraints()
+            .iter()
+            .zip(self.problem.constraint_scales())
+            .enumerate()
+        {
+            let mu = ud[n_q + c];
+            let mut gc = D::cst(-load * row.value);
+            for &(d, a) in &row.terms {
+                r[d] += mu * (k * a);
+                gc += ud[d] * a;
+            }
+            r[n_q + c] = gc * k;
+        }
+        Ok(r)
+    }
+
+    /// Check that the loads given to the reference are the problem's: equal forces at `dq`.
+    fn check_loads(&self, dq: &[f64], load: f64) -> Result<(), ProblemError> {
+        let model = &self.problem.model;
+        let reference = self.problem.external_force(dq, load).map_err(fatal)?;
+        let mut mine = vec![0.0; reference.len()];
+        for l in &self.loads {
+            l.add_force_f64(model, dq, load, &mut mine).map_err(fatal)?;
+        }
+        let scale = reference.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+        let diff = reference
+            .iter()
+            .zip(&mine)
+            .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
+        // Same loads summed in the same order give equal forces; 1e-12 of the largest
+        // component leaves room for a different summation order only.
+        if diff > 1e-12 * scale || (scale == 0.0 && diff > 0.0) {
+            return Err(fatal(format!(
+                "the loads given to the reference differ from the problem's at load {load}: \
+                 largest force difference {diff:e} (largest force {scale:e})"
+            )));
+        }
+        Ok(())
+    }
+
+    fn hook(&mut self, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
+        if step.factorised_at != FactorisedAt::Converged {
+            return Err(fatal(
+                "the solver's tangent is not the converged one (the problem must declare \
+                 ConvergedTangent::Required)",
+            ));
+        }
+        let n = step.u.len();
+        let n_q = self.problem.n_generalised();
+        let committed = self.problem.state();
+        let du: Vec<f64> = step.u.iter().zip(committed).map(|(a, b)| a - b).collect();
+        self.check_loads(&du[..n_q], step.load)?;
+        let dq_const: Vec<D> = du[..n_q].iter().map(|&v| D::cst(v)).collect();
+        // 1. Right-hand sides of all variables, column-major n × n_variables.
+        let nv = self.variables.len();
+        let mut b = vec![0.0; n * nv];
+        for g in &self.groups {
+            let r = self
+                .dual_residual(g, &dq_const, step.u, step.load)
+                .map_err(fatal)?;
+            for k in 0..g.count {
+                let col = &mut b[(g.first + k) * n..(g.first + k + 1) * n];
+                for (c, ri) in col.iter_mut().zip(&r) {
+                    *c = -ri.part(k);
+                }
+                step.essential.zero_constrained(col);
+            }
+        }
+        // 2. One multi-RHS solve with the converged tangent (eq 65).
+        step.solver
+            .solve_columns_in_place(&mut b, nv)
+            .map_err(fatal)?;
+        // 3. The dual increment, the dual point and particle updates.
+        let mut next = Vec::with_capacity(self.groups.len());
+        for g in &self.groups {
+            let mut parts = vec![0.0; D::DIRECTIONS];
+            let inc: Vec<D> = (0..n)
+                .map(|i| {
+                    for (k, p) in parts.iter_mut().enumerate().take(g.count) {
+                        *p = b[(g.first + k) * n + i];
+                    }
+                    D::from_parts(du[i], &parts)
+                })
+                .collect();
+            let model = &self.problem.model;
+            let (_, history) = model
+                .internal_force_with(
+                    &g.particles,
+                    &g.history,
+                    &g.material,
+                    g.thickness,
+                    &inc[..n_q],
+                )
+                .map_err(fatal)?;
+            let particles = g
+                .particles
+                .iter()
+                .zip(inc[..n_q].chunks_exact(DOFS_PER_PARTICLE))
+                .map(|(p, q)| commit_particle(p, q))
+                .collect();
+            let unknowns = g.unknowns.iter().zip(&inc).map(|(a, d)| *a + *d).collect();
+            next.push(DualState {
+                first: g.first,
+                count: g.count,
+                particles,
+                history,
+                material: g.material,
+                thickness: g.thickness,
+                unknowns,
+            });
+        }
+        self.pending = Some(next);
+        Ok(())
+    }
+
+    /// After the analysis' commit: adopt the pending dual state and record the monitors.
+    fn record(&mut self, load: f64, plastic_points: usize) -> Result<(), String> {
+        let next = self
+            .pending
+            .take()
+            .ok_or("commit without a converged-step hook")?;
+        self.groups = next;
+        let model = &self.problem.model;
+        let mut mismatch = 0.0_f64;
+        for g in &self.groups {
+            mismatch = mismatch.max(value_mismatch(model, g));
+        }
+        let nv = self.variables.len();
+        let n_q = self.problem.n_generalised();
+        let mut values = Vec::with_capacity(self.monitors.len());
+        let mut derivatives = vec![vec![0.0; nv]; self.monitors.len()];
+        // ū̇ of the real particles as generalised vectors, one per variable.
+        let mut udot = vec![vec![0.0; n_q]; nv];
+        for g in &self.groups {
+            for (i, p) in g.particles.iter().enumerate() {
+                for c in 0..3 {
+                    for k in 0..g.count {
+                        udot[g.first + k][DOFS_PER_PARTICLE * i + c] = p.u[c].part(k);
+                    }
+                }
+            }
+        }
+        for (mi, m) in self.monitors.iter().enumerate() {
+            values.push(m.value(model).map_err(|e| e.to_string())?);
+            for (v, ud) in udot.iter().enumerate() {
+                derivatives[mi][v] = model
+                    .interpolate_translation(m.uv, ud)
+                    .map_err(|e| e.to_string())?[m.component];
+            }
+        }
+        self.records.push(DualStepRecord {
+            step: self.records.len(),
+            load,
+            values,
+            derivatives,
+            value_mismatch: mismatch,
+            plastic_points,
+        });
+        Ok(())
+    }
+}
+
+/// Largest difference between the value parts of a dual state and the model, relative to the
+/// largest entry of each field (displacements, directors, lamina vectors, frames, stresses,
+/// back stresses, plastic strains).
+pub fn value_mismatch<D: DesignDual>(
+    model: &crate::shell::model::ShellModel,
+    g: &DualState<D>,
+) -> f64 {
+    let mut fields = [(0.0_f64, 0.0_f64); 7];
+    let mut acc = |f: usize, dual: &D, val: f64| {
+        fields[f].0 = fields[f].0.max((dual.value() - val).abs());
+        fields[f].1 = fields[f].1.max(val.abs());
+    };
+    for (pd, pm) in g.particles.iter().zip(&model.particles) {
+        for c in 0..3 {
+            acc(0, &pd.u[c], pm.u[c]);
+            acc(1, &pd.d[c], pm.d[c]);
+            acc(2, &pd.e[0][c], pm.e[0][c]);
+            acc(2, &pd.e[1][c], pm.e[1][c]);
+        }
+    }
+    for (hd, hm) in g.history.iter().zip(&model.history) {
+        for (a, b) in hd.frame.iter().zip(hm.frame.iter()) {
+            acc(3, a, *b);
+        }
+        for c in 0..5 {
+            acc(4, &hd.material.stress[c], hm.material.stress[c]);
+            acc(5, &hd.material.back_stress[c], hm.material.back_stress[c]);
+        }
+        acc(6, &hd.material.eps_p, hm.material.eps_p);
+    }
+    fields
+        .iter()
+        .map(|&(d, s)| if s > 0.0 { d / s } else { d })
+        .fold(0.0, f64::max)
+}
+
+/// Number of layer points whose effective plastic strain grew from `before` to `after`.
+pub fn yielding_points(before: &[PointHistory<f64>], after: &[PointHistory<f64>]) -> usize {
+    before
+        .iter()
+        .zip(after)
+        .filter(|(a, b)| b.material.eps_p > a.material.eps_p)
+        .count()
+}
+
+impl<D: DesignDual> NonlinearProblem for DualShellProblem<D> {
+    fn n_dofs(&self) -> usize {
+        self.problem.n_dofs()
+    }
+    fn residual(&mut self, u: &[f64], load: f64, r: &mut [f64]) -> Result<(), ProblemError> {
+        self.problem.residual(u, load, r)
+    }
+    fn tangent(&mut self, u: &[f64], load: f64, values: &mut [f64]) -> Result<(), ProblemError> {
+        self.problem.tangent(u, load, values)
+    }
+    fn residual_and_tangent(
+        &mut self,
+        u: &[f64],
+        load: f64,
+        r: &mut [f64],
+        values: &mut [f64],
+    ) -> Result<(), ProblemError> {
+        self.problem.residual_and_tangent(u, load, r, values)
+    }
+    fn essential(&self, load: f64) -> Vec<(usize, f64)> {
+        self.problem.essential(load)
+    }
+    fn force_norm(&self, load: f64) -> f64 {
+        self.problem.force_norm(load)
+    }
+    fn residual_scale(&self) -> f64 {
+        self.problem.residual_scale()
+    }
+    fn on_converged(&mut self, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
+        if let Some(f) = &self.failure {
+            return Err(fatal(f));
+        }
+        let t0 = Instant::now();
+        let out = self.hook(step);
+        self.time += t0.elapsed();
+        out
+    }
+    /// The reference solves with the tangent at the converged state.
+    fn converged_tangent(&self) -> ConvergedTangent {
+        ConvergedTangent::Required
+    }
+    fn commit(&mut self, u: &[f64], load: f64) {
+        let before = self.problem.model.history.clone();
+        self.problem.commit(u, load);
+        let plastic = yielding_points(&before, &self.problem.model.history);
+        let t0 = Instant::now();
+        if let Err(e) = self.record(load, plastic) {
+            // `commit` cannot fail: the next hook (or the caller, `failure()`) reports it.
+            self.failure.get_or_insert(e);
+        }
+        self.time += t0.elapsed();
+    }
+    fn restore(&mut self) {
+        self.pending = None;
+        self.problem.restore();
+    }
+}
+
+impl<D: DesignDual> DualShellProblem<D> {
+    /// A failure of the reference after a commit (reported by the next step's hook too).
+    pub fn failure(&self) -> Option<&str> {
+        self.failure.as_deref()
+    }
+}
+
+/// Which dual scalar the reference uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum DualMode {
+    /// `DualSVec64<N>`, all variables in one pass (N = number of variables, 1..=8).
+    #[default]
+    Vector,
+    /// `Dual64`, one pass per variable.
+    PerVariable,
+}
+
+/// The result of [`run_dual`].
+#[derive(Clone, Debug)]
+pub struct DualRun {
+    /// The design variables.
+    pub variables: Vec<DesignVariable>,
+    /// Per converged step.
+    pub records: Vec<DualStepRecord>,
+    /// The Newton report.
+    pub report: NewtonReport,
+    /// Wall time of the whole run (analysis and reference).
+    pub total: Duration,
+    /// Wall time of the reference alone.
+    pub reference: Duration,
+}
+
+impl DualRun {
+    /// Cost of the reference per design variable as a fraction of the analysis (the run's time
+    /// without the reference).
+    pub fn cost_per_variable(&self) -> f64 {
+        let analysis = (self.total - self.reference).as_secs_f64();
+        self.reference.as_secs_f64() / analysis / self.variables.len() as f64
+    }
+}
+
+fn drive<D: DesignDual>(
+    problem: ShellProblem,
+    variables: Vec<DesignVariable>,
+    loads: Vec<DualLoad>,
+    monitors: Vec<Monitor>,
+    newton: &NewtonSolver,
+    solver: SolverOptions,
+) -> Result<DualRun, SensitivityError> {
+    let t0 = Instant::now();
+    let pattern = problem.pattern().clone();
+    let mut linear = LinearSolver::new(&pattern, crate::solver::Method::auto(&pattern), solver)?;
+    let mut p = DualShellProblem::<D>::new(problem, variables, loads, monitors)?;
+    let u0 = p.problem().state().to_vec();
+    let report = newton
+        .run(&mut p, &pattern, &mut linear, &u0)
+        .map_err(SensitivityError::Newton)?;
+    if let Some(f) = p.failure() {
+        return Err(SensitivityError::Shell(ShellError::InvalidInput(format!(
+            "dual sensitivity reference: {f}"
+        ))));
+    }
+    Ok(DualRun {
+        variables: p.variables.clone(),
+        records: p.records.clone(),
+        report,
+        total: t0.elapsed(),
+        reference: p.time(),
+    })
+}
+
+/// Run the analysis of `problem` with the dual reference of `variables` in its convergence
+/// hook (`mode` picks the dual scalar), recording `monitors` and their derivatives at every
+/// converged step.
+pub fn run_dual(
+    problem: ShellProblem,
+    variables: Vec<DesignVariable>,
+    loads: Vec<DualLoad>,
+    monitors: Vec<Monitor>,
+    newton: &NewtonSolver,
+    solver: SolverOptions,
+    mode: DualMode,
+) -> Result<DualRun, SensitivityError> {
+    macro_rules! vector {
+        ($($n:literal),*) => {
+            match variables.len() {
+                $($n => drive::<DualSVec64<$n>>(problem, variables, loads, monitors, newton, solver),)*
+                count => Err(SensitivityError::TooManyVariables { count, max: 8 }),
+            }
+        };
+    }
+    match mode {
+        DualMode::PerVariable => {
+            drive::<Dual64>(problem, variables, loads, monitors, newton, solver)
+        }
+        DualMode::Vector => vector!(1, 2, 3, 4, 5, 6, 7, 8),
+    }
+}

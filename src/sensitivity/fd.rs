@@ -1,0 +1,332 @@
+//! Finite differences of complete re-runs (path 4 of `/work/shared/design.md`): central
+//! differences for a list of step sizes (the step-size study) and the Taylor remainder test
+//! `|ψ(τ + h) − ψ(τ) − h ψ'|`, which falls as `h²` when `ψ'` is the derivative of the discrete
+//! response, with its observed rate fitted over the step sizes.
+//!
+//! **Same discrete function.** The response of a path-dependent analysis depends on its load
+//! steps, so every re-run must take the nominal run's steps: a re-run whose converged load
+//! levels differ (bit for bit) is an error ([`SensitivityError::StepSequence`]). Cases for
+//! finite differences therefore prescribe their steps (equal steps, no growth, or `stops` at
+//! every level).
+//!
+//! **Active set.** The response is only piecewise smooth in the design: a layer point that
+//! yields at a step in one run and not in another (the yield status changes within `±h`) puts
+//! a kink between them. Such a step, and every later one (the history carries the kink), is
+//! *flagged*: its difference is reported but left out of comparisons and of the rate fit, never
+//! silently ([`CentralDifference::flagged`], [`TaylorFit::excluded`]).
+
+use super::dual::SensitivityError;
+use super::{Design, DesignVariable, Monitor};
+use crate::shell::problem::ShellProblem;
+use crate::solver::{
+    ConvergedStep, ConvergedTangent, LinearSolver, Method, NewtonSolver, NonlinearProblem,
+    ProblemError, SolverOptions,
+};
+
+/// The monitored responses of one complete run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RunResponse {
+    /// Load factor of every converged step.
+    pub loads: Vec<f64>,
+    /// `values[step][monitor]`.
+    pub values: Vec<Vec<f64>>,
+    /// `yielding[step][layer point]`: whether the point's `ē^p` grew in the step.
+    pub yielding: Vec<Vec<bool>>,
+}
+
+/// The problem with a recorder after every commit.
+struct Recording<'a> {
+    problem: ShellProblem,
+    monitors: &'a [Monitor],
+    out: RunResponse,
+    failure: Option<String>,
+}
+
+impl NonlinearProblem for Recording<'_> {
+    fn n_dofs(&self) -> usize {
+        self.problem.n_dofs()
+    }
+    fn residual(&mut self, u: &[f64], load: f64, r: &mut [f64]) -> Result<(), ProblemError> {
+        self.problem.residual(u, load, r)
+    }
+    fn tangent(&mut self, u: &[f64], load: f64, values: &mut [f64]) -> Result<(), ProblemError> {
+        self.problem.tangent(u, load, values)
+    }
+    fn residual_and_tangent(
+        &mut self,
+        u: &[f64],
+        load: f64,
+        r: &mut [f64],
+        values: &mut [f64],
+    ) -> Result<(), ProblemError> {
+        self.problem.residual_and_tangent(u, load, r, values)
+    }
+    fn essential(&self, load: f64) -> Vec<(usize, f64)> {
+        self.problem.essential(load)
+    }
+    fn force_norm(&self, load: f64) -> f64 {
+        self.problem.force_norm(load)
+    }
+    fn residual_scale(&self) -> f64 {
+        self.problem.residual_scale()
+    }
+    fn on_converged(&mut self, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
+        self.problem.on_converged(step)
+    }
+    fn converged_tangent(&self) -> ConvergedTangent {
+        self.problem.converged_tangent()
+    }
+    fn commit(&mut self, u: &[f64], load: f64) {
+        let before: Vec<f64> = self
+            .problem
+            .model
+            .history
+            .iter()
+            .map(|h| h.material.eps_p)
+            .collect();
+        self.problem.commit(u, load);
+        let model = &self.problem.model;
+        let yielding = before
+            .iter()
+            .zip(&model.history)
+            .map(|(a, h)| h.material.eps_p > *a)
+            .collect();
+        let values: Result<Vec<f64>, _> = self.monitors.iter().map(|m| m.value(model)).collect();
+        match values {
+            Ok(v) => {
+                self.out.loads.push(load);
+                self.out.values.push(v);
+                self.out.yielding.push(yielding);
+            }
+            Err(e) => {
+                self.failure.get_or_insert(e.to_string());
+            }
+        }
+    }
+    fn restore(&mut self) {
+        self.problem.restore();
+    }
+}
+
+/// Run `problem` with `newton` and record `monitors` at every converged step.
+pub fn response(
+    problem: ShellProblem,
+    newton: &NewtonSolver,
+    solver: SolverOptions,
+    monitors: &[Monitor],
+) -> Result<RunResponse, SensitivityError> {
+    let pattern = problem.pattern().clone();
+    let mut linear = LinearSolver::new(&pattern, Method::auto(&pattern), solver)?;
+    let u0 = problem.state().to_vec();
+    let mut rec = Recording {
+        problem,
+        monitors,
+        out: RunResponse {
+            loads: Vec::new(),
+            values: Vec::new(),
+            yielding: Vec::new(),
+        },
+        failure: None,
+    };
+    newton
+        .run(&mut rec, &pattern, &mut linear, &u0)
+        .map_err(SensitivityError::Newton)?;
+    if let Some(f) = rec.failure {
+        return Err(SensitivityError::Shell(
+            crate::shell::ShellError::InvalidInput(format!("monitor: {f}")),
+        ));
+    }
+    Ok(rec.out)
+}
+
+/// Builds the analysis for a design: the problem and its driver.
+pub trait Analysis {
+    /// The problem (at its initial state) and the driver for `design`.
+    fn build(&self, design: &Design) -> Result<(ShellProblem, NewtonSolver), SensitivityError>;
+    /// Linear solver options.
+    fn solver(&self) -> SolverOptions {
+        SolverOptions::default()
+    }
+}
+
+fn run_at(
+    analysis: &dyn Analysis,
+    design: &Design,
+    monitors: &[Monitor],
+) -> Result<RunResponse, SensitivityError> {
+    let (problem, newton) = analysis.build(design)?;
+    response(problem, &newton, analysis.solver(), monitors)
+}
+
+fn same_steps(
+    variable: &DesignVariable,
+    h: f64,
+    nominal: &RunResponse,
+    other: &RunResponse,
+) -> Result<(), SensitivityError> {
+    if nominal.loads != other.loads {
+        return Err(SensitivityError::StepSequence {
+            variable: variable.name.clone(),
+            h,
+            detail: format!(
+                "converged load levels {:?}, nominal {:?}: prescribe the steps",
+                other.loads, nominal.loads
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// Per step, whether the yield status of any layer point differs between the runs at this or
+/// an earlier step.
+fn flags(runs: &[&RunResponse]) -> Vec<bool> {
+    let n = runs[0].yielding.len();
+    let mut flagged = false;
+    (0..n)
+        .map(|s| {
+            flagged |= runs
+                .windows(2)
+                .any(|w| w[0].yielding[s] != w[1].yielding[s]);
+            flagged
+        })
+        .collect()
+}
+
+/// Central differences of one design variable with one step size.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CentralDifference {
+    /// Step size (absolute, in the variable's units).
+    pub h: f64,
+    /// `derivatives[step][monitor] = (ψ(τ + h) − ψ(τ − h)) / 2h`.
+    pub derivatives: Vec<Vec<f64>>,
+    /// Per step: the yield status of some layer point differs among the runs at `τ − h`, `τ`,
+    /// `τ + h` at this step or an earlier one (the difference straddles a kink).
+    pub flagged: Vec<bool>,
+}
+
+/// The nominal run and central differences of `variable` for every step size in `hs`
+/// (absolute): two complete re-runs per step size.
+pub fn central_differences(
+    analysis: &dyn Analysis,
+    base: &Design,
+    variable: &DesignVariable,
+    hs: &[f64],
+    monitors: &[Monitor],
+) -> Result<(RunResponse, Vec<CentralDifference>), SensitivityError> {
+    let nominal = run_at(analysis, base, monitors)?;
+    let mut out = Vec::with_capacity(hs.len());
+    for &h in hs {
+        let plus = run_at(analysis, &variable.perturbed(base, h)?, monitors)?;
+        let minus = run_at(analysis, &variable.perturbed(base, -h)?, monitors)?;
+        same_steps(variable, h, &nominal, &plus)?;
+        same_steps(variable, -h, &nominal, &minus)?;
+        let derivatives = plus
+            .values
+            .iter()
+            .zip(&minus.values)
+            .map(|(p, m)| p.iter().zip(m).map(|(a, b)| (a - b) / (2.0 * h)).collect())
+            .collect();
+        out.push(CentralDifference {
+            h,
+            derivatives,
+            flagged: flags(&[&minus, &nominal, &plus]),
+        });
+    }
+    Ok((nominal, out))
+}
+
+/// The Taylor remainder for one step size.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TaylorRow {
+    /// Step size.
+    pub h: f64,
+    /// Per step: `max_m |ψ_m(τ + h) − ψ_m(τ) − h ψ'_m|` over the monitors.
+    pub remainder: Vec<f64>,
+    /// Per step: the yield status differs between `τ` and `τ + h` (at this or an earlier step).
+    pub flagged: Vec<bool>,
+}
+
+/// The Taylor remainder of `derivatives[step][monitor]` (the sensitivity under test, e.g. the
+/// dual reference) for every step size in `hs`: one re-run per step size.
+pub fn taylor_remainders(
+    analysis: &dyn Analysis,
+    base: &Design,
+    variable: &DesignVariable,
+    hs: &[f64],
+    monitors: &[Monitor],
+    nominal: &RunResponse,
+    derivatives: &[Vec<f64>],
+) -> Result<Vec<TaylorRow>, SensitivityError> {
+    let mut rows = Vec::with_capacity(hs.len());
+    for &h in hs {
+        let plus = run_at(analysis, &variable.perturbed(base, h)?, monitors)?;
+        same_steps(variable, h, nominal, &plus)?;
+        let remainder = plus
+            .values
+            .iter()
+            .zip(&nominal.values)
+            .zip(derivatives)
+            .map(|((p, n), d)| {
+                p.iter()
+                    .zip(n)
+                    .zip(d)
+                    .map(|((a, b), g)| (a - b - h * g).abs())
+                    .fold(0.0, f64::max)
+            })
+            .collect();
+        rows.push(TaylorRow {
+            h,
+            remainder,
+            flagged: flags(&[nominal, &plus]),
+        });
+    }
+    Ok(rows)
+}
+
+/// The observed rate of the Taylor remainder at one step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TaylorFit {
+    /// Step index.
+    pub step: usize,
+    /// Least-squares slope of `ln remainder` against `ln h` over the used rows (`None` with
+    /// fewer than two).
+    pub rate: Option<f64>,
+    /// Step sizes used.
+    pub used: Vec<f64>,
+    /// Step sizes left out because the active set changed within `h` (reported, not used).
+    pub excluded: Vec<f64>,
+    /// Step sizes left out because the remainder is exactly zero (a response that does not
+    /// depend on the variable at this step, e.g. σ0 before first yield).
+    pub exact: Vec<f64>,
+}
+
+/// Fit the rate of the remainders at `step` over the unflagged rows with a positive remainder.
+pub fn fit_rate(rows: &[TaylorRow], step: usize) -> TaylorFit {
+    let (mut used, mut excluded, mut exact) = (Vec::new(), Vec::new(), Vec::new());
+    let mut pts = Vec::new();
+    for r in rows {
+        if r.flagged[step] {
+            excluded.push(r.h);
+        } else if r.remainder[step] <= 0.0 {
+            exact.push(r.h);
+        } else {
+            used.push(r.h);
+            pts.push((r.h.abs().ln(), r.remainder[step].ln()));
+        }
+    }
+    let rate = (pts.len() >= 2).then(|| {
+        let n = pts.len() as f64;
+        let mx = pts.iter().map(|p| p.0).sum::<f64>() / n;
+        let my = pts.iter().map(|p| p.1).sum::<f64>() / n;
+        let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+        let sxx: f64 = pts.iter().map(|p| (p.0 - mx) * (p.0 - mx)).sum();
+        sxy / sxx
+    });
+    TaylorFit {
+        step,
+        rate,
+        used,
+        excluded,
+        exact,
+    }
+}

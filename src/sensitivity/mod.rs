@@ -1,0 +1,335 @@
+//! Design sensitivity analysis (issue 5; the paper's §3, eqs 37–65): design variables, the
+//! dual-number reference ([`dual`]) and finite differences of complete re-runs ([`fd`]).
+//!
+//! This first part covers the **non-shape** design variables of the shell without contact:
+//! the thickness `t` and the material parameters `E, ν, k, σ0, H, β` (eqs 9–13). They enter the
+//! residual (eq 32) only through the point kernel's `PointInput::thickness` and
+//! `PointInput::material`; the design velocity of eqs 37–43 is zero for them (the geometry does
+//! not move), so the structural fictitious load `a'_V` of eq (64) reduces to the material and
+//! history terms of eq (49). Shape design variables (NURBS control points, a surface parameter)
+//! and tool placements (`b'_N`, eq 83) are the next kinds of [`DesignKind`].
+//!
+//! Layout: `docs/sensitivity.md`.
+
+pub mod dual;
+pub mod fd;
+
+use crate::material::{MaterialError, MaterialParams, PARAM_NAMES};
+use crate::shell::model::ShellModel;
+use crate::shell::ShellError;
+use thiserror::Error;
+
+/// A material parameter as a design variable (the fields of [`MaterialParams`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum MaterialParameter {
+    /// Young's modulus `E` (eq 9).
+    Young,
+    /// Poisson's ratio `ν` (eq 9).
+    Poisson,
+    /// Transverse shear correction factor `k`.
+    ShearFactor,
+    /// Initial yield stress `σ0` (eq 10).
+    Sigma0,
+    /// Hardening modulus `H` (eqs 12–13).
+    Hardening,
+    /// Hardening mix `β` (eq 12).
+    Beta,
+}
+
+impl MaterialParameter {
+    /// All parameters in the order of [`MaterialParams::to_array`].
+    pub const ALL: [MaterialParameter; 6] = [
+        MaterialParameter::Young,
+        MaterialParameter::Poisson,
+        MaterialParameter::ShearFactor,
+        MaterialParameter::Sigma0,
+        MaterialParameter::Hardening,
+        MaterialParameter::Beta,
+    ];
+
+    /// Position in [`MaterialParams::to_array`].
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// The case-file name (as [`PARAM_NAMES`]).
+    pub fn name(self) -> &'static str {
+        PARAM_NAMES[self.index()]
+    }
+
+    /// From its case-file name (`young`, `poisson`, `shear_factor`, `sigma0`, `hardening`,
+    /// `beta`).
+    pub fn from_name(name: &str) -> Result<Self, DesignError> {
+        Self::ALL
+            .into_iter()
+            .find(|p| p.name() == name)
+            .ok_or_else(|| DesignError::UnknownParameter {
+                name: name.to_string(),
+                expected: PARAM_NAMES.join(", "),
+            })
+    }
+}
+
+/// What a design variable changes. Non-exhaustive: shape (surface parameters, control-point
+/// moves with their design velocity field) and rigid-tool placements come next.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum DesignKind {
+    /// The shell thickness `t` (uniform).
+    Thickness,
+    /// A material parameter.
+    Material(MaterialParameter),
+}
+
+impl DesignKind {
+    /// From a case-file key: `thickness`, or `material.<name>` with `<name>` one of
+    /// [`PARAM_NAMES`].
+    pub fn parse(key: &str) -> Result<Self, DesignError> {
+        if key == "thickness" {
+            return Ok(DesignKind::Thickness);
+        }
+        match key.strip_prefix("material.") {
+            Some(name) => Ok(DesignKind::Material(MaterialParameter::from_name(name)?)),
+            None => Err(DesignError::UnknownKind {
+                key: key.to_string(),
+            }),
+        }
+    }
+}
+
+/// A named design variable.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub struct DesignVariable {
+    /// Name (for tables and output).
+    pub name: String,
+    /// What it changes.
+    pub kind: DesignKind,
+}
+
+impl DesignVariable {
+    /// A design variable.
+    pub fn new(name: impl Into<String>, kind: DesignKind) -> Self {
+        DesignVariable {
+            name: name.into(),
+            kind,
+        }
+    }
+
+    /// The thickness, named `t`.
+    pub fn thickness() -> Self {
+        Self::new("t", DesignKind::Thickness)
+    }
+
+    /// A material parameter, named after it.
+    pub fn material(p: MaterialParameter) -> Self {
+        Self::new(p.name(), DesignKind::Material(p))
+    }
+
+    /// Its value at `design`.
+    pub fn value(&self, design: &Design) -> f64 {
+        match self.kind {
+            DesignKind::Thickness => design.thickness,
+            DesignKind::Material(p) => design.material.to_array()[p.index()],
+        }
+    }
+
+    /// `design` with this variable moved by `delta`, checked: a thickness must stay > 0 and a
+    /// material parameter in its admissible range ([`MaterialParams::validate`]).
+    pub fn perturbed(&self, design: &Design, delta: f64) -> Result<Design, DesignError> {
+        if !delta.is_finite() {
+            return Err(DesignError::InvalidPerturbation {
+                variable: self.name.clone(),
+                delta,
+                detail: "expected a finite perturbation".into(),
+            });
+        }
+        let mut d = *design;
+        match self.kind {
+            DesignKind::Thickness => {
+                d.thickness += delta;
+                if !(d.thickness > 0.0 && d.thickness.is_finite()) {
+                    return Err(DesignError::InvalidPerturbation {
+                        variable: self.name.clone(),
+                        delta,
+                        detail: format!(
+                            "thickness {} + {delta} = {}: expected a finite value > 0",
+                            design.thickness, d.thickness
+                        ),
+                    });
+                }
+            }
+            DesignKind::Material(p) => {
+                let mut a = d.material.to_array();
+                a[p.index()] += delta;
+                d.material = MaterialParams::from_array(a);
+                d.material
+                    .validate()
+                    .map_err(|e| DesignError::InvalidPerturbation {
+                        variable: self.name.clone(),
+                        delta,
+                        detail: e.to_string(),
+                    })?;
+            }
+        }
+        Ok(d)
+    }
+
+    /// Check the variable against `model`: the perturbations `±max_delta` (the largest finite
+    /// difference step that will be used, 0 for the dual reference alone) must give an
+    /// admissible design.
+    pub fn validate(&self, model: &ShellModel, max_delta: f64) -> Result<(), DesignError> {
+        let d = Design::of(model);
+        self.perturbed(&d, max_delta)?;
+        self.perturbed(&d, -max_delta)?;
+        Ok(())
+    }
+}
+
+/// Check a list of design variables against `model`: names unique and not empty, every
+/// variable admissible under `±max_delta`, no kind listed twice (two columns of the same
+/// derivative).
+pub fn validate_design(
+    variables: &[DesignVariable],
+    model: &ShellModel,
+    max_delta: f64,
+) -> Result<(), DesignError> {
+    if variables.is_empty() {
+        return Err(DesignError::NoVariables);
+    }
+    for (i, v) in variables.iter().enumerate() {
+        if v.name.trim().is_empty() {
+            return Err(DesignError::EmptyName { index: i });
+        }
+        if let Some(w) = variables[..i]
+            .iter()
+            .find(|w| w.name == v.name || w.kind == v.kind)
+        {
+            return Err(DesignError::Duplicate {
+                first: w.name.clone(),
+                second: v.name.clone(),
+            });
+        }
+        v.validate(model, max_delta)?;
+    }
+    Ok(())
+}
+
+/// The non-shape design of a shell: thickness and material.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Design {
+    /// Thickness `t`.
+    pub thickness: f64,
+    /// Material parameters.
+    pub material: MaterialParams<f64>,
+}
+
+impl Design {
+    /// The design of `model`.
+    pub fn of(model: &ShellModel) -> Self {
+        Design {
+            thickness: model.thickness,
+            material: model.material,
+        }
+    }
+}
+
+/// A monitored response: a component of the RK-interpolated mid-surface displacement
+/// `Σ Ψ_J ū_J` at parameter coordinates `uv` ([`ShellModel::displacement_at`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Monitor {
+    /// Label (for tables and output).
+    pub label: String,
+    /// Parameter coordinates.
+    pub uv: [f64; 2],
+    /// Component 0, 1, 2 (x, y, z).
+    pub component: usize,
+}
+
+impl Monitor {
+    /// A monitor, checked: `component` in 0..3, `uv` finite.
+    pub fn new(
+        label: impl Into<String>,
+        uv: [f64; 2],
+        component: usize,
+    ) -> Result<Self, DesignError> {
+        let label = label.into();
+        if component > 2 || !uv.iter().all(|v| v.is_finite()) {
+            return Err(DesignError::InvalidMonitor {
+                label,
+                detail: format!(
+                    "uv = {uv:?}, component = {component}: expected finite coordinates and a \
+                     component in 0..3"
+                ),
+            });
+        }
+        Ok(Monitor {
+            label,
+            uv,
+            component,
+        })
+    }
+
+    /// Its committed value in `model`.
+    pub fn value(&self, model: &ShellModel) -> Result<f64, ShellError> {
+        Ok(model.displacement_at(self.uv)?[self.component])
+    }
+}
+
+/// Errors of design variables and sensitivity runs. Each names the variable or field concerned.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum DesignError {
+    /// No design variable given.
+    #[error("design variables: none given, expected at least one")]
+    NoVariables,
+    /// A variable without a name.
+    #[error("design variable {index}: empty name")]
+    EmptyName {
+        /// Position in the list.
+        index: usize,
+    },
+    /// Two variables with the same name or kind.
+    #[error(
+        "design variables `{first}` and `{second}`: same name or same kind, expected distinct"
+    )]
+    Duplicate {
+        /// The first.
+        first: String,
+        /// The repeated one.
+        second: String,
+    },
+    /// A key that is no design-variable kind.
+    #[error("design variable kind `{key}`: expected `thickness` or `material.<parameter>`")]
+    UnknownKind {
+        /// The key given.
+        key: String,
+    },
+    /// An unknown material parameter.
+    #[error("material parameter `{name}`: unknown, expected one of {expected}")]
+    UnknownParameter {
+        /// The name given.
+        name: String,
+        /// The admissible names.
+        expected: String,
+    },
+    /// A perturbation that leaves the admissible design.
+    #[error("design variable `{variable}` perturbed by {delta}: {detail}")]
+    InvalidPerturbation {
+        /// Variable name.
+        variable: String,
+        /// The perturbation.
+        delta: f64,
+        /// What is violated.
+        detail: String,
+    },
+    /// A monitor that cannot be evaluated.
+    #[error("monitor `{label}`: {detail}")]
+    InvalidMonitor {
+        /// Monitor label.
+        label: String,
+        /// What is wrong.
+        detail: String,
+    },
+    /// Material validation.
+    #[error(transparent)]
+    Material(#[from] MaterialError),
+}
