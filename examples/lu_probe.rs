@@ -4,7 +4,9 @@
 //! `cargo run --release --example lu_probe -- verification/hemisphere-plastic/case.toml`
 use shelldsa::io::shell_build::build;
 use shelldsa::io::shell_case::read_shell_case;
-use shelldsa::solver::{EssentialBc, LinearSolver, Method, NonlinearProblem, Parallelism, SolverOptions};
+use shelldsa::solver::{
+    EssentialBc, LinearSolver, Method, NonlinearProblem, Parallelism, SolverOptions,
+};
 use std::time::Instant;
 
 fn main() {
@@ -56,11 +58,19 @@ fn main() {
         "sparse LU (current): {:.1} ms",
         t.elapsed().as_secs_f64() * 1e3 / reps as f64
     );
-    for (probe, par) in [(None, Parallelism::Sequential), (Some(1e-2), Parallelism::Sequential), (None, Parallelism::Rayon(2)), (Some(1e-2), Parallelism::Rayon(2))] {
+    for (probe, par) in [
+        (None, Parallelism::Sequential),
+        (Some(1e-2), Parallelism::Sequential),
+        (None, Parallelism::Rayon(2)),
+        (Some(1e-2), Parallelism::Rayon(2)),
+    ] {
         let mut dense = LinearSolver::new(
             &pattern,
             Method::DenseLu,
-            SolverOptions { singularity_probe: probe, parallelism: par },
+            SolverOptions {
+                singularity_probe: probe,
+                parallelism: par,
+            },
         )
         .unwrap();
         dense.factorize(&values).unwrap();

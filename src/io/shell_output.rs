@@ -986,12 +986,15 @@ impl ShellOutput {
         );
         doc.insert("status".into(), json!(status));
         // Solver parts summed over the converged steps (failed attempts not included).
-        let total = self.steps.iter().fold(StepTiming::default(), |a, s| StepTiming {
-            residual_and_tangent_s: a.residual_and_tangent_s + s.timing.residual_and_tangent_s,
-            residual_s: a.residual_s + s.timing.residual_s,
-            factorise_s: a.factorise_s + s.timing.factorise_s,
-            solve_s: a.solve_s + s.timing.solve_s,
-        });
+        let total = self
+            .steps
+            .iter()
+            .fold(StepTiming::default(), |a, s| StepTiming {
+                residual_and_tangent_s: a.residual_and_tangent_s + s.timing.residual_and_tangent_s,
+                residual_s: a.residual_s + s.timing.residual_s,
+                factorise_s: a.factorise_s + s.timing.factorise_s,
+                solve_s: a.solve_s + s.timing.solve_s,
+            });
         doc.insert("solver_timing_s".into(), timing_json(&total));
         doc.insert(
             "monitors".into(),
