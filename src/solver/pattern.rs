@@ -91,14 +91,29 @@ impl SparsityPattern {
         slot_ptr.push(0);
         let mut cell_dofs = Vec::new();
         let mut slots = Vec::new();
+        let mut order: Vec<usize> = Vec::new();
+        let mut column: Vec<u32> = Vec::new();
         for dofs in cells {
             // Column-major local order (slot of local (i, j) at j * m + i), matching nalgebra.
+            // The cell's rows in ascending order are found in each (sorted) column by one merge
+            // walk instead of a binary search per entry.
+            let m = dofs.len();
+            order.clear();
+            order.extend(0..m);
+            order.sort_unstable_by_key(|&a| dofs[a]);
+            column.resize(m, 0);
             for &cj in dofs {
                 let rows = &row_idx[col_ptr[cj]..col_ptr[cj + 1]];
-                for &ri in dofs {
-                    let k = rows.binary_search(&ri).expect("cell pair in pattern");
-                    slots.push((col_ptr[cj] + k) as u32);
+                let mut k = 0;
+                for &a in &order {
+                    let ri = dofs[a];
+                    while rows[k] < ri {
+                        k += 1;
+                    }
+                    debug_assert_eq!(rows[k], ri, "cell pair in pattern");
+                    column[a] = (col_ptr[cj] + k) as u32;
                 }
+                slots.extend_from_slice(&column);
             }
             cell_dofs.extend_from_slice(dofs);
             cell_ptr.push(cell_dofs.len());
