@@ -16,7 +16,7 @@ use super::point::{
     point_residual_with, ParticleState, PointHistory, PointIncrement, PointInput, ShapeData,
     SurfacePoint, DOFS_PER_PARTICLE,
 };
-use super::rotation::rotate_director;
+use super::rotation::{director_derivatives, rotate_director, DirectorDerivatives};
 use super::symmetry::{SymmetryLayout, SymmetryPlane};
 use super::tangent::{CellSlot, ThicknessTangent};
 use super::ShellError;
@@ -84,6 +84,20 @@ pub struct MidSurfaceSample {
     pub displacement: Vector3<f64>,
     /// Director `d` (RK-interpolated, not normalised).
     pub director: Vector3<f64>,
+}
+
+/// Per shape-function particle (real and image) data of one global increment, shared by the
+/// points that have the particle as a neighbour: the committed state, the five local DOFs, the
+/// director increment and its first derivatives ([`PointIncrement`]) and, for the tangent, the
+/// director derivatives. Built by [`ShellModel::particle_cache`]; the same values a point would
+/// compute for itself, computed once.
+#[derive(Clone, Debug)]
+pub struct ParticleCache {
+    states: Vec<ParticleState<f64>>,
+    local: Vec<[f64; DOFS_PER_PARTICLE]>,
+    dd: Vec<Vector3<f64>>,
+    d_alpha: Vec<[Vector3<f64>; 2]>,
+    dirs: Option<Vec<DirectorDerivatives>>,
 }
 
 /// Discretisation of a shell patch: particles, RK functions, quadrature, thickness.
@@ -297,6 +311,60 @@ impl ShellModel {
             .collect()
     }
 
+    /// The per-particle data of the global increment `dofs` for every shape-function particle
+    /// (real and image): what every point would otherwise recompute for each of its neighbours
+    /// ([`ParticleCache`]). The director derivatives of the tangent only when `tangent`.
+    pub fn particle_cache(&self, dofs: &[f64], tangent: bool) -> Result<ParticleCache, ShellError> {
+        if dofs.len() != self.n_dofs() {
+            return Err(ShellError::Dimension {
+                expected: self.n_dofs(),
+                got: dofs.len(),
+            });
+        }
+        let n_sf = self.particles.len() + self.symmetry.images.len();
+        let per: Vec<_> = (0..n_sf)
+            .into_par_iter()
+            .map(|j| {
+                let state = self.particle_state(j);
+                let m = self.dof_map(j);
+                let q = &dofs[DOFS_PER_PARTICLE * m.source..DOFS_PER_PARTICLE * (m.source + 1)];
+                // The local DOFs exactly as `gather_local` forms them.
+                let x: [f64; DOFS_PER_PARTICLE] = match m.map {
+                    None => [q[0], q[1], q[2], q[3], q[4]],
+                    Some((qm, det)) => [
+                        q[0] * qm[(0, 0)] + q[1] * qm[(0, 1)] + q[2] * qm[(0, 2)],
+                        q[0] * qm[(1, 0)] + q[1] * qm[(1, 1)] + q[2] * qm[(1, 2)],
+                        q[0] * qm[(2, 0)] + q[1] * qm[(2, 1)] + q[2] * qm[(2, 2)],
+                        q[3] * det,
+                        q[4] * det,
+                    ],
+                };
+                let inc = PointIncrement::new(std::slice::from_ref(&state), &x)?;
+                let dirs = tangent.then(|| {
+                    director_derivatives(&state.d, &state.e[0], &state.e[1], [x[3], x[4]])
+                });
+                Ok((state, x, inc.dd[0], inc.d_alpha[0], dirs))
+            })
+            .collect::<Result<_, ShellError>>()?;
+        let mut cache = ParticleCache {
+            states: Vec::with_capacity(n_sf),
+            local: Vec::with_capacity(n_sf),
+            dd: Vec::with_capacity(n_sf),
+            d_alpha: Vec::with_capacity(n_sf),
+            dirs: tangent.then(|| Vec::with_capacity(n_sf)),
+        };
+        for (state, x, dd, da, dirs) in per {
+            cache.states.push(state);
+            cache.local.push(x);
+            cache.dd.push(dd);
+            cache.d_alpha.push(da);
+            if let (Some(v), Some(d)) = (cache.dirs.as_mut(), dirs) {
+                v.push(d);
+            }
+        }
+        Ok(cache)
+    }
+
     fn dof_map(&self, j: usize) -> DofMap {
         let n = self.particles.len();
         if j < n {
@@ -505,7 +573,12 @@ impl ShellModel {
             Some(km) => ks.add_to_cell(&self.cell_slots(p), p.sources.len(), km.as_mut_slice()),
             None => Ok(()),
         };
-        let layers = self.layers(k, dofs, tangent.then_some(&mut add as &mut TangentSink<'_>))?;
+        let layers = self.layers(
+            k,
+            dofs,
+            None,
+            tangent.then_some(&mut add as &mut TangentSink<'_>),
+        )?;
         let residual = self.residual_to_cell(p, layers.residual);
         let (history, plastic_layers) = (layers.history, layers.plastic_layers);
         Ok(LocalContribution {
@@ -538,17 +611,43 @@ impl ShellModel {
         &self,
         k: usize,
         dofs: &[f64],
+        cache: Option<&ParticleCache>,
         tangent: Option<&mut TangentSink<'_>>,
     ) -> Result<Layers, ShellError> {
         let p = &self.points[k];
-        let (parts, x) = self.gather_local(k, dofs);
         let nl = self.thickness_rule.len();
+        let (parts, x, inc, mut k_sum) = match cache {
+            None => {
+                let (parts, x) = self.gather_local(k, dofs);
+                let inc = PointIncrement::new(&parts, &x)?;
+                (parts, x, inc, None)
+            }
+            Some(c) => {
+                let parts: Vec<_> = p.neighbours.iter().map(|&j| c.states[j]).collect();
+                let x: Vec<f64> = p.neighbours.iter().flat_map(|&j| c.local[j]).collect();
+                let inc = PointIncrement {
+                    du: p
+                        .neighbours
+                        .iter()
+                        .map(|&j| Vector3::new(c.local[j][0], c.local[j][1], c.local[j][2]))
+                        .collect(),
+                    dd: p.neighbours.iter().map(|&j| c.dd[j]).collect(),
+                    d_alpha: p.neighbours.iter().map(|&j| c.d_alpha[j]).collect(),
+                };
+                (parts, x, inc, None)
+            }
+        };
         let mut residual = vec![0.0; x.len()];
-        let inc = PointIncrement::new(&parts, &x)?;
-        let mut k_sum = tangent
-            .is_some()
-            .then(|| ThicknessTangent::new(&p.shape, &parts, &x))
-            .transpose()?;
+        if tangent.is_some() {
+            k_sum = Some(match cache.and_then(|c| c.dirs.as_ref()) {
+                Some(dirs) => ThicknessTangent::with_directors(
+                    &p.shape,
+                    &parts,
+                    p.neighbours.iter().map(|&j| dirs[j]).collect(),
+                )?,
+                None => ThicknessTangent::new(&p.shape, &parts, &x)?,
+            });
+        }
         let mut history = Vec::with_capacity(nl);
         let mut plastic_layers = 0;
         for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
@@ -605,6 +704,20 @@ impl ShellModel {
         residual: &mut [f64],
         tangent: Option<&mut [f64]>,
     ) -> Result<(Vec<PointHistory<f64>>, usize), ShellError> {
+        self.add_to_cell_cached(k, dofs, None, residual, tangent)
+    }
+
+    /// [`ShellModel::add_to_cell`] with the per-particle data of `dofs` computed once for all
+    /// points ([`ShellModel::particle_cache`], built with `tangent` when a tangent is asked
+    /// for): bit for bit the same results.
+    pub fn add_to_cell_cached(
+        &self,
+        k: usize,
+        dofs: &[f64],
+        cache: Option<&ParticleCache>,
+        residual: &mut [f64],
+        tangent: Option<&mut [f64]>,
+    ) -> Result<(Vec<PointHistory<f64>>, usize), ShellError> {
         const D: usize = DOFS_PER_PARTICLE;
         let p = &self.points[k];
         let nc = D * p.sources.len();
@@ -642,6 +755,7 @@ impl ShellModel {
         } = self.layers(
             k,
             dofs,
+            cache,
             with_tangent.then_some(&mut add as &mut TangentSink<'_>),
         )?;
         let r_cell = self.residual_to_cell(p, r_loc);

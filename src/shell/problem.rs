@@ -450,6 +450,10 @@ impl ShellProblem {
             uv: model.points[k].uv,
             source: e,
         };
+        let cache = model
+            .particle_cache(&q, values.is_some())
+            .map_err(|e| fatal(format!("particle data: {e}")))?;
+        let cache = &cache;
         // The points of cell `c` in a fixed order (deterministic sums) into its arrays.
         let cell = |c: usize, kc: Option<&mut [f64]>, fc: &mut [f64]| -> Result<(), PointError> {
             let Some(group) = groups.get(c) else {
@@ -459,7 +463,7 @@ impl ShellProblem {
             let mut kc = kc;
             for &k in group {
                 let (h, _) = model
-                    .add_to_cell(k, &q, fc, kc.as_deref_mut())
+                    .add_to_cell_cached(k, &q, Some(cache), fc, kc.as_deref_mut())
                     .map_err(|e| point_error(k, e))?;
                 // Each point is evaluated once per assembly.
                 let _ = hist[k].set(h);

@@ -181,6 +181,31 @@ impl<'a> ThicknessTangent<'a> {
         })
     }
 
+    /// As [`ThicknessTangent::new`] with the director derivatives of the neighbours given
+    /// (`super::rotation::director_derivatives` of each neighbour's state and rotation DOFs,
+    /// e.g. from a per-particle cache).
+    pub fn with_directors(
+        shape: &'a [ShapeData],
+        particles: &'a [ParticleState<f64>],
+        dirs: Vec<DirectorDerivatives>,
+    ) -> Result<Self, ShellError> {
+        let n = shape.len();
+        for got in [particles.len(), dirs.len()] {
+            if got != n {
+                return Err(ShellError::Dimension { expected: n, got });
+            }
+        }
+        Ok(ThicknessTangent {
+            shape,
+            particles,
+            dirs,
+            half_t: 0.0,
+            layers: 0,
+            moments: [[[0.0; 9]; 9]; 3],
+            p_moments: [M3::zeros(); 2],
+        })
+    }
+
     /// Number of layers added.
     pub fn layers(&self) -> usize {
         self.layers
