@@ -158,6 +158,7 @@ fn record(load_start: f64, load: f64, converged: bool) -> StepRecord {
         residual_only: vec![(2, 1e-12)],
         factorised_at: converged.then_some(shelldsa::solver::FactorisedAt::PreviousIterate),
         timing: Default::default(),
+        krylov: Vec::new(),
         failure: (!converged).then_some(FailureReason::MaxIterations(2)),
     }
 }

@@ -34,9 +34,9 @@ use crate::shell::problem::ShellProblem;
 use crate::shell::symmetry::SymmetryPlane;
 use crate::shell::ShellError;
 use crate::solver::{
-    ConvergedStep, ConvergedTangent, LinearSolver, LoadStepping, Method, NewtonOptions,
-    NewtonSolver, NonlinearProblem, Parallelism, Predictor, ProblemError, SolverError,
-    SolverOptions, SparsityPattern, StepRecord,
+    ConvergedStep, ConvergedTangent, LinearSolver, LinearUpdates, LoadStepping, Method,
+    NewtonOptions, NewtonSolver, NonlinearProblem, Parallelism, Predictor, ProblemError,
+    SolverError, SolverOptions, SparsityPattern, StepRecord,
 };
 use nalgebra::Vector3;
 use serde_json::json;
@@ -147,6 +147,11 @@ pub fn newton_settings(case: &ShellCase) -> (NewtonOptions, LoadStepping) {
             energy_rtol: s.energy_rtol,
             energy_atol: s.energy_atol,
             max_iterations: s.max_iterations,
+            linear_updates: if s.krylov_updates {
+                LinearUpdates::KrylovNearConvergence
+            } else {
+                LinearUpdates::Direct
+            },
             ..NewtonOptions::default()
         },
         LoadStepping {

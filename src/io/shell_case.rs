@@ -186,6 +186,8 @@ struct StepsFile {
     #[serde(default)]
     predictor: Option<String>,
     #[serde(default)]
+    linear_updates: Option<String>,
+    #[serde(default)]
     stops: Vec<f64>,
 }
 
@@ -454,6 +456,9 @@ pub struct StepsSpec {
     pub easy_iterations: usize,
     /// Predictor (`None`: the driver's default).
     pub predictor: Option<PredictorKind>,
+    /// How Newton updates are solved near convergence (`false`: always a fresh factorisation,
+    /// the default; `true`: GMRES preconditioned by the step's last factorisation).
+    pub krylov_updates: bool,
     /// Load levels the stepping lands on exactly (strictly ascending, finite, in
     /// `(0, final_load]`; possibly empty).
     pub stops: Vec<f64>,
@@ -1565,6 +1570,17 @@ impl Checker<'_> {
                 ))
             }
         };
+        let krylov_updates = match s.linear_updates.as_deref() {
+            None | Some("direct") => false,
+            Some("krylov") => true,
+            Some(other) => {
+                return Err(self.err(
+                    "steps.linear_updates",
+                    format!("{other:?}"),
+                    "\"direct\" or \"krylov\"",
+                ))
+            }
+        };
         let mut prev = 0.0;
         for (k, &v) in s.stops.iter().enumerate() {
             if !(v.is_finite() && v > prev && v <= final_load) {
@@ -1593,6 +1609,7 @@ impl Checker<'_> {
             grow_factor: s.grow_factor,
             easy_iterations,
             predictor,
+            krylov_updates,
             stops: s.stops.clone(),
         })
     }

@@ -510,6 +510,8 @@ pub struct StepSummary {
     pub accepted_residual_only: bool,
     /// Wall time of the step's solver parts (the converged attempt).
     pub timing: StepTiming,
+    /// Updates solved by preconditioned GMRES: `(k, Arnoldi steps)`.
+    pub krylov: Vec<(usize, usize)>,
     /// Monitor displacements, in the case's monitor order.
     pub monitors: Vec<[f64; 3]>,
     /// The VTU written for this step (relative to the output directory), if any.
@@ -762,6 +764,7 @@ impl ShellOutput {
             residual_only: record.residual_only.clone(),
             accepted_residual_only: record.factorised_at == Some(FactorisedAt::PreviousIterate),
             timing: record.timing,
+            krylov: record.krylov.clone(),
             monitors,
             vtu,
             contact,
@@ -921,6 +924,7 @@ impl ShellOutput {
             "residual_only": s.residual_only,
             "accepted_residual_only": s.accepted_residual_only,
             "timing_s": timing_json(&s.timing),
+            "krylov_updates": s.krylov,
             "converged": true,
             "monitors": self.monitors_json(&s.monitors),
             "vtu": s.vtu,

@@ -18,6 +18,7 @@
 
 pub mod assembly;
 pub mod dirichlet;
+pub mod krylov;
 pub mod linear;
 pub mod newton;
 pub mod pattern;
@@ -28,9 +29,9 @@ pub use assembly::{
 pub use dirichlet::EssentialBc;
 pub use linear::{LinearSolver, Method, Parallelism, SolverOptions};
 pub use newton::{
-    Acceptance, ConvergedStep, ConvergedTangent, FactorisedAt, FailureReason, LoadStepping,
-    NewtonFailure, NewtonOptions, NewtonReport, NewtonSolver, NonlinearProblem, Predictor,
-    ProblemError, StepRecord, StepTiming,
+    Acceptance, ConvergedStep, ConvergedTangent, FactorisedAt, FailureReason, LinearUpdates,
+    LoadStepping, NewtonFailure, NewtonOptions, NewtonReport, NewtonSolver, NonlinearProblem,
+    Predictor, ProblemError, StepRecord, StepTiming,
 };
 pub use pattern::SparsityPattern;
 

@@ -64,6 +64,7 @@
 //! `min_step` the run stops with a [`NewtonFailure`] naming the load level, the reason and the
 //! residual norms, and keeping every converged step.
 
+use super::krylov::gmres;
 use super::{EssentialBc, LinearSolver, SolverError, SparsityPattern};
 use std::fmt;
 use std::time::Instant;
@@ -207,6 +208,8 @@ pub struct NewtonOptions {
     pub energy_atol: f64,
     /// Maximum iterations per step (default 20).
     pub max_iterations: usize,
+    /// How the Newton updates are solved (default [`LinearUpdates::Direct`]).
+    pub linear_updates: LinearUpdates,
     /// Divergence when `‖r_k‖ > factor · r_ref` or `|Δu_kᵀ r_k| > factor · |Δu_0ᵀ r_0|`
     /// (default 1e8).
     pub divergence_factor: f64,
@@ -223,8 +226,26 @@ impl Default for NewtonOptions {
             energy_atol: 0.0,
             max_iterations: 20,
             divergence_factor: 1e8,
+            linear_updates: LinearUpdates::Direct,
         }
     }
+}
+
+/// How the linear system of a Newton update is solved.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LinearUpdates {
+    /// Factorise every tangent and solve directly.
+    #[default]
+    Direct,
+    /// Near convergence (`k ≥ 1`, constraints met, `‖r_k‖ ≤ 10⁻² r_ref`, and a factorisation
+    /// of an earlier iterate of the same step held), solve `K_k Δu = −r_k` by GMRES
+    /// right-preconditioned with that factorisation ([`super::krylov::gmres`]) to 1e-12 of
+    /// `‖r_k‖`, within 20 Arnoldi steps; otherwise (or if GMRES fails) factorise as
+    /// [`LinearUpdates::Direct`]. The updates equal the direct ones to that tolerance, so the
+    /// iteration stays Newton's (quadratic); an iterate accepted after a GMRES update is
+    /// factorised before [`NonlinearProblem::on_converged`] when the problem requires the
+    /// converged tangent.
+    KrylovNearConvergence,
 }
 
 /// How a load step's iteration starts.
@@ -394,6 +415,8 @@ pub struct StepRecord {
     pub factorised_at: Option<FactorisedAt>,
     /// Wall time spent in the attempt's parts.
     pub timing: StepTiming,
+    /// Updates solved by GMRES ([`LinearUpdates::KrylovNearConvergence`]): `(k, Arnoldi steps)`.
+    pub krylov: Vec<(usize, usize)>,
     /// Why it failed, if it did.
     pub failure: Option<FailureReason>,
 }
@@ -620,6 +643,7 @@ impl NewtonSolver {
                 residual_only: Vec::new(),
                 factorised_at: None,
                 timing: StepTiming::default(),
+                krylov: Vec::new(),
                 failure: None,
             };
             let outcome = self.attempt(
@@ -696,6 +720,8 @@ impl NewtonSolver {
         let o = self.options;
         let residual_first = problem.converged_tangent() == ConvergedTangent::NotNeeded;
         let mut unknowns_terms = 0.0;
+        // Whether the solver holds the factorisation of an iterate of this attempt.
+        let mut held_in_step = false;
         let bc = EssentialBc::new(u.len(), &problem.essential(load))
             .map_err(|e| FailureReason::Setup(e.to_string()))?;
         let predicted = rec.predictor != Predictor::Zero;
@@ -763,10 +789,17 @@ impl NewtonSolver {
                 * r_ref.max(problem.residual_scale()).max(unknowns_terms);
             rec.roundoff_floors.push(floor);
             let floor_ok = constraints_met && rnorm <= floor;
-            let clock = Instant::now();
-            let factorised = solver.factorize(&w.values);
-            rec.timing.factorise_s += clock.elapsed().as_secs_f64();
-            factorised.map_err(FailureReason::LinearSolver)?;
+            let krylov = o.linear_updates == LinearUpdates::KrylovNearConvergence
+                && held_in_step
+                && k >= 1
+                && constraints_met
+                && rnorm <= 1e-2 * r_ref;
+            let mut factorised_here = false;
+            if !krylov {
+                factorise(solver, &w.values, rec)?;
+                held_in_step = true;
+                factorised_here = true;
+            }
             if floor_ok {
                 // At the floor the energy product is round-off too: the residual decides.
                 let how = if res_ok {
@@ -774,16 +807,34 @@ impl NewtonSolver {
                 } else {
                     Acceptance::RoundoffFloor
                 };
-                return Ok((bc, how, FactorisedAt::Converged));
+                let at = accepted_at(factorised_here, residual_first, solver, &w.values, rec)?;
+                return Ok((bc, how, at));
             }
             if res_ok && k == 0 {
                 return Ok((bc, Acceptance::Tolerance, FactorisedAt::Converged));
             }
-            w.du.copy_from_slice(&w.rhs);
             let clock = Instant::now();
-            let solved = solver.solve_in_place(&mut w.du);
+            let iterative = if krylov {
+                gmres(pattern, &w.values, solver, &w.rhs, &mut w.du, 1e-12, 20)
+                    .map_err(FailureReason::LinearSolver)?
+            } else {
+                None
+            };
             rec.timing.solve_s += clock.elapsed().as_secs_f64();
-            solved.map_err(FailureReason::LinearSolver)?;
+            match iterative {
+                Some(info) => rec.krylov.push((k, info.iterations)),
+                None => {
+                    if !factorised_here {
+                        factorise(solver, &w.values, rec)?;
+                        factorised_here = true;
+                    }
+                    w.du.copy_from_slice(&w.rhs);
+                    let clock = Instant::now();
+                    let solved = solver.solve_in_place(&mut w.du);
+                    rec.timing.solve_s += clock.elapsed().as_secs_f64();
+                    solved.map_err(FailureReason::LinearSolver)?;
+                }
+            }
             let e = free_dot(&bc, &w.du, &w.rhs).abs();
             rec.energy_norms.push(e);
             if k == 0 {
@@ -799,7 +850,8 @@ impl NewtonSolver {
             }
             let energy_ok = e <= (o.energy_rtol * e0).max(o.energy_atol);
             if res_ok && energy_ok {
-                return Ok((bc, Acceptance::Tolerance, FactorisedAt::Converged));
+                let at = accepted_at(factorised_here, residual_first, solver, &w.values, rec)?;
+                return Ok((bc, Acceptance::Tolerance, at));
             }
             // Two consecutive iterations without progress: round-off, not a slow approach.
             let stalled = |a: f64, b: f64| a >= o.stagnation_ratio * b;
@@ -811,7 +863,8 @@ impl NewtonSolver {
                 && stalled(r_prev, r_prev2)
                 && rnorm <= o.residual_rtol.sqrt() * r_ref;
             if stagnated {
-                return Ok((bc, Acceptance::Stagnation, FactorisedAt::Converged));
+                let at = accepted_at(factorised_here, residual_first, solver, &w.values, rec)?;
+                return Ok((bc, Acceptance::Stagnation, at));
             }
             if k == o.max_iterations {
                 return Err(FailureReason::MaxIterations(o.max_iterations));
@@ -886,6 +939,37 @@ impl NewtonSolver {
         rec.energy_norms.push(e);
         Ok(Some(Acceptance::Tolerance))
     }
+}
+
+/// The tangent the solver holds for an accepted iterate: factorised there, or (after an
+/// iterative update) an earlier iterate's when the problem allows it, else factorised now.
+fn accepted_at(
+    factorised_here: bool,
+    residual_first: bool,
+    solver: &mut LinearSolver,
+    values: &[f64],
+    rec: &mut StepRecord,
+) -> Result<FactorisedAt, FailureReason> {
+    if factorised_here {
+        Ok(FactorisedAt::Converged)
+    } else if residual_first {
+        Ok(FactorisedAt::PreviousIterate)
+    } else {
+        factorise(solver, values, rec)?;
+        Ok(FactorisedAt::Converged)
+    }
+}
+
+/// Numeric factorisation of the tangent, timed into `rec`.
+fn factorise(
+    solver: &mut LinearSolver,
+    values: &[f64],
+    rec: &mut StepRecord,
+) -> Result<(), FailureReason> {
+    let clock = Instant::now();
+    let factorised = solver.factorize(values);
+    rec.timing.factorise_s += clock.elapsed().as_secs_f64();
+    factorised.map_err(FailureReason::LinearSolver)
 }
 
 /// Why `st.stops` is invalid (strictly ascending, finite, within `(start, end]`), if it is.

@@ -1,0 +1,175 @@
+//! GMRES right-preconditioned by a held factorisation: `A x = b` for a matrix `A` over a
+//! [`SparsityPattern`] when the [`LinearSolver`] holds the factorisation of a nearby matrix
+//! (the tangent of an earlier Newton iterate of the same step). Near convergence the tangent
+//! changes by `O(‖Δu‖)` from one iterate to the next, so `A M⁻¹` is a small perturbation of the
+//! identity and a few Arnoldi steps reach round-off, at the cost of one sparse product and one
+//! pair of triangular solves each, against a full refactorisation.
+//!
+//! The iteration (Saad, *Iterative Methods for Sparse Linear Systems*, 2nd ed., §9.3.2): start
+//! from the chord step `x₀ = M⁻¹ b`, build an orthonormal basis `V` of the Krylov space of
+//! `A M⁻¹` on `r₀ = b − A x₀` by modified Gram–Schmidt, keep the least-squares problem in upper
+//! triangular form with Givens rotations, and stop when the estimated residual
+//! `|g_{j+1}| ≤ rtol ‖b‖`; then `x = x₀ + M⁻¹ V y`. No restart: the iteration fails (and the
+//! caller refactorises) when `max_iterations` is reached first.
+
+use super::{LinearSolver, SolverError, SparsityPattern};
+
+/// Outcome of [`gmres`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GmresInfo {
+    /// Arnoldi steps taken (0 when the chord step already met the tolerance).
+    pub iterations: usize,
+    /// True residual `‖b − A x‖ / ‖b‖` at the returned `x`.
+    pub relative_residual: f64,
+}
+
+/// `y = A x` for the CSC values `values` of `pattern`.
+pub fn csc_mul(pattern: &SparsityPattern, values: &[f64], x: &[f64], y: &mut [f64]) {
+    let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
+    y.fill(0.0);
+    for (j, &xj) in x.iter().enumerate() {
+        if xj == 0.0 {
+            continue;
+        }
+        for p in cp[j]..cp[j + 1] {
+            y[ri[p]] += values[p] * xj;
+        }
+    }
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// Solve `A x = b` (`A` given by `values` over `pattern`) with GMRES right-preconditioned by the
+/// factorisation `m` holds; `x` receives the solution. `Ok(None)`: not converged within
+/// `max_iterations` (or the true residual of the result missed `rtol` by more than a factor
+/// 10), `x` is then unspecified; errors are the solver's.
+pub fn gmres(
+    pattern: &SparsityPattern,
+    values: &[f64],
+    m: &LinearSolver,
+    b: &[f64],
+    x: &mut [f64],
+    rtol: f64,
+    max_iterations: usize,
+) -> Result<Option<GmresInfo>, SolverError> {
+    let n = b.len();
+    let b_norm = norm(b);
+    if b_norm == 0.0 {
+        x.fill(0.0);
+        return Ok(Some(GmresInfo {
+            iterations: 0,
+            relative_residual: 0.0,
+        }));
+    }
+    let tol = rtol * b_norm;
+    x.copy_from_slice(b);
+    m.solve_in_place(x)?;
+    let mut ax = vec![0.0; n];
+    csc_mul(pattern, values, x, &mut ax);
+    let r0: Vec<f64> = b.iter().zip(&ax).map(|(bi, ai)| bi - ai).collect();
+    let beta = norm(&r0);
+    if beta <= tol {
+        return Ok(Some(GmresInfo {
+            iterations: 0,
+            relative_residual: beta / b_norm,
+        }));
+    }
+    let mut v: Vec<Vec<f64>> = vec![r0.iter().map(|r| r / beta).collect()];
+    // Columns of the Hessenberg matrix after the rotations (upper triangular R), the
+    // rotations (c, s) and the rotated right-hand side g.
+    let mut r: Vec<Vec<f64>> = Vec::new();
+    let mut rot: Vec<(f64, f64)> = Vec::new();
+    let mut g = vec![beta];
+    let mut z = vec![0.0; n];
+    let mut w = vec![0.0; n];
+    let mut converged = false;
+    for j in 0..max_iterations {
+        z.copy_from_slice(&v[j]);
+        m.solve_in_place(&mut z)?;
+        csc_mul(pattern, values, &z, &mut w);
+        let mut h = Vec::with_capacity(j + 2);
+        for vi in &v {
+            let hij = dot(&w, vi);
+            for (wk, vk) in w.iter_mut().zip(vi) {
+                *wk -= hij * vk;
+            }
+            h.push(hij);
+        }
+        let h_next = norm(&w);
+        h.push(h_next);
+        for (i, &(c, s)) in rot.iter().enumerate() {
+            let (a, bb) = (h[i], h[i + 1]);
+            h[i] = c * a + s * bb;
+            h[i + 1] = -s * a + c * bb;
+        }
+        let (a, bb) = (h[j], h[j + 1]);
+        let d = a.hypot(bb);
+        if d == 0.0 || !d.is_finite() {
+            return Ok(None);
+        }
+        let (c, s) = (a / d, bb / d);
+        h[j] = d;
+        h[j + 1] = 0.0;
+        rot.push((c, s));
+        let gj = g[j];
+        g[j] = c * gj;
+        g.push(-s * gj);
+        h.truncate(j + 1);
+        r.push(h);
+        if g[j + 1].abs() <= tol {
+            converged = true;
+            break;
+        }
+        if h_next == 0.0 {
+            // Lucky breakdown: the Krylov space is invariant and the least-squares solution
+            // exact.
+            converged = true;
+            break;
+        }
+        v.push(w.iter().map(|x| x / h_next).collect());
+    }
+    if !converged {
+        return Ok(None);
+    }
+    // Back substitution R y = g, then x += M⁻¹ V y.
+    let k = r.len();
+    let mut y = vec![0.0; k];
+    for i in (0..k).rev() {
+        let mut s = g[i];
+        for (l, yl) in y.iter().enumerate().take(k).skip(i + 1) {
+            s -= r[l][i] * yl;
+        }
+        y[i] = s / r[i][i];
+    }
+    z.fill(0.0);
+    for (vi, yi) in v.iter().zip(&y) {
+        for (zk, vk) in z.iter_mut().zip(vi) {
+            *zk += yi * vk;
+        }
+    }
+    m.solve_in_place(&mut z)?;
+    for (xk, zk) in x.iter_mut().zip(&z) {
+        *xk += zk;
+    }
+    csc_mul(pattern, values, x, &mut ax);
+    let res = b
+        .iter()
+        .zip(&ax)
+        .map(|(bi, ai)| (bi - ai).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    // A NaN residual fails too.
+    if res.is_nan() || res > 10.0 * tol {
+        return Ok(None);
+    }
+    Ok(Some(GmresInfo {
+        iterations: k,
+        relative_residual: res / b_norm,
+    }))
+}
