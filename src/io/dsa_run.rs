@@ -500,7 +500,7 @@ pub fn table(r: &DsaResult, v: usize) -> String {
                 .and_then(|d| col.map(|c| d[st][m] * c.h).or(Some(d[st][m])));
             let ratio = match (fd, dual) {
                 (Some(a), Some(b)) if b != 0.0 => format!("{:>10.4}", 100.0 * a / b),
-                (Some(a), Some(_)) if a == 0.0 => format!("{:>10}", "0 = 0"),
+                (Some(0.0), Some(_)) => format!("{:>10}", "0 = 0"),
                 _ => format!("{:>10}", "—"),
             };
             s.push_str(&format!(
