@@ -211,19 +211,23 @@ fn describe(c: &Case) -> String {
             m.path.n_steps(),
             m.design_name
         ),
-        Case::Shell(s) => format!(
-            "shell on a {} surface, {} × {} particles, {} basis, {} boundary condition(s), {} \
+        Case::Shell(s) => {
+            format!(
+                "shell on a {} surface, {} × {} particles, {} basis, {} boundary condition(s), {} \
              load(s), {} tool(s), {} monitor(s), load factor to {}",
-            s.surface.kind(),
-            s.particles.counts[0],
-            s.particles.counts[1],
-            s.kernel.basis,
-            s.boundary.len(),
-            s.loads.len(),
-            s.tools.len(),
-            s.monitors.len(),
-            s.steps.final_load
-        ),
+                s.surface.kind(),
+                s.particles.counts[0],
+                s.particles.counts[1],
+                s.kernel.basis,
+                s.boundary.len(),
+                s.loads.len(),
+                s.tools.len(),
+                s.monitors.len(),
+                s.steps.final_load
+            ) + &s.dsa.as_ref().map_or(String::new(), |d| {
+                format!(", {} design variable(s) for `shelldsa dsa`", d.design.len())
+            })
+        }
     }
 }
 

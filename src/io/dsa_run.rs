@@ -107,6 +107,10 @@ pub struct DsaResult {
     /// Largest difference between the dual run's monitor values and the plain analysis',
     /// relative to the largest monitor magnitude (both converge to the Newton tolerance).
     pub dual_value_difference: Option<f64>,
+    /// Largest [`crate::sensitivity::dual::DualStepRecord::value_mismatch`] over the steps:
+    /// the value parts of the dual state against the f64 analysis state (round-off when the
+    /// reference follows the analysis).
+    pub dual_state_mismatch: Option<f64>,
     /// Wall time of the plain analysis (s).
     pub time_analysis: f64,
     /// The dual reference's own time inside its run (s).
@@ -162,6 +166,7 @@ pub fn run(
     // (2) The dual reference.
     let mut dual: Option<Vec<Vec<Vec<f64>>>> = None; // [variable][step][monitor]
     let (mut time_dual, mut time_dual_run, mut dual_value_difference) = (None, None, None);
+    let mut dual_state_mismatch = None;
     if spec.methods.contains(&DsaMethod::Dual) {
         let loads = dual_loads(case)?;
         let (problem, newton) = analysis.build(&base)?;
@@ -198,6 +203,12 @@ pub fn run(
             .flat_map(|(s, n)| s.values.iter().zip(n).map(|(a, b)| (a - b).abs()))
             .fold(0.0f64, f64::max);
         dual_value_difference = Some(if scale > 0.0 { diff / scale } else { diff });
+        dual_state_mismatch = Some(
+            r.records
+                .iter()
+                .map(|s| s.value_mismatch)
+                .fold(0.0f64, f64::max),
+        );
         time_dual = Some(r.reference.as_secs_f64());
         time_dual_run = Some(r.total.as_secs_f64());
         progress(&format!(
@@ -254,7 +265,7 @@ pub fn run(
                     }
                     done += 1;
                     progress(&format!(
-                        "fd {done}/{total_runs}: `{}` {} h (h/|τ| = {relative:e}, h = {delta:e}) \
+                        "fd {done}/{total_runs}: `{}` {} h (h/|τ| = {relative:e}, h = {delta:.4e}) \
                          in {:.2} s",
                         var.name,
                         if delta > 0.0 { "+" } else { "−" },
@@ -318,6 +329,7 @@ pub fn run(
         nominal,
         variables,
         dual_value_difference,
+        dual_state_mismatch,
         time_analysis,
         time_dual,
         time_dual_run,
@@ -429,6 +441,7 @@ pub fn to_json(case: &ShellCase, r: &DsaResult) -> Value {
         "monitors": monitors,
         "loads": r.nominal.loads,
         "dual_value_difference": r.dual_value_difference.map_or(Value::Null, num),
+        "dual_state_mismatch": r.dual_state_mismatch.map_or(Value::Null, num),
         "timing_s": {
             "analysis": r.time_analysis,
             "continuum": Value::Null,
@@ -486,9 +499,14 @@ pub fn table(r: &DsaResult, v: usize) -> String {
             c.h, c.relative
         ))
     );
+    let (dual_head, cont_head) = if col.is_some() {
+        ("ψ'Δτ dual", "ψ'Δτ cont.")
+    } else {
+        ("ψ' dual", "ψ' cont.")
+    };
     s.push_str(&format!(
         "{:>4} {:>11} {:<10} {:>13} {:>13} {:>13} {:>13} {:>10}\n",
-        "step", "λ", "monitor", "ψ", "Δψ (FD)", "ψ'Δτ dual", "ψ'Δτ cont.", "ratio×100"
+        "step", "λ", "monitor", "ψ", "Δψ (FD)", dual_head, cont_head, "ratio×100"
     ));
     for st in 0..r.nominal.loads.len() {
         let flag = col.is_some_and(|c| c.flagged[st]);
