@@ -7,6 +7,8 @@
 //! - `kind = "shell"`: a whole shell problem ([`shell_case`]; format in `docs/case-format.md`),
 //!   assembled by [`shell_build`] and written by [`shell_output`].
 
+pub mod dsa_case;
+pub mod dsa_run;
 pub mod plot;
 pub mod shell_build;
 pub mod shell_case;

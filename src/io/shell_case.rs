@@ -47,6 +47,10 @@ struct ShellFile {
     tool: Vec<ToolFile>,
     #[serde(default)]
     contact: Option<ContactFile>,
+    #[serde(default)]
+    design: Vec<super::dsa_case::DesignFile>,
+    #[serde(default)]
+    dsa: Option<super::dsa_case::DsaFile>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -581,6 +585,8 @@ pub struct ShellCase {
     pub monitors: Vec<Monitor>,
     /// Output settings.
     pub output: OutputSpec,
+    /// `[[design]]` and `[dsa]` (`None` without `[[design]]` tables; [`super::dsa_case`]).
+    pub dsa: Option<super::dsa_case::DsaSpec>,
 }
 
 /// Edge names as written in case files.
@@ -901,7 +907,11 @@ impl Checker<'_> {
             },
         };
 
+        let dsa =
+            super::dsa_case::check(self.path, f.design, f.dsa, thickness, &material, &monitors)?;
+
         Ok(ShellCase {
+            dsa,
             path: self.path.into(),
             title: f.problem.title.clone().unwrap_or_else(|| "shell".into()),
             surface_spec: f.surface,

@@ -179,7 +179,7 @@ fn same_steps(
 
 /// Per step, whether the yield status of any layer point differs between the runs at this or
 /// an earlier step.
-fn flags(runs: &[&RunResponse]) -> Vec<bool> {
+pub fn flags(runs: &[&RunResponse]) -> Vec<bool> {
     let n = runs[0].yielding.len();
     let mut flagged = false;
     (0..n)

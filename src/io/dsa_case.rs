@@ -1,0 +1,479 @@
+//! Design variables in a shell case file: the `[[design]]` tables and the optional `[dsa]`
+//! table (issue 5; `docs/case-format.md` §"Design sensitivity").
+//!
+//! ```toml
+//! [[design]]
+//! name = "t"                      # unique, non-empty
+//! kind = "thickness"              # or "material.young" | "material.poisson" | "material.sigma0"
+//!                                 #    | "material.hardening" | "material.beta" | "material.shear_factor"
+//! fd_steps = [1e-3, 1e-4]         # relative steps h/|τ| of the finite-difference study
+//!
+//! [dsa]
+//! methods = ["dual", "fd"]        # default: both ("continuum" is not implemented yet)
+//! monitors = ["A.ux", "B"]        # `<monitor>.<ux|uy|uz>` or `<monitor>` (all three);
+//!                                 # default: every [[monitor]], all three components
+//! ```
+//!
+//! Everything is checked here, before any analysis: each wrong key is a
+//! [`CaseError::Invalid`] naming the dotted key (`design[1].kind`, `dsa.monitors[0]`), the
+//! value and the expectation; every `±h` of the finite-difference study must give an
+//! admissible design ([`DesignVariable::perturbed`]: `t ± h > 0`, material parameters in their
+//! ranges). [`dual_loads`] checks that the dual-number reference can carry the case's loads.
+
+use super::shell_case::{Load, LoadScalingSpec, Monitor as CaseMonitor, ShellCase};
+use super::CaseError;
+use crate::material::MaterialParams;
+use crate::sensitivity::dual::DualLoad;
+use crate::sensitivity::{Design, DesignKind, DesignVariable, Monitor};
+use crate::shell::load::{Gravity, PointForce, Pressure};
+use serde::Deserialize;
+use std::path::Path;
+
+/// Default relative finite-difference steps `h/|τ|`: 1e-3 and 1e-4 (truncation error of the
+/// central difference ~1e-6 and ~1e-8 of the response's curvature scale, both far above the
+/// ~1e-14 noise of converged re-runs; `docs/sensitivity.md` §4).
+pub const DEFAULT_FD_STEPS: [f64; 2] = [1e-3, 1e-4];
+
+/// The displacement components a sensitivity monitor can name.
+pub const COMPONENT_NAMES: [&str; 3] = ["ux", "uy", "uz"];
+
+/// One `[[design]]` table as written.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct DesignFile {
+    name: String,
+    kind: String,
+    #[serde(default)]
+    fd_steps: Option<Vec<f64>>,
+}
+
+/// The `[dsa]` table as written.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct DsaFile {
+    #[serde(default)]
+    methods: Option<Vec<String>>,
+    #[serde(default)]
+    monitors: Option<Vec<String>>,
+}
+
+/// A sensitivity method.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum DsaMethod {
+    /// The dual-number reference (`sensitivity::dual`).
+    Dual,
+    /// Central differences of complete re-runs (`sensitivity::fd`).
+    Fd,
+}
+
+impl DsaMethod {
+    /// The name used in case files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            DsaMethod::Dual => "dual",
+            DsaMethod::Fd => "fd",
+        }
+    }
+
+    /// Parse a method name; `key` names where it was written (for the error).
+    pub fn parse(s: &str, key: &str, path: &Path) -> Result<Self, CaseError> {
+        match s {
+            "dual" => Ok(DsaMethod::Dual),
+            "fd" => Ok(DsaMethod::Fd),
+            "continuum" => Err(invalid(
+                path,
+                key,
+                format!("{s:?}"),
+                "\"dual\" or \"fd\": the continuum method (eqs 37-65) is not implemented yet",
+            )),
+            _ => Err(invalid(
+                path,
+                key,
+                format!("{s:?}"),
+                "\"dual\" or \"fd\" (\"continuum\" is not implemented yet)",
+            )),
+        }
+    }
+}
+
+/// One checked design variable with its finite-difference steps.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DesignEntry {
+    /// The variable.
+    pub variable: DesignVariable,
+    /// Relative steps `h/|τ|` (each finite, > 0), in the order written.
+    pub fd_steps: Vec<f64>,
+}
+
+impl DesignEntry {
+    /// The absolute steps `h = (h/|τ|)·|τ|` at `design`.
+    pub fn absolute_steps(&self, design: &Design) -> Vec<f64> {
+        let tau = self.variable.value(design).abs();
+        self.fd_steps.iter().map(|r| r * tau).collect()
+    }
+}
+
+/// The checked design-sensitivity part of a shell case.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DsaSpec {
+    /// The design variables (at least one).
+    pub design: Vec<DesignEntry>,
+    /// The methods to run (default: dual and fd).
+    pub methods: Vec<DsaMethod>,
+    /// The monitored components (default: every case monitor, ux, uy, uz).
+    pub monitors: Vec<Monitor>,
+}
+
+fn invalid(
+    path: &Path,
+    key: impl Into<String>,
+    value: impl Into<String>,
+    expected: impl Into<String>,
+) -> CaseError {
+    CaseError::Invalid {
+        path: path.into(),
+        key: key.into(),
+        value: value.into(),
+        expected: expected.into(),
+    }
+}
+
+fn fmt_list(a: &[f64]) -> String {
+    let parts: Vec<String> = a.iter().map(|v| format!("{v}")).collect();
+    format!("[{}]", parts.join(", "))
+}
+
+/// Parse a list of method names (`--methods dual,fd` or `[dsa] methods`): at least one, no
+/// repeats.
+pub fn parse_methods(
+    names: &[String],
+    key: &str,
+    path: &Path,
+) -> Result<Vec<DsaMethod>, CaseError> {
+    if names.is_empty() {
+        return Err(invalid(path, key, "[]", "at least one of \"dual\", \"fd\""));
+    }
+    let mut out = Vec::with_capacity(names.len());
+    for (i, n) in names.iter().enumerate() {
+        let m = DsaMethod::parse(n.trim(), &format!("{key}[{i}]"), path)?;
+        if out.contains(&m) {
+            return Err(invalid(
+                path,
+                format!("{key}[{i}]"),
+                format!("{n:?}"),
+                "a method not listed before",
+            ));
+        }
+        out.push(m);
+    }
+    Ok(out)
+}
+
+/// Check the `[[design]]` and `[dsa]` tables of a case (`None` when there are no `[[design]]`
+/// tables; a `[dsa]` table without them is an error). `thickness`, `material` and `monitors`
+/// are the case's, already checked.
+pub(crate) fn check(
+    path: &Path,
+    design: Vec<DesignFile>,
+    dsa: Option<DsaFile>,
+    thickness: f64,
+    material: &MaterialParams<f64>,
+    monitors: &[CaseMonitor],
+) -> Result<Option<DsaSpec>, CaseError> {
+    if design.is_empty() {
+        return match dsa {
+            Some(_) => Err(invalid(
+                path,
+                "dsa",
+                "(table)",
+                "at least one [[design]] table alongside [dsa]",
+            )),
+            None => Ok(None),
+        };
+    }
+    let base = Design {
+        thickness,
+        material: *material,
+    };
+    let mut entries: Vec<DesignEntry> = Vec::with_capacity(design.len());
+    for (k, d) in design.iter().enumerate() {
+        let key = format!("design[{k}]");
+        if d.name.trim().is_empty() {
+            return Err(invalid(
+                path,
+                format!("{key}.name"),
+                format!("{:?}", d.name),
+                "a non-empty name",
+            ));
+        }
+        if let Some(j) = entries.iter().position(|e| e.variable.name == d.name) {
+            return Err(invalid(
+                path,
+                format!("{key}.name"),
+                format!("{:?}", d.name),
+                format!("a name not used by an earlier design variable (design[{j}])"),
+            ));
+        }
+        let kind = design_kind(path, &format!("{key}.kind"), &d.kind)?;
+        if let Some(j) = entries.iter().position(|e| e.variable.kind == kind) {
+            return Err(invalid(
+                path,
+                format!("{key}.kind"),
+                format!("{:?}", d.kind),
+                format!(
+                    "a kind not used by an earlier design variable (design[{j}] `{}`)",
+                    entries[j].variable.name
+                ),
+            ));
+        }
+        let variable = DesignVariable::new(d.name.clone(), kind);
+        let fd_steps = d
+            .fd_steps
+            .clone()
+            .unwrap_or_else(|| DEFAULT_FD_STEPS.to_vec());
+        let steps_key = format!("{key}.fd_steps");
+        if fd_steps.is_empty() {
+            return Err(invalid(
+                path,
+                &steps_key,
+                "[]",
+                "at least one relative step h/|τ| > 0",
+            ));
+        }
+        for (i, &r) in fd_steps.iter().enumerate() {
+            if !(r > 0.0 && r.is_finite()) {
+                return Err(invalid(
+                    path,
+                    format!("{steps_key}[{i}]"),
+                    r.to_string(),
+                    "a finite relative step h/|τ| > 0",
+                ));
+            }
+            if fd_steps[..i].contains(&r) {
+                return Err(invalid(
+                    path,
+                    format!("{steps_key}[{i}]"),
+                    r.to_string(),
+                    "a step not listed before",
+                ));
+            }
+        }
+        let tau = variable.value(&base);
+        if tau == 0.0 {
+            return Err(invalid(
+                path,
+                &steps_key,
+                fmt_list(&fd_steps),
+                format!(
+                    "a variable with a non-zero value: `{}` = 0, so relative steps h/|τ| give \
+                     h = 0",
+                    d.kind
+                ),
+            ));
+        }
+        for (i, &r) in fd_steps.iter().enumerate() {
+            let h = r * tau.abs();
+            for delta in [h, -h] {
+                variable.perturbed(&base, delta).map_err(|e| {
+                    invalid(
+                        path,
+                        format!("{steps_key}[{i}]"),
+                        r.to_string(),
+                        format!("a step that keeps the design admissible: {e}"),
+                    )
+                })?;
+            }
+        }
+        entries.push(DesignEntry { variable, fd_steps });
+    }
+
+    let dsa = dsa.unwrap_or_default();
+    let methods = match &dsa.methods {
+        Some(m) => parse_methods(m, "dsa.methods", path)?,
+        None => vec![DsaMethod::Dual, DsaMethod::Fd],
+    };
+    let sel = match &dsa.monitors {
+        Some(m) => {
+            if m.is_empty() {
+                return Err(invalid(
+                    path,
+                    "dsa.monitors",
+                    "[]",
+                    "at least one `<monitor>` or `<monitor>.<ux|uy|uz>`",
+                ));
+            }
+            let mut out: Vec<Monitor> = Vec::new();
+            for (i, s) in m.iter().enumerate() {
+                let key = format!("dsa.monitors[{i}]");
+                for mon in monitor_selection(path, &key, s, monitors)? {
+                    if out.iter().any(|o| o.label == mon.label) {
+                        return Err(invalid(
+                            path,
+                            &key,
+                            format!("{s:?}"),
+                            format!("a component not selected before (`{}` is)", mon.label),
+                        ));
+                    }
+                    out.push(mon);
+                }
+            }
+            out
+        }
+        None => {
+            if monitors.is_empty() {
+                return Err(invalid(
+                    path,
+                    "monitor",
+                    "(none)",
+                    "at least one [[monitor]]: the design sensitivities are those of the \
+                     monitored displacements",
+                ));
+            }
+            let mut out = Vec::new();
+            for m in monitors {
+                for (c, n) in COMPONENT_NAMES.iter().enumerate() {
+                    out.push(sens_monitor(path, "monitor", m, c, n)?);
+                }
+            }
+            out
+        }
+    };
+    Ok(Some(DsaSpec {
+        design: entries,
+        methods,
+        monitors: sel,
+    }))
+}
+
+fn sens_monitor(
+    path: &Path,
+    key: &str,
+    m: &CaseMonitor,
+    component: usize,
+    cname: &str,
+) -> Result<Monitor, CaseError> {
+    Monitor::new(format!("{}.{cname}", m.name), m.at, component)
+        .map_err(|e| invalid(path, key, format!("{:?}", m.name), e.to_string()))
+}
+
+fn monitor_selection(
+    path: &Path,
+    key: &str,
+    s: &str,
+    monitors: &[CaseMonitor],
+) -> Result<Vec<Monitor>, CaseError> {
+    let names: Vec<&str> = monitors.iter().map(|m| m.name.as_str()).collect();
+    let find = |n: &str| {
+        monitors.iter().find(|m| m.name == n).ok_or_else(|| {
+            invalid(
+                path,
+                key,
+                format!("{s:?}"),
+                format!(
+                    "`<monitor>` or `<monitor>.<ux|uy|uz>` with <monitor> one of the \
+                     [[monitor]] names {names:?}"
+                ),
+            )
+        })
+    };
+    // A monitor's own name may contain a dot: the whole string is tried first.
+    if let Ok(m) = find(s) {
+        return COMPONENT_NAMES
+            .iter()
+            .enumerate()
+            .map(|(c, n)| sens_monitor(path, key, m, c, n))
+            .collect();
+    }
+    let Some((name, comp)) = s.rsplit_once('.') else {
+        return find(s).map(|_| Vec::new());
+    };
+    let m = find(name)?;
+    let c = COMPONENT_NAMES
+        .iter()
+        .position(|n| *n == comp)
+        .ok_or_else(|| {
+            invalid(
+                path,
+                key,
+                format!("{s:?}"),
+                format!("a component of {COMPONENT_NAMES:?} after `{name}.`"),
+            )
+        })?;
+    Ok(vec![sens_monitor(path, key, m, c, comp)?])
+}
+
+fn design_kind(path: &Path, key: &str, s: &str) -> Result<DesignKind, CaseError> {
+    const EXPECTED: &str = "\"thickness\" or \"material.<young|poisson|shear_factor|sigma0|\
+                            hardening|beta>\"";
+    for (prefix, what) in [
+        (
+            "shape",
+            "shape design variables (surface parameters, control-point moves)",
+        ),
+        ("tool", "tool design variables (die and punch placement)"),
+    ] {
+        if s == prefix || s.starts_with(&format!("{prefix}.")) {
+            return Err(invalid(
+                path,
+                key,
+                format!("{s:?}"),
+                format!("{EXPECTED}: {what} are not supported yet"),
+            ));
+        }
+    }
+    DesignKind::parse(s)
+        .map_err(|e| invalid(path, key, format!("{s:?}"), format!("{EXPECTED} ({e})")))
+}
+
+/// The case's loads as the dual-number reference evaluates them. Rejects, before any
+/// analysis, what the reference cannot carry yet: edge moments (they act through the
+/// director), loads held constant (`scaling = "constant"`), and contact with rigid tools.
+pub fn dual_loads(case: &ShellCase) -> Result<Vec<DualLoad>, CaseError> {
+    let path = case.path.as_path();
+    if !case.tools.is_empty() || case.contact.is_some() {
+        return Err(invalid(
+            path,
+            "tool",
+            format!("{} tool(s)", case.tools.len()),
+            "no [[tool]] and no [contact] for the dual-number reference: contact is not \
+             supported by it yet",
+        ));
+    }
+    let mut out = Vec::with_capacity(case.loads.len());
+    for (k, l) in case.loads.iter().enumerate() {
+        let key = format!("load[{k}]");
+        if case.load_scaling.get(k).copied().unwrap_or_default() != LoadScalingSpec::Proportional {
+            return Err(invalid(
+                path,
+                format!("{key}.scaling"),
+                "\"constant\"",
+                "\"proportional\" for the dual-number reference (constant loads are not \
+                 supported by it yet)",
+            ));
+        }
+        let shell_err = |e: crate::shell::ShellError| invalid(path, &key, "(table)", e.to_string());
+        out.push(match l {
+            Load::PointForce { at, force } => DualLoad::PointForce(PointForce {
+                uv: *at,
+                force: *force,
+            }),
+            Load::Gravity { per_area } => {
+                DualLoad::Gravity(Gravity::new(*per_area).map_err(shell_err)?)
+            }
+            Load::Pressure { value } => {
+                DualLoad::Pressure(Pressure::new(*value).map_err(shell_err)?)
+            }
+            Load::Moment { .. } => {
+                return Err(invalid(
+                    path,
+                    format!("{key}.kind"),
+                    "\"moment\"",
+                    "\"point-force\", \"pressure\" or \"gravity\" for the dual-number \
+                     reference (edge moments act through the director and are not supported \
+                     by it yet)",
+                ))
+            }
+        });
+    }
+    Ok(out)
+}

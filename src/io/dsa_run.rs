@@ -1,0 +1,590 @@
+//! `shelldsa dsa`: the design sensitivities of a shell case by the dual-number reference and by
+//! central differences of complete re-runs, the table in the format of the paper's Tables 1–2,
+//! and `sensitivity.json` (`docs/sensitivity.md` §6).
+//!
+//! Order of the runs: (1) the plain analysis (no hook; its wall time is `timing_s.analysis`,
+//! and its monitors are the nominal responses `ψ(τ)` of the finite differences); (2) the
+//! analysis with the dual reference in its convergence hook (one run gives the responses and
+//! the derivatives of every design variable; `timing_s.dual` is the reference's own time inside
+//! it); (3) per design variable and relative step, the re-runs at `τ ± h` (`timing_s.fd`, all
+//! of them). The Taylor remainder `|ψ(τ + h) − ψ(τ) − h ψ'_dual|` of every step size reuses the
+//! `τ + h` re-run.
+
+use super::dsa_case::{dual_loads, DesignEntry, DsaMethod, DsaSpec};
+use super::shell_build;
+use super::shell_case::ShellCase;
+use super::CaseError;
+use crate::sensitivity::dual::{run_dual, DualMode, SensitivityError};
+use crate::sensitivity::fd::{self, fit_rate, Analysis, RunResponse, TaylorFit, TaylorRow};
+use crate::sensitivity::{validate_design, Design, DesignVariable};
+use crate::shell::problem::ShellProblem;
+use crate::shell::ShellError;
+use crate::solver::NewtonSolver;
+use serde_json::{json, Value};
+use std::time::Instant;
+use thiserror::Error;
+
+/// Errors of a `dsa` run.
+#[derive(Debug, Error)]
+pub enum DsaError {
+    /// The case has no `[[design]]` table.
+    #[error(
+        "case file {0}: no [[design]] table: `shelldsa dsa` needs at least one design variable"
+    )]
+    NoDesign(String),
+    /// Invalid case input (design variables, loads the reference cannot carry).
+    #[error(transparent)]
+    Case(#[from] CaseError),
+    /// The analysis or a method failed.
+    #[error(transparent)]
+    Sensitivity(#[from] SensitivityError),
+    /// The dual-reference run took other load steps than the plain analysis.
+    #[error("dual reference: {0}")]
+    Inconsistent(String),
+}
+
+/// The case's analysis for any design: the case with `thickness` and `material` replaced.
+pub struct CaseAnalysis<'a> {
+    /// The case.
+    pub case: &'a ShellCase,
+}
+
+impl Analysis for CaseAnalysis<'_> {
+    fn build(&self, design: &Design) -> Result<(ShellProblem, NewtonSolver), SensitivityError> {
+        let mut c = self.case.clone();
+        c.thickness = design.thickness;
+        c.material = design.material;
+        let b = shell_build::build(&c).map_err(|e| {
+            SensitivityError::Shell(ShellError::InvalidInput(format!(
+                "{}: {e}",
+                self.case.path.display()
+            )))
+        })?;
+        Ok((b.problem, b.newton))
+    }
+}
+
+/// Central differences of one variable with one step size.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FdColumn {
+    /// Relative step `h/|τ|`.
+    pub relative: f64,
+    /// Absolute step `h`.
+    pub h: f64,
+    /// `derivatives[step][monitor] = (ψ(τ + h) − ψ(τ − h)) / 2h`.
+    pub derivatives: Vec<Vec<f64>>,
+    /// Per step: the yield status of some layer point differs among the three runs at this or
+    /// an earlier step ([`fd::flags`]).
+    pub flagged: Vec<bool>,
+    /// The Taylor remainder of the dual derivative with this step (when the dual ran).
+    pub taylor: Option<TaylorRow>,
+}
+
+/// The results of one design variable.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VariableResult {
+    /// The variable and its relative steps.
+    pub entry: DesignEntry,
+    /// Its value `τ`.
+    pub value: f64,
+    /// `dual[step][monitor]` (when the dual reference ran).
+    pub dual: Option<Vec<Vec<f64>>>,
+    /// One column per step size (when finite differences ran).
+    pub fd: Vec<FdColumn>,
+    /// Per load step, the fitted Taylor rate (dual and fd both ran).
+    pub taylor: Vec<TaylorFit>,
+}
+
+/// All results of a `dsa` run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DsaResult {
+    /// The spec run (methods possibly overridden on the command line).
+    pub spec: DsaSpec,
+    /// The plain analysis: loads, monitors, yield status.
+    pub nominal: RunResponse,
+    /// Per design variable.
+    pub variables: Vec<VariableResult>,
+    /// Largest difference between the dual run's monitor values and the plain analysis',
+    /// relative to the largest monitor magnitude (both converge to the Newton tolerance).
+    pub dual_value_difference: Option<f64>,
+    /// Largest [`crate::sensitivity::dual::DualStepRecord::value_mismatch`] over the steps:
+    /// the value parts of the dual state against the f64 analysis state (round-off when the
+    /// reference follows the analysis).
+    pub dual_state_mismatch: Option<f64>,
+    /// Wall time of the plain analysis (s).
+    pub time_analysis: f64,
+    /// The dual reference's own time inside its run (s).
+    pub time_dual: Option<f64>,
+    /// Wall time of the whole run with the dual hook (analysis + reference, s).
+    pub time_dual_run: Option<f64>,
+    /// Wall time of all finite-difference re-runs (s).
+    pub time_fd: Option<f64>,
+}
+
+/// Check everything a `dsa` run of `case` with `methods` needs, before any analysis: design
+/// variables present and admissible, loads the dual reference can carry, and, on the built
+/// model, [`validate_design`].
+pub fn validate(case: &ShellCase, methods: &[DsaMethod]) -> Result<DsaSpec, DsaError> {
+    let mut spec = case
+        .dsa
+        .clone()
+        .ok_or_else(|| DsaError::NoDesign(case.path.display().to_string()))?;
+    spec.methods = methods.to_vec();
+    if methods.contains(&DsaMethod::Dual) {
+        dual_loads(case)?;
+    }
+    Ok(spec)
+}
+
+/// Run the analysis and the methods of `spec` on `case`; `progress` receives one line per
+/// run.
+pub fn run(
+    case: &ShellCase,
+    spec: &DsaSpec,
+    progress: &mut dyn FnMut(&str),
+) -> Result<DsaResult, DsaError> {
+    let analysis = CaseAnalysis { case };
+    let base = Design {
+        thickness: case.thickness,
+        material: case.material,
+    };
+    let vars: Vec<DesignVariable> = spec.design.iter().map(|d| d.variable.clone()).collect();
+    let monitors = &spec.monitors;
+
+    // (1) The plain analysis.
+    let t = Instant::now();
+    let (problem, newton) = analysis.build(&base)?;
+    validate_design(&vars, &problem.model, 0.0).map_err(SensitivityError::from)?;
+    let nominal = fd::response(problem, &newton, analysis.solver(), monitors)?;
+    let time_analysis = t.elapsed().as_secs_f64();
+    progress(&format!(
+        "analysis: {} converged steps, {:.2} s",
+        nominal.loads.len(),
+        time_analysis
+    ));
+
+    // (2) The dual reference.
+    let mut dual: Option<Vec<Vec<Vec<f64>>>> = None; // [variable][step][monitor]
+    let (mut time_dual, mut time_dual_run, mut dual_value_difference) = (None, None, None);
+    let mut dual_state_mismatch = None;
+    if spec.methods.contains(&DsaMethod::Dual) {
+        let loads = dual_loads(case)?;
+        let (problem, newton) = analysis.build(&base)?;
+        let mode = if vars.len() <= 8 {
+            DualMode::Vector
+        } else {
+            DualMode::PerVariable
+        };
+        let r = run_dual(
+            problem,
+            vars.clone(),
+            loads,
+            monitors.clone(),
+            &newton,
+            analysis.solver(),
+            mode,
+        )?;
+        let loads: Vec<f64> = r.records.iter().map(|s| s.load).collect();
+        if loads != nominal.loads {
+            return Err(DsaError::Inconsistent(format!(
+                "converged load levels {loads:?}, plain analysis {:?}: prescribe the steps",
+                nominal.loads
+            )));
+        }
+        let scale = nominal
+            .values
+            .iter()
+            .flatten()
+            .fold(0.0f64, |a, v| a.max(v.abs()));
+        let diff = r
+            .records
+            .iter()
+            .zip(&nominal.values)
+            .flat_map(|(s, n)| s.values.iter().zip(n).map(|(a, b)| (a - b).abs()))
+            .fold(0.0f64, f64::max);
+        dual_value_difference = Some(if scale > 0.0 { diff / scale } else { diff });
+        dual_state_mismatch = Some(
+            r.records
+                .iter()
+                .map(|s| s.value_mismatch)
+                .fold(0.0f64, f64::max),
+        );
+        time_dual = Some(r.reference.as_secs_f64());
+        time_dual_run = Some(r.total.as_secs_f64());
+        progress(&format!(
+            "dual: {} variable(s), reference {:.2} s in a run of {:.2} s",
+            vars.len(),
+            r.reference.as_secs_f64(),
+            r.total.as_secs_f64()
+        ));
+        dual = Some(
+            (0..vars.len())
+                .map(|v| {
+                    r.records
+                        .iter()
+                        .map(|s| s.derivatives.iter().map(|d| d[v]).collect())
+                        .collect()
+                })
+                .collect(),
+        );
+    }
+
+    // (3) Finite differences.
+    let run_fd = spec.methods.contains(&DsaMethod::Fd);
+    let total_runs: usize = if run_fd {
+        spec.design.iter().map(|d| 2 * d.fd_steps.len()).sum()
+    } else {
+        0
+    };
+    let t_fd = Instant::now();
+    let mut done = 0;
+    let mut variables = Vec::with_capacity(vars.len());
+    for (v, entry) in spec.design.iter().enumerate() {
+        let var = &entry.variable;
+        let dual_v = dual.as_ref().map(|d| d[v].clone());
+        let mut cols = Vec::new();
+        if run_fd {
+            for (&relative, h) in entry.fd_steps.iter().zip(entry.absolute_steps(&base)) {
+                let mut one = |delta: f64| -> Result<RunResponse, DsaError> {
+                    let t = Instant::now();
+                    let (problem, newton) = analysis.build(
+                        &var.perturbed(&base, delta)
+                            .map_err(SensitivityError::from)?,
+                    )?;
+                    let r = fd::response(problem, &newton, analysis.solver(), monitors)?;
+                    if r.loads != nominal.loads {
+                        return Err(SensitivityError::StepSequence {
+                            variable: var.name.clone(),
+                            h: delta,
+                            detail: format!(
+                                "converged load levels {:?}, nominal {:?}: prescribe the steps",
+                                r.loads, nominal.loads
+                            ),
+                        }
+                        .into());
+                    }
+                    done += 1;
+                    progress(&format!(
+                        "fd {done}/{total_runs}: `{}` {} h (h/|τ| = {relative:e}, h = {delta:.4e}) \
+                         in {:.2} s",
+                        var.name,
+                        if delta > 0.0 { "+" } else { "−" },
+                        t.elapsed().as_secs_f64()
+                    ));
+                    Ok(r)
+                };
+                let plus = one(h)?;
+                let minus = one(-h)?;
+                let derivatives = plus
+                    .values
+                    .iter()
+                    .zip(&minus.values)
+                    .map(|(p, m)| p.iter().zip(m).map(|(a, b)| (a - b) / (2.0 * h)).collect())
+                    .collect();
+                let taylor = dual_v.as_ref().map(|d| TaylorRow {
+                    h,
+                    remainder: plus
+                        .values
+                        .iter()
+                        .zip(&nominal.values)
+                        .zip(d)
+                        .map(|((p, n), g)| {
+                            p.iter()
+                                .zip(n)
+                                .zip(g)
+                                .map(|((a, b), g)| (a - b - h * g).abs())
+                                .fold(0.0, f64::max)
+                        })
+                        .collect(),
+                    flagged: fd::flags(&[&nominal, &plus]),
+                });
+                cols.push(FdColumn {
+                    relative,
+                    h,
+                    derivatives,
+                    flagged: fd::flags(&[&minus, &nominal, &plus]),
+                    taylor,
+                });
+            }
+        }
+        let rows: Vec<TaylorRow> = cols.iter().filter_map(|c| c.taylor.clone()).collect();
+        let taylor = if rows.is_empty() {
+            Vec::new()
+        } else {
+            (0..nominal.loads.len())
+                .map(|s| fit_rate(&rows, s))
+                .collect()
+        };
+        variables.push(VariableResult {
+            entry: entry.clone(),
+            value: var.value(&base),
+            dual: dual_v,
+            fd: cols,
+            taylor,
+        });
+    }
+    let time_fd = run_fd.then(|| t_fd.elapsed().as_secs_f64());
+    Ok(DsaResult {
+        spec: spec.clone(),
+        nominal,
+        variables,
+        dual_value_difference,
+        dual_state_mismatch,
+        time_analysis,
+        time_dual,
+        time_dual_run,
+        time_fd,
+    })
+}
+
+/// A number for JSON: `null` when not finite (JSON has no NaN).
+fn num(v: f64) -> Value {
+    if v.is_finite() {
+        json!(v)
+    } else {
+        Value::Null
+    }
+}
+
+/// The notes written at the top of `sensitivity.json`.
+pub const NOTES: [&str; 4] = [
+    "continuum: null everywhere -- the hand-derived continuum method (eqs 37-65) is not \
+     implemented yet",
+    "timing_s.analysis: wall time of a separate plain run of the analysis (no sensitivity \
+     hook), the nominal run of the finite differences; timing_s.dual: the dual reference's own \
+     time inside the analysis run with the hook (the whole hooked run: dual_run_total_s); \
+     timing_s.fd: all finite-difference re-runs",
+    "fd_central and fd_step are lists, one entry per step size of the variable's fd_steps \
+     (relative steps h/|tau|; fd_step holds the absolute h); fd_flagged[k] marks load steps \
+     where the yield status of some layer point differs among the runs at tau-h, tau, tau+h \
+     (at that step or an earlier one): such differences straddle a kink and are not \
+     comparable",
+    "taylor: per load step, the least-squares slope of log |psi(tau+h) - psi(tau) - h psi'_dual| \
+     (max over the monitors) against log h over the unflagged step sizes; 2 when psi'_dual is \
+     the derivative of the discrete response",
+];
+
+/// `sensitivity.json`. Everything but `timing_s` and `dual_run_total_s` is a deterministic
+/// function of the case.
+pub fn to_json(case: &ShellCase, r: &DsaResult) -> Value {
+    let monitors: Vec<Value> = r
+        .spec
+        .monitors
+        .iter()
+        .map(|m| json!({"label": m.label, "uv": m.uv, "component": m.component}))
+        .collect();
+    let variables: Vec<Value> = r
+        .variables
+        .iter()
+        .map(|v| {
+            let steps: Vec<Value> = (0..r.nominal.loads.len())
+                .map(|s| {
+                    let mut comps = serde_json::Map::new();
+                    for (m, mon) in r.spec.monitors.iter().enumerate() {
+                        comps.insert(
+                            mon.label.clone(),
+                            json!({
+                                "value": num(r.nominal.values[s][m]),
+                                "continuum": Value::Null,
+                                "dual": v.dual.as_ref().map_or(Value::Null, |d| num(d[s][m])),
+                                "fd_central": v.fd.iter().map(|c| num(c.derivatives[s][m])).collect::<Vec<_>>(),
+                                "fd_step": v.fd.iter().map(|c| num(c.h)).collect::<Vec<_>>(),
+                            }),
+                        );
+                    }
+                    json!({
+                        "step": s + 1,
+                        "load": r.nominal.loads[s],
+                        "plastic_points": r.nominal.yielding[s].iter().filter(|y| **y).count(),
+                        "fd_flagged": v.fd.iter().map(|c| c.flagged[s]).collect::<Vec<_>>(),
+                        "taylor_remainder": v.fd.iter().map(|c| c.taylor.as_ref().map_or(Value::Null, |t| num(t.remainder[s]))).collect::<Vec<_>>(),
+                        "monitors": comps,
+                    })
+                })
+                .collect();
+            let fits: Vec<Value> = v
+                .taylor
+                .iter()
+                .map(|f| {
+                    json!({
+                        "step": f.step + 1,
+                        "rate": f.rate.map_or(Value::Null, num),
+                        "used_h": f.used,
+                        "excluded_h_active_set": f.excluded,
+                        "exact_h": f.exact,
+                    })
+                })
+                .collect();
+            let rates: Vec<f64> = v.taylor.iter().filter_map(|f| f.rate).collect();
+            json!({
+                "name": v.entry.variable.name,
+                "kind": kind_name(&v.entry.variable),
+                "value": v.value,
+                "fd_steps_relative": v.entry.fd_steps,
+                "fd_steps": v.fd.iter().map(|c| c.h).collect::<Vec<_>>(),
+                "flagged_steps": flagged_steps(v),
+                "taylor": {
+                    "rate_min": rates.iter().copied().reduce(f64::min),
+                    "rate_max": rates.iter().copied().reduce(f64::max),
+                    "per_step": fits,
+                },
+                "steps": steps,
+            })
+        })
+        .collect();
+    json!({
+        "kind": "shell-dsa",
+        "case": case.path.display().to_string(),
+        "title": case.title,
+        "notes": NOTES,
+        "methods": r.spec.methods.iter().map(|m| m.name()).collect::<Vec<_>>(),
+        "monitors": monitors,
+        "loads": r.nominal.loads,
+        "dual_value_difference": r.dual_value_difference.map_or(Value::Null, num),
+        "dual_state_mismatch": r.dual_state_mismatch.map_or(Value::Null, num),
+        "timing_s": {
+            "analysis": r.time_analysis,
+            "continuum": Value::Null,
+            "dual": r.time_dual,
+            "fd": r.time_fd,
+        },
+        "dual_run_total_s": r.time_dual_run,
+        "variables": variables,
+    })
+}
+
+/// `thickness` or `material.<name>`.
+pub fn kind_name(v: &DesignVariable) -> String {
+    match v.kind {
+        crate::sensitivity::DesignKind::Material(p) => format!("material.{}", p.name()),
+        _ => "thickness".into(),
+    }
+}
+
+/// Per step size, the 1-based load steps flagged by the active-set test.
+fn flagged_steps(v: &VariableResult) -> Vec<Value> {
+    v.fd
+        .iter()
+        .map(|c| {
+            json!({
+                "fd_step_relative": c.relative,
+                "steps": c.flagged.iter().enumerate().filter(|(_, f)| **f).map(|(s, _)| s + 1).collect::<Vec<_>>(),
+            })
+        })
+        .collect()
+}
+
+fn cell(v: Option<f64>) -> String {
+    match v {
+        Some(x) if x.is_finite() => format!("{x:>13.5e}"),
+        _ => format!("{:>13}", "—"),
+    }
+}
+
+/// The table of one design variable in the format of the paper's Tables 1–2, at its first
+/// step size `h` (`Δτ`): per load step and monitor component ψ, `Δψ = (ψ(τ+h) − ψ(τ−h))/2`
+/// (central differences), `ψ'Δτ` per method (continuum: not implemented yet), and
+/// `Δψ / ψ'Δτ × 100` (finite differences against the dual reference). `*` marks a step
+/// flagged by the active-set test.
+pub fn table(r: &DsaResult, v: usize) -> String {
+    let var = &r.variables[v];
+    let col = var.fd.first();
+    let mut s = format!(
+        "design variable `{}` ({}), τ = {:e}{}\n",
+        var.entry.variable.name,
+        kind_name(&var.entry.variable),
+        var.value,
+        col.map_or(String::from(", no finite differences"), |c| format!(
+            ", Δτ = {:e} (h/|τ| = {:e})",
+            c.h, c.relative
+        ))
+    );
+    let (dual_head, cont_head) = if col.is_some() {
+        ("ψ'Δτ dual", "ψ'Δτ cont.")
+    } else {
+        ("ψ' dual", "ψ' cont.")
+    };
+    s.push_str(&format!(
+        "{:>4} {:>11} {:<10} {:>13} {:>13} {:>13} {:>13} {:>10}\n",
+        "step", "λ", "monitor", "ψ", "Δψ (FD)", dual_head, cont_head, "ratio×100"
+    ));
+    for st in 0..r.nominal.loads.len() {
+        let flag = col.is_some_and(|c| c.flagged[st]);
+        for (m, mon) in r.spec.monitors.iter().enumerate() {
+            let fd = col.map(|c| c.derivatives[st][m] * c.h);
+            let dual = var
+                .dual
+                .as_ref()
+                .and_then(|d| col.map(|c| d[st][m] * c.h).or(Some(d[st][m])));
+            let ratio = match (fd, dual) {
+                (Some(a), Some(b)) if b != 0.0 => format!("{:>10.4}", 100.0 * a / b),
+                (Some(0.0), Some(_)) => format!("{:>10}", "0 = 0"),
+                _ => format!("{:>10}", "—"),
+            };
+            s.push_str(&format!(
+                "{:>4} {:>11.4e} {:<10} {} {} {} {} {}{}\n",
+                st + 1,
+                r.nominal.loads[st],
+                mon.label,
+                cell(Some(r.nominal.values[st][m])),
+                cell(fd),
+                cell(dual),
+                cell(None),
+                ratio,
+                if flag { " *" } else { "" }
+            ));
+        }
+    }
+    for c in &var.fd {
+        s.push_str(&format!(
+            "h/|τ| = {:e}: max |Δψ/ψ'Δτ − 1| over unflagged components with |ψ'| ≥ 1e-6 max|ψ'|: {}\n",
+            c.relative,
+            max_rel_diff(var, c).map_or("—".into(), |e| format!("{e:.3e}"))
+        ));
+    }
+    let rates: Vec<String> = var
+        .taylor
+        .iter()
+        .filter_map(|f| f.rate.map(|r| format!("{}: {r:.3}", f.step + 1)))
+        .collect();
+    if !rates.is_empty() {
+        s.push_str(&format!("Taylor rate per step: {}\n", rates.join(", ")));
+    }
+    let flagged: Vec<String> = var
+        .fd
+        .iter()
+        .filter(|c| c.flagged.iter().any(|f| *f))
+        .map(|c| {
+            let first = c.flagged.iter().position(|f| *f).map_or(0, |p| p + 1);
+            format!("h/|τ| = {:e} from step {first}", c.relative)
+        })
+        .collect();
+    if !flagged.is_empty() {
+        s.push_str(&format!(
+            "* active set changed within ±h (not comparable): {}\n",
+            flagged.join("; ")
+        ));
+    }
+    s
+}
+
+/// The largest `|fd/dual − 1|` of one step size over the unflagged steps and the components
+/// with `|ψ'_dual| ≥ 1e-6 · max|ψ'_dual|` (the variable's largest over all steps and
+/// monitors); `None` without both methods or without an unflagged non-zero component.
+pub fn max_rel_diff(v: &VariableResult, c: &FdColumn) -> Option<f64> {
+    let d = v.dual.as_ref()?;
+    let big = d.iter().flatten().fold(0.0f64, |a, x| a.max(x.abs()));
+    let mut out: Option<f64> = None;
+    for (s, row) in d.iter().enumerate() {
+        if c.flagged[s] {
+            continue;
+        }
+        for (m, g) in row.iter().enumerate() {
+            if big > 0.0 && g.abs() >= 1e-6 * big {
+                let e = (c.derivatives[s][m] / g - 1.0).abs();
+                out = Some(out.map_or(e, |o: f64| o.max(e)));
+            }
+        }
+    }
+    out
+}
