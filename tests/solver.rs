@@ -1045,15 +1045,16 @@ fn quadratic_predictor_saves_iterations_on_a_softening_chain() {
     assert!(totals[1] < totals[0], "{totals:?}");
 }
 
-/// [`SpringChain`] declaring that its convergence hook does not need the converged tangent,
-/// counting tangent assemblies.
-struct NoHook {
+/// [`SpringChain`] with a given converged-tangent policy, counting tangent assemblies and
+/// recording what the convergence hook saw.
+struct Counting {
     chain: SpringChain,
+    policy: ConvergedTangent,
     tangents: usize,
     hooks: Vec<FactorisedAt>,
 }
 
-impl NonlinearProblem for NoHook {
+impl NonlinearProblem for Counting {
     fn n_dofs(&self) -> usize {
         self.chain.n_dofs()
     }
@@ -1081,7 +1082,7 @@ impl NonlinearProblem for NoHook {
         self.chain.force_norm(l)
     }
     fn converged_tangent(&self) -> ConvergedTangent {
-        ConvergedTangent::NotNeeded
+        self.policy
     }
     fn on_converged(&mut self, s: &ConvergedStep<'_>) -> Result<(), ProblemError> {
         self.hooks.push(s.factorised_at);
@@ -1114,23 +1115,18 @@ fn residual_first_acceptance_saves_tangents_and_keeps_the_converged_states() {
                 ..Default::default()
             },
         };
-        if not_needed {
-            let mut prob = NoHook {
-                chain,
-                tangents: 0,
-                hooks: Vec::new(),
-            };
-            let report = newton.run(&mut prob, &pattern, &mut solver, &[0.0; 11]);
-            (report.unwrap(), prob.tangents, prob.hooks)
-        } else {
-            let mut prob = Counting {
-                chain,
-                tangents: 0,
-                hooks: Vec::new(),
-            };
-            let report = newton.run(&mut prob, &pattern, &mut solver, &[0.0; 11]);
-            (report.unwrap(), prob.tangents, prob.hooks)
-        }
+        let mut prob = Counting {
+            chain,
+            policy: if not_needed {
+                ConvergedTangent::NotNeeded
+            } else {
+                ConvergedTangent::Required
+            },
+            tangents: 0,
+            hooks: Vec::new(),
+        };
+        let report = newton.run(&mut prob, &pattern, &mut solver, &[0.0; 11]);
+        (report.unwrap(), prob.tangents, prob.hooks)
     };
     let (full, t_full, h_full) = run(false);
     let (first, t_first, h_first) = run(true);
@@ -1160,52 +1156,6 @@ fn residual_first_acceptance_saves_tangents_and_keeps_the_converged_states() {
             s.residual_only.last().map(|&(k, _)| k) == Some(s.residual_norms.len() - 1),
             "{s:?}"
         );
-    }
-}
-
-/// [`SpringChain`] with the default hook policy, counting tangents and recording the hooks.
-struct Counting {
-    chain: SpringChain,
-    tangents: usize,
-    hooks: Vec<FactorisedAt>,
-}
-
-impl NonlinearProblem for Counting {
-    fn n_dofs(&self) -> usize {
-        self.chain.n_dofs()
-    }
-    fn residual(&mut self, u: &[f64], l: f64, r: &mut [f64]) -> Result<(), ProblemError> {
-        self.chain.residual(u, l, r)
-    }
-    fn tangent(&mut self, u: &[f64], l: f64, v: &mut [f64]) -> Result<(), ProblemError> {
-        self.tangents += 1;
-        self.chain.tangent(u, l, v)
-    }
-    fn residual_and_tangent(
-        &mut self,
-        u: &[f64],
-        l: f64,
-        r: &mut [f64],
-        v: &mut [f64],
-    ) -> Result<(), ProblemError> {
-        self.tangents += 1;
-        self.chain.residual_and_tangent(u, l, r, v)
-    }
-    fn essential(&self, l: f64) -> Vec<(usize, f64)> {
-        self.chain.essential(l)
-    }
-    fn force_norm(&self, l: f64) -> f64 {
-        self.chain.force_norm(l)
-    }
-    fn on_converged(&mut self, s: &ConvergedStep<'_>) -> Result<(), ProblemError> {
-        self.hooks.push(s.factorised_at);
-        Ok(())
-    }
-    fn commit(&mut self, u: &[f64], l: f64) {
-        self.chain.commit(u, l)
-    }
-    fn restore(&mut self) {
-        self.chain.restore()
     }
 }
 
