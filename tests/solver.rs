@@ -890,34 +890,37 @@ fn secant_predictor_is_exact_on_a_linear_path_even_when_steps_grow() {
     }
 }
 
+/// Newton updates over 20 equal steps of the softening chain near its limit load (tolerance
+/// 1e-12) with `predictor`.
+fn softening_chain_iterations(predictor: Predictor) -> usize {
+    let mut prob = SpringChain::new(10, 0.05, 2.0, None);
+    let pattern = prob.pattern.clone();
+    let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+    let newton = NewtonSolver {
+        options: NewtonOptions {
+            residual_rtol: 1e-12,
+            ..Default::default()
+        },
+        stepping: LoadStepping {
+            initial_step: 0.05,
+            max_step: 0.05,
+            predictor,
+            ..Default::default()
+        },
+    };
+    let report = newton
+        .run(&mut prob, &pattern, &mut solver, &[0.0; 11])
+        .unwrap();
+    let total: usize = report.converged_steps().map(|s| s.iterations).sum();
+    println!("{predictor:?}: {total} iterations in 20 steps");
+    total
+}
+
 #[test]
 fn secant_predictor_saves_iterations_on_a_softening_chain() {
     // Softening springs near their limit load: the path bends, the secant prediction is not
     // exact, but it starts each step closer than the committed state does.
-    let mut totals = Vec::new();
-    for predictor in [Predictor::Zero, Predictor::Secant] {
-        let mut prob = SpringChain::new(10, 0.05, 2.0, None);
-        let pattern = prob.pattern.clone();
-        let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
-        let newton = NewtonSolver {
-            options: NewtonOptions {
-                residual_rtol: 1e-12,
-                ..Default::default()
-            },
-            stepping: LoadStepping {
-                initial_step: 0.05,
-                max_step: 0.05,
-                predictor,
-                ..Default::default()
-            },
-        };
-        let report = newton
-            .run(&mut prob, &pattern, &mut solver, &[0.0; 11])
-            .unwrap();
-        let total: usize = report.converged_steps().map(|s| s.iterations).sum();
-        println!("{predictor:?}: {total} iterations in 20 steps");
-        totals.push(total);
-    }
+    let totals = [Predictor::Zero, Predictor::Secant].map(softening_chain_iterations);
     assert!(totals[1] < totals[0], "{totals:?}");
 }
 
@@ -1018,30 +1021,7 @@ fn quadratic_predictor_is_exact_on_a_parabolic_path() {
 fn quadratic_predictor_saves_iterations_on_a_softening_chain() {
     // The softening chain of the secant test, equal steps: the quadratic extrapolation's error
     // is third order in the step, the secant's second order.
-    let mut totals = Vec::new();
-    for predictor in [Predictor::Secant, Predictor::Quadratic] {
-        let mut prob = SpringChain::new(10, 0.05, 2.0, None);
-        let pattern = prob.pattern.clone();
-        let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
-        let newton = NewtonSolver {
-            options: NewtonOptions {
-                residual_rtol: 1e-12,
-                ..Default::default()
-            },
-            stepping: LoadStepping {
-                initial_step: 0.05,
-                max_step: 0.05,
-                predictor,
-                ..Default::default()
-            },
-        };
-        let report = newton
-            .run(&mut prob, &pattern, &mut solver, &[0.0; 11])
-            .unwrap();
-        let total: usize = report.converged_steps().map(|s| s.iterations).sum();
-        println!("{predictor:?}: {total} iterations in 20 steps");
-        totals.push(total);
-    }
+    let totals = [Predictor::Secant, Predictor::Quadratic].map(softening_chain_iterations);
     assert!(totals[1] < totals[0], "{totals:?}");
 }
 
