@@ -11,6 +11,7 @@ pub mod integration;
 pub mod load;
 pub mod model;
 pub mod point;
+pub mod point_sensitivity;
 pub mod problem;
 pub mod rotation;
 pub mod symmetry;

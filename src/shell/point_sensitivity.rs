@@ -1,0 +1,825 @@
+//! Hand-derived forward (directional) derivative of the point residual for the continuum design
+//! sensitivity analysis (issue 5, path 2; paper §3, eqs 37–65).
+//!
+//! The continuum DSA differentiates the residual of one converged step `R(Δq; ⁿs, τ)` with
+//! respect to everything it depends on. At one layer point this is [`point_residual_dot`]: the
+//! derivative of [`point_residual_with`]'s residual and trial history, linear in the seeds
+//! ([`PointSeeds`]):
+//! - the design velocity of the initial geometry `ẋ⁰,α, ṅ⁰, ṅ⁰,α` (shape variables),
+//! - the thickness rate `ṫ` and the material-parameter rates `Ė, ν̇, k̇, σ̇0, Ḣ, β̇`,
+//! - the sensitivities of the neighbours' committed states `ⁿū̇, ⁿḋ, ḋ⁰, ė1, ė2`,
+//! - the history sensitivities `ⁿQ̇, ⁿ(σ̇, α̇, ė^p)` (eq 49's history terms),
+//! - the increment's sensitivity `Δq̇` (which reproduces [`super::point::point_tangent`]'s
+//!   columns).
+//!
+//! The chain, stage by stage (point.rs's notation; `˙ = d/dτ`):
+//! - `J̇ⁿ = [ẋ,1 + ḋ,1 z + d,1 ż | ẋ,2 + ḋ,2 z + d,2 ż | ḋ t/2 + d ṫ/2]`, `z = ζt/2` (eq 37's
+//!   configuration at step n, with `x̄,α = x̄⁰,α + Σ Ψ_I,α ū_I`, `d = n⁰ + Σ Ψ_I (d_I − d⁰_I)`),
+//! - `Ġ` from `Δū̇_I, Δḋ_I` ([`PointIncrementDot`]) and `ż, ṫ`,
+//! - `Ḣ = (Ġ − H J̇ⁿ) Jⁿ⁻¹` (the design-velocity term `−H ∇V` of eqs 38–39),
+//! - `L̇ = F½⁻¹ Ḣ F½⁻¹` (eqs 56–57, [`crate::kinematics::mid_step_gradient_dot`]),
+//! - `Δε̇, Δω̇, ṙ, ½ṙ` (eqs 54–55, 58, [`hughes_winget_dot`]),
+//! - `Δε̇ˡ` with `ⁿQ̇` (eq 50, [`local_strain_increment_dot`]),
+//! - the return-map sensitivity `ⁿ⁺¹(σ̇, α̇, ė^p)` (eqs 44–49, [`material_sensitivity`]),
+//! - `ⁿ⁺¹Q̇ = ⁿQ̇ rᵀ + ⁿQ ṙᵀ` (eq 51), `σ̇ᵍ` (eq 42),
+//! - `Ṗ = tr(J⁻¹J̇) P + w det J σ̇ᵍ J⁻ᵀ − P J̇ᵀ J⁻ᵀ` on `ⁿ⁺¹J = Jⁿ + G`,
+//! - the rows (eq 64's internal-force part): `ḟ_I = Ψ_I,α Ṗ:α`, and
+//!   `ṙ_Iβ = (∂d_I/∂α_β)˙ · m_I + ∂d_I/∂α_β · ṁ_I` with `ṁ_I = ḟ_I z + f_I ż + Ṗ:3 Ψ_I t/2 +
+//!   P:3 Ψ_I ṫ/2`.
+//!
+//! Every stage is checked against the dual-number derivative of the generic kernel and central
+//! differences in `tests/point_sensitivity.rs`; where the paper's transcription differs
+//! (eq 55's `B^ε`, eqs 46–49's factors, eq 56's first line), the dual number decides, as in the
+//! kinematics and material modules.
+//!
+//! At model level, [`ShellModel::internal_force_dots`] evaluates the f64 point once per layer
+//! point and applies the derivative to several seed sets (design variables) at once.
+
+use super::model::ShellModel;
+use super::point::{
+    point_residual_with, ParticleState, PointHistory, PointIncrement, PointInput, PointResult,
+    ShapeData, SurfacePoint, DOFS_PER_PARTICLE,
+};
+use super::rotation::rodrigues_coefficient_derivatives;
+use super::ShellError;
+use crate::kinematics::{
+    frame_update_dot, global_stress_dot, hughes_winget_dot, local_strain_increment,
+    local_strain_increment_dot, strain_to_vec5, stress_from_vec5, HwIncrement, M3,
+};
+use crate::material::{material_sensitivity, MaterialParams, ReturnMap, Vec5};
+use nalgebra::{Matrix3, Vector3};
+use rayon::prelude::*;
+
+type V3 = Vector3<f64>;
+
+/// The seeds of one directional derivative at one layer point (all linear).
+#[derive(Clone, Copy, Debug)]
+pub struct PointSeeds<'a> {
+    /// Design velocity of the initial geometry at the point (`ẋ⁰,α`, `ṅ⁰`, `ṅ⁰,α`), for shape
+    /// variables; `None` = zero.
+    pub surface: Option<&'a SurfacePoint<f64>>,
+    /// `ṫ`.
+    pub thickness: f64,
+    /// `Ė, ν̇, k̇, σ̇0, Ḣ, β̇` ([`MaterialParams::zero`] for none).
+    pub material: MaterialParams<f64>,
+    /// Sensitivities of the neighbours' committed states (`ⁿū̇, ⁿḋ, ḋ⁰, ė1, ė2`), in the order
+    /// of [`PointInput::particles`].
+    pub particles: &'a [ParticleState<f64>],
+    /// `ⁿQ̇` and `ⁿ(σ̇, α̇, ė^p)` at this layer point.
+    pub history: &'a PointHistory<f64>,
+    /// `Δq̇` (5 per neighbour: `Δū̇_I`, `α̇_I`). It enters the residual through
+    /// [`PointIncrementDot`], built from it once per in-plane point; here its length is checked.
+    pub dofs: &'a [f64],
+}
+
+/// Derivative of one layer point's residual and trial history ([`point_residual_dot`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointDot {
+    /// `d/dτ` of the internal force, `5 × n_neighbours` as [`PointResult::residual`].
+    pub residual: Vec<f64>,
+    /// `d/dτ` of the trial history `ⁿ⁺¹(Q, σ, α, ē^p)`.
+    pub history: PointHistory<f64>,
+}
+
+/// Derivative of [`PointIncrement`] (layer-independent, once per in-plane point): `Δū̇_I`,
+/// `Δḋ_I` and `d/dτ ∂d_I/∂α_β`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PointIncrementDot {
+    /// `Δū̇_I`.
+    pub du: Vec<V3>,
+    /// `Δḋ_I`, the derivative of Rodrigues' increment `f1 θ×dⁿ + f2 θ×(θ×dⁿ)`.
+    pub dd: Vec<V3>,
+    /// `d/dτ ∂d_I/∂α_β`.
+    pub d_alpha: Vec<[V3; 2]>,
+}
+
+/// Rodrigues' coefficients and their first two derivatives with respect to `x = θ·θ`.
+struct Coefficients {
+    f1: [f64; 3],
+    f2: [f64; 3],
+}
+
+impl Coefficients {
+    fn at(theta: &V3) -> Self {
+        let (f1, f2) = rodrigues_coefficient_derivatives(theta.dot(theta));
+        Coefficients { f1, f2 }
+    }
+}
+
+/// `d/dτ [f1 θ×v + f2 θ×(θ×v)]` (Rodrigues' increment of a vector `v` rotated by `θ`), with
+/// `ẋ = 2θ·θ̇`, `c = θ×v`, `ċ = θ̇×v + θ×v̇`.
+fn rodrigues_increment_dot(v: &V3, v_dot: &V3, theta: &V3, theta_dot: &V3, k: &Coefficients) -> V3 {
+    let x_dot = theta.dot(theta_dot) * 2.0;
+    let c = theta.cross(v);
+    let c_dot = theta_dot.cross(v) + theta.cross(v_dot);
+    let tc = theta.cross(&c);
+    let tc_dot = theta_dot.cross(&c) + theta.cross(&c_dot);
+    c_dot * k.f1[0] + c * (k.f1[1] * x_dot) + tc_dot * k.f2[0] + tc * (k.f2[1] * x_dot)
+}
+
+/// `d/dτ ∂d/∂α_β` of Rodrigues' formula ([`super::rotation::director_derivatives`]): with
+/// `c = θ×d`, `x_β = 2θ·e_β`, `c_β = e_β×d`, `w_β = e_β×c + θ×c_β`,
+/// `∂d/∂α_β = f1' x_β c + f1 c_β + f2' x_β θ×c + f2 w_β`, differentiated by the product rule in
+/// `θ, d, e_β` (the second derivatives `f''` enter through `ẋ`).
+fn director_first_derivatives_dot(
+    d: &V3,
+    d_dot: &V3,
+    e: &[V3; 2],
+    e_dot: &[V3; 2],
+    theta: &V3,
+    theta_dot: &V3,
+    k: &Coefficients,
+) -> [V3; 2] {
+    let ([_, f1p, f1pp], [_, f2p, f2pp]) = (k.f1, k.f2);
+    let (f1, f2) = (k.f1[0], k.f2[0]);
+    let x_dot = theta.dot(theta_dot) * 2.0;
+    let c = theta.cross(d);
+    let c_dot = theta_dot.cross(d) + theta.cross(d_dot);
+    let tc = theta.cross(&c);
+    let tc_dot = theta_dot.cross(&c) + theta.cross(&c_dot);
+    std::array::from_fn(|b| {
+        let xb = theta.dot(&e[b]) * 2.0;
+        let xb_dot = (theta_dot.dot(&e[b]) + theta.dot(&e_dot[b])) * 2.0;
+        let cb = e[b].cross(d);
+        let cb_dot = e_dot[b].cross(d) + e[b].cross(d_dot);
+        let wb = e[b].cross(&c) + theta.cross(&cb);
+        let wb_dot =
+            e_dot[b].cross(&c) + e[b].cross(&c_dot) + theta_dot.cross(&cb) + theta.cross(&cb_dot);
+        c_dot * (f1p * xb)
+            + c * (f1pp * x_dot * xb + f1p * xb_dot)
+            + cb_dot * f1
+            + cb * (f1p * x_dot)
+            + tc_dot * (f2p * xb)
+            + tc * (f2pp * x_dot * xb + f2p * xb_dot)
+            + wb_dot * f2
+            + wb * (f2p * x_dot)
+    })
+}
+
+fn invalid(field: &str, got: usize, expected: usize, what: &str) -> ShellError {
+    ShellError::InvalidInput(format!(
+        "{field}: {got} entries, expected {expected} ({what})"
+    ))
+}
+
+impl PointIncrementDot {
+    /// From the neighbours' committed states `particles`, their sensitivities `particles_dot`,
+    /// the DOF increments `dofs` and their sensitivities `dofs_dot` (5 per neighbour: `Δū_I`
+    /// then `α_I`): `θ̇ = ė1 α1 + ė2 α2 + e1 α̇1 + e2 α̇2` drives the derivatives of Rodrigues'
+    /// increment and of its virtual directors.
+    pub fn new(
+        particles: &[ParticleState<f64>],
+        particles_dot: &[ParticleState<f64>],
+        dofs: &[f64],
+        dofs_dot: &[f64],
+    ) -> Result<Self, ShellError> {
+        let n = particles.len();
+        const D: usize = DOFS_PER_PARTICLE;
+        if particles_dot.len() != n {
+            return Err(invalid(
+                "particles_dot",
+                particles_dot.len(),
+                n,
+                "one per particle",
+            ));
+        }
+        if dofs.len() != D * n {
+            return Err(invalid("dofs", dofs.len(), D * n, "5 per particle"));
+        }
+        if dofs_dot.len() != D * n {
+            return Err(invalid("dofs_dot", dofs_dot.len(), D * n, "5 per particle"));
+        }
+        let mut out = PointIncrementDot {
+            du: Vec::with_capacity(n),
+            dd: Vec::with_capacity(n),
+            d_alpha: Vec::with_capacity(n),
+        };
+        for (((p, pd), q), qd) in particles
+            .iter()
+            .zip(particles_dot)
+            .zip(dofs.chunks_exact(D))
+            .zip(dofs_dot.chunks_exact(D))
+        {
+            let (du, dd, da) = particle_increment_dot(p, pd, q, qd);
+            out.du.push(du);
+            out.dd.push(dd);
+            out.d_alpha.push(da);
+        }
+        Ok(out)
+    }
+}
+
+/// One particle's `(Δū̇, Δḋ, (∂d/∂α_β)˙)`.
+fn particle_increment_dot(
+    p: &ParticleState<f64>,
+    pd: &ParticleState<f64>,
+    q: &[f64],
+    qd: &[f64],
+) -> (V3, V3, [V3; 2]) {
+    let theta = p.e[0] * q[3] + p.e[1] * q[4];
+    let theta_dot = pd.e[0] * q[3] + pd.e[1] * q[4] + p.e[0] * qd[3] + p.e[1] * qd[4];
+    let k = Coefficients::at(&theta);
+    (
+        V3::new(qd[0], qd[1], qd[2]),
+        rodrigues_increment_dot(&p.d, &pd.d, &theta, &theta_dot, &k),
+        director_first_derivatives_dot(&p.d, &pd.d, &p.e, &pd.e, &theta, &theta_dot, &k),
+    )
+}
+
+/// Derivative of [`crate::sensitivity::dual::commit_particle`], the particle update of a
+/// converged step: `ū̇ + Δū̇`, the director and first lamina vector rotated by Rodrigues'
+/// formula (derivatives as [`PointIncrementDot`]), and the re-orthogonalised lamina vectors
+/// `e1 = a/|a|`, `a = t − d (d·t)`: `ė1 = (ȧ − e1 (e1·ȧ))/|a|`, `ė2 = ḋ × e1 + d × ė1`.
+/// `q`, `q_dot`: the particle's 5 DOF increments and their sensitivities (the first 5 entries
+/// are used).
+pub fn commit_particle_dot(
+    p: &ParticleState<f64>,
+    p_dot: &ParticleState<f64>,
+    q: &[f64],
+    q_dot: &[f64],
+) -> ParticleState<f64> {
+    let theta = p.e[0] * q[3] + p.e[1] * q[4];
+    let theta_dot = p_dot.e[0] * q[3] + p_dot.e[1] * q[4] + p.e[0] * q_dot[3] + p.e[1] * q_dot[4];
+    let k = Coefficients::at(&theta);
+    let rotate = |v: &V3| {
+        let c = theta.cross(v);
+        v + c * k.f1[0] + theta.cross(&c) * k.f2[0]
+    };
+    let d = rotate(&p.d);
+    let t = rotate(&p.e[0]);
+    let d_dot = p_dot.d + rodrigues_increment_dot(&p.d, &p_dot.d, &theta, &theta_dot, &k);
+    let t_dot = p_dot.e[0] + rodrigues_increment_dot(&p.e[0], &p_dot.e[0], &theta, &theta_dot, &k);
+    let dt = d.dot(&t);
+    let a = t - d * dt;
+    let a_dot = t_dot - d_dot * dt - d * (d_dot.dot(&t) + d.dot(&t_dot));
+    let na = a.norm();
+    let e1 = a / na;
+    let e1_dot = (a_dot - e1 * e1.dot(&a_dot)) / na;
+    ParticleState {
+        u: p_dot.u + V3::new(q_dot[0], q_dot[1], q_dot[2]),
+        d: d_dot,
+        d0: p_dot.d0,
+        e: [e1_dot, d_dot.cross(&e1) + d.cross(&e1_dot)],
+    }
+}
+
+/// Layer-independent sums of one seed set at one in-plane point (the neighbour loops of `J̇ⁿ`
+/// and `Ġ`), combined with `z = ζt/2` per layer.
+#[derive(Clone, Copy, Debug, Default)]
+struct SeedSums {
+    /// `ẋ⁰,α + Σ Ψ_I,α ū̇_I`.
+    xa: [V3; 2],
+    /// `ṅ⁰,α + Σ Ψ_I,α (ḋ_I − ḋ⁰_I)`.
+    da: [V3; 2],
+    /// `ṅ⁰ + Σ Ψ_I (ḋ_I − ḋ⁰_I)`.
+    d: V3,
+    /// `Σ Ψ_I,α Δū̇_I`.
+    g_u: [V3; 2],
+    /// `Σ Ψ_I,α Δḋ_I`.
+    g_d: [V3; 2],
+    /// `Σ Ψ_I Δḋ_I`.
+    g_d3: V3,
+}
+
+impl SeedSums {
+    fn new(
+        shape: &[ShapeData],
+        surface: Option<&SurfacePoint<f64>>,
+        particles: &[ParticleState<f64>],
+        incr_dot: &PointIncrementDot,
+    ) -> Self {
+        let mut s = match surface {
+            Some(sp) => SeedSums {
+                xa: sp.x_a,
+                da: sp.n_a,
+                d: sp.n,
+                ..Default::default()
+            },
+            None => SeedSums::default(),
+        };
+        for (((sh, p), du), dd) in shape
+            .iter()
+            .zip(particles)
+            .zip(&incr_dot.du)
+            .zip(&incr_dot.dd)
+        {
+            let ddir = p.d - p.d0;
+            for a in 0..2 {
+                s.xa[a] += p.u * sh.dpsi[a];
+                s.da[a] += ddir * sh.dpsi[a];
+                s.g_u[a] += du * sh.dpsi[a];
+                s.g_d[a] += dd * sh.dpsi[a];
+            }
+            s.d += ddir * sh.psi;
+            s.g_d3 += dd * sh.psi;
+        }
+        s
+    }
+}
+
+/// Value sums at one in-plane point (f64, layer-independent): `d,α = n⁰,α + Σ Ψ_I,α (d_I − d⁰_I)`,
+/// `d = n⁰ + Σ Ψ_I (d_I − d⁰_I)`, `Σ Ψ_I,α Δd_I`, `Σ Ψ_I Δd_I` (the factors of `ż`, `ṫ/2`).
+#[derive(Clone, Copy, Debug)]
+struct ValueSums {
+    da: [V3; 2],
+    d: V3,
+    g_d: [V3; 2],
+    g_d3: V3,
+}
+
+impl ValueSums {
+    fn new(
+        s: &SurfacePoint<f64>,
+        shape: &[ShapeData],
+        particles: &[ParticleState<f64>],
+        incr: &PointIncrement<f64>,
+    ) -> Self {
+        let mut v = ValueSums {
+            da: s.n_a,
+            d: s.n,
+            g_d: [V3::zeros(); 2],
+            g_d3: V3::zeros(),
+        };
+        for ((sh, p), dd) in shape.iter().zip(particles).zip(&incr.dd) {
+            let ddir = p.d - p.d0;
+            for a in 0..2 {
+                v.da[a] += ddir * sh.dpsi[a];
+                v.g_d[a] += dd * sh.dpsi[a];
+            }
+            v.d += ddir * sh.psi;
+            v.g_d3 += dd * sh.psi;
+        }
+        v
+    }
+}
+
+/// The f64 data of one layer point shared by all seed sets.
+struct LayerData<'a> {
+    zeta: f64,
+    half_t: f64,
+    z: f64,
+    weight: f64,
+    h: M3<f64>,
+    jn_inv: M3<f64>,
+    /// `F½⁻¹ = (I + ½H)⁻¹`.
+    f_half_inv: M3<f64>,
+    inc: HwIncrement<f64>,
+    q_n: M3<f64>,
+    deps_l: Vec5<f64>,
+    q1: M3<f64>,
+    sigma_l: M3<f64>,
+    j1_inv: M3<f64>,
+    det1: f64,
+    p: M3<f64>,
+    material: &'a MaterialParams<f64>,
+    return_map: &'a ReturnMap<f64>,
+}
+
+impl<'a> LayerData<'a> {
+    fn new(inp: &'a PointInput<f64>, res: &'a PointResult<f64>) -> Result<Self, ShellError> {
+        let k = &res.kinematics;
+        let f_half = M3::identity() + k.h * 0.5;
+        // The f64 evaluation succeeded, so I + ½H passed the kinematics' determinant check.
+        let f_half_inv = f_half.try_inverse().ok_or_else(|| {
+            ShellError::InvalidInput(
+                "res: I + ½H of the given point result is singular (not from point_residual_with?)"
+                    .into(),
+            )
+        })?;
+        let q_n = inp.history.frame;
+        let deps_l = strain_to_vec5(&local_strain_increment(&q_n, &k.inc.r_half, &k.inc.deps));
+        let half_t = inp.thickness * 0.5;
+        Ok(LayerData {
+            zeta: inp.zeta,
+            half_t,
+            z: half_t * inp.zeta,
+            weight: inp.weight,
+            h: k.h,
+            jn_inv: k.jn_inv,
+            f_half_inv,
+            inc: k.inc,
+            q_n,
+            deps_l,
+            q1: res.history.frame,
+            sigma_l: stress_from_vec5(&res.history.material.stress),
+            j1_inv: k.j1_inv,
+            det1: k.det1,
+            p: k.p,
+            material: inp.material,
+            return_map: &res.return_map,
+        })
+    }
+
+    /// Add the derivative of the layer's residual for one seed set into `out` and return the
+    /// trial history's derivative.
+    #[allow(clippy::too_many_arguments)]
+    fn apply(
+        &self,
+        shape: &[ShapeData],
+        d_alpha: &[[V3; 2]],
+        values: &ValueSums,
+        sums: &SeedSums,
+        incr_dot: &PointIncrementDot,
+        t_dot: f64,
+        material_dot: &MaterialParams<f64>,
+        history_dot: &PointHistory<f64>,
+        out: &mut [f64],
+    ) -> PointHistory<f64> {
+        let (z, half_t) = (self.z, self.half_t);
+        let half_t_dot = t_dot * 0.5;
+        let z_dot = half_t_dot * self.zeta;
+        // J̇ⁿ (configuration at step n, eq 37).
+        let jn_dot = M3::from_columns(&[
+            sums.xa[0] + sums.da[0] * z + values.da[0] * z_dot,
+            sums.xa[1] + sums.da[1] * z + values.da[1] * z_dot,
+            sums.d * half_t + values.d * half_t_dot,
+        ]);
+        // Ġ (the increment's gradient on the parameter coordinates).
+        let g_dot = M3::from_columns(&[
+            sums.g_u[0] + sums.g_d[0] * z + values.g_d[0] * z_dot,
+            sums.g_u[1] + sums.g_d[1] * z + values.g_d[1] * z_dot,
+            sums.g_d3 * half_t + values.g_d3 * half_t_dot,
+        ]);
+        // Ḣ = Ġ Jⁿ⁻¹ − G Jⁿ⁻¹ J̇ⁿ Jⁿ⁻¹ = (Ġ − H J̇ⁿ) Jⁿ⁻¹ (eqs 38–39).
+        let h_dot = (g_dot - self.h * jn_dot) * self.jn_inv;
+        // L̇ = F½⁻¹ Ḣ F½⁻¹ (eqs 56–57, kinematics::mid_step_gradient_dot).
+        let l_dot = self.f_half_inv * h_dot * self.f_half_inv;
+        let inc_dot = hughes_winget_dot(&self.inc, &l_dot);
+        // Δε̇ˡ with the history frame's sensitivity (eq 50).
+        let deps_l_dot = local_strain_increment_dot(
+            &self.q_n,
+            &history_dot.frame,
+            &self.inc.r_half,
+            &inc_dot.r_half_dot,
+            &self.inc.deps,
+            &inc_dot.deps_dot,
+        );
+        // Return-map sensitivity (eqs 44–49).
+        let mat_dot = material_sensitivity(
+            self.material,
+            &self.deps_l,
+            self.return_map,
+            material_dot,
+            &history_dot.material,
+            &strain_to_vec5(&deps_l_dot),
+        );
+        // ⁿ⁺¹Q̇ (eq 51) and σ̇ᵍ (eq 42).
+        let q1_dot = frame_update_dot(&self.q_n, &history_dot.frame, &self.inc.r, &inc_dot.r_dot);
+        let sigma_g_dot = global_stress_dot(
+            &self.q1,
+            &q1_dot,
+            &self.sigma_l,
+            &stress_from_vec5(&mat_dot.stress),
+        );
+        // P = w det(J) σᵍ J⁻ᵀ on J = Jⁿ + G:
+        // Ṗ = tr(J⁻¹J̇) P + w det J σ̇ᵍ J⁻ᵀ − P J̇ᵀ J⁻ᵀ.
+        let j1_dot = jn_dot + g_dot;
+        let jinv_t = self.j1_inv.transpose();
+        let tr = (self.j1_inv * j1_dot).trace();
+        let p_dot = self.p * tr + sigma_g_dot * jinv_t * (self.det1 * self.weight)
+            - self.p * j1_dot.transpose() * jinv_t;
+        let (p, pd) = (&self.p, &p_dot);
+        for (((sh, da), dad), o) in shape
+            .iter()
+            .zip(d_alpha)
+            .zip(&incr_dot.d_alpha)
+            .zip(out.chunks_exact_mut(DOFS_PER_PARTICLE))
+        {
+            let [t0, t1] = sh.dpsi_test;
+            let f = p.column(0) * t0 + p.column(1) * t1;
+            let f_dot = pd.column(0) * t0 + pd.column(1) * t1;
+            let m = f * z + p.column(2) * (half_t * sh.psi);
+            let m_dot = f_dot * z
+                + f * z_dot
+                + pd.column(2) * (half_t * sh.psi)
+                + p.column(2) * (half_t_dot * sh.psi);
+            o[0] += f_dot[0];
+            o[1] += f_dot[1];
+            o[2] += f_dot[2];
+            o[3] += dad[0].dot(&m) + da[0].dot(&m_dot);
+            o[4] += dad[1].dot(&m) + da[1].dot(&m_dot);
+        }
+        PointHistory {
+            frame: q1_dot,
+            material: mat_dot,
+        }
+    }
+}
+
+/// `d/dτ` of [`point_residual_with`]'s residual and trial history at one layer point.
+///
+/// `inp`, `incr`, `res`: the f64 evaluation (`res = point_residual_with(inp, incr)`);
+/// `incr_dot`: the increment's derivative ([`PointIncrementDot::new`] from `inp.particles`,
+/// `seeds.particles`, the DOFs and `seeds.dofs`); `seeds`: the remaining seeds. Linear in the
+/// seeds. Errors name the field whose length does not match the neighbours.
+pub fn point_residual_dot(
+    inp: &PointInput<f64>,
+    incr: &PointIncrement<f64>,
+    incr_dot: &PointIncrementDot,
+    res: &PointResult<f64>,
+    seeds: &PointSeeds,
+) -> Result<PointDot, ShellError> {
+    let n = inp.shape.len();
+    check_point_sizes(inp, incr, incr_dot, res, seeds)?;
+    let values = ValueSums::new(inp.surface, inp.shape, inp.particles, incr);
+    let sums = SeedSums::new(inp.shape, seeds.surface, seeds.particles, incr_dot);
+    let layer = LayerData::new(inp, res)?;
+    let mut residual = vec![0.0; DOFS_PER_PARTICLE * n];
+    let history = layer.apply(
+        inp.shape,
+        &incr.d_alpha,
+        &values,
+        &sums,
+        incr_dot,
+        seeds.thickness,
+        &seeds.material,
+        seeds.history,
+        &mut residual,
+    );
+    Ok(PointDot { residual, history })
+}
+
+fn check_point_sizes(
+    inp: &PointInput<f64>,
+    incr: &PointIncrement<f64>,
+    incr_dot: &PointIncrementDot,
+    res: &PointResult<f64>,
+    seeds: &PointSeeds,
+) -> Result<(), ShellError> {
+    let n = inp.shape.len();
+    let per = "one per neighbour (inp.shape)";
+    for (field, got) in [
+        ("inp.particles", inp.particles.len()),
+        ("incr.du", incr.du.len()),
+        ("incr.dd", incr.dd.len()),
+        ("incr.d_alpha", incr.d_alpha.len()),
+        ("incr_dot.du", incr_dot.du.len()),
+        ("incr_dot.dd", incr_dot.dd.len()),
+        ("incr_dot.d_alpha", incr_dot.d_alpha.len()),
+        ("seeds.particles", seeds.particles.len()),
+    ] {
+        if got != n {
+            return Err(invalid(field, got, n, per));
+        }
+    }
+    let nd = DOFS_PER_PARTICLE * n;
+    let per5 = "5 per neighbour (inp.shape)";
+    if seeds.dofs.len() != nd {
+        return Err(invalid("seeds.dofs", seeds.dofs.len(), nd, per5));
+    }
+    if res.residual.len() != nd {
+        return Err(invalid("res.residual", res.residual.len(), nd, per5));
+    }
+    Ok(())
+}
+
+/// The seeds of one design variable for the whole model ([`ShellModel::internal_force_dots`]).
+#[derive(Clone, Copy, Debug)]
+pub struct ModelSeeds<'a> {
+    /// Design velocity of the initial geometry per in-plane point (as [`ShellModel::points`]);
+    /// `None` = zero.
+    pub surface: Option<&'a [SurfacePoint<f64>]>,
+    /// `ṫ`.
+    pub thickness: f64,
+    /// `Ė, ν̇, k̇, σ̇0, Ḣ, β̇`.
+    pub material: MaterialParams<f64>,
+    /// Sensitivities of the committed states of the real particles (as
+    /// [`ShellModel::particles`]; images follow through their fixed maps).
+    pub particles: &'a [ParticleState<f64>],
+    /// History sensitivities, point-major as [`ShellModel::history`].
+    pub history: &'a [PointHistory<f64>],
+    /// `Δq̇` on the global DOFs (`n_dofs`).
+    pub dofs: &'a [f64],
+}
+
+impl ShellModel {
+    /// The fixed map of shape-function particle `j`: `(source, Q, det Q)`, `Q = I` for a real one.
+    fn seed_map(&self, j: usize) -> (usize, Matrix3<f64>, f64) {
+        let n = self.particles.len();
+        if j < n {
+            (j, Matrix3::identity(), 1.0)
+        } else {
+            let im = &self.symmetry.images[j - n];
+            (im.source, im.map, im.det)
+        }
+    }
+
+    fn check_model_seeds(&self, s: usize, seeds: &ModelSeeds) -> Result<(), ShellError> {
+        let f = |name: &str| format!("seeds[{s}].{name}");
+        if let Some(sp) = seeds.surface {
+            if sp.len() != self.points.len() {
+                return Err(invalid(
+                    &f("surface"),
+                    sp.len(),
+                    self.points.len(),
+                    "one per in-plane point",
+                ));
+            }
+        }
+        if seeds.particles.len() != self.particles.len() {
+            return Err(invalid(
+                &f("particles"),
+                seeds.particles.len(),
+                self.particles.len(),
+                "one per real particle",
+            ));
+        }
+        if seeds.history.len() != self.history.len() {
+            return Err(invalid(
+                &f("history"),
+                seeds.history.len(),
+                self.history.len(),
+                "one per layer point, point-major",
+            ));
+        }
+        if seeds.dofs.len() != self.n_dofs() {
+            return Err(invalid(
+                &f("dofs"),
+                seeds.dofs.len(),
+                self.n_dofs(),
+                "5 per real particle",
+            ));
+        }
+        for (name, v) in [("thickness", seeds.thickness)].into_iter().chain(
+            crate::material::PARAM_NAMES
+                .iter()
+                .copied()
+                .zip(seeds.material.to_array()),
+        ) {
+            if !v.is_finite() {
+                return Err(ShellError::InvalidInput(format!(
+                    "{}: {v}, expected a finite rate",
+                    f(name)
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Sensitivities of the global internal force (eq 32) and of the trial histories for several
+    /// seed sets at once (the residual part of the continuum DSA's right-hand side, eq 64–65).
+    ///
+    /// `dofs` is the converged increment `Δq` (f64, `n_dofs`); `seeds[v]` the seeds of design
+    /// variable `v` ([`ModelSeeds`]). Returns, per seed set, `d f_int/dτ` (`n_dofs`) and the
+    /// trial history sensitivities (point-major, as [`ShellModel::history`]). The f64 point
+    /// evaluation ([`point_residual_with`]) is done once per layer point and shared by all seed
+    /// sets; the per-particle increment derivatives once per shape-function particle. Images
+    /// follow their sources: an image's state dot is `Q ṡ`, its DOF dot `T q̇`. Points run in
+    /// parallel and are summed in point order (deterministic). Equal to the derivative part of
+    /// [`ShellModel::internal_force_with`] in dual numbers with the same seeds.
+    pub fn internal_force_dots(
+        &self,
+        dofs: &[f64],
+        seeds: &[ModelSeeds],
+    ) -> Result<Vec<(Vec<f64>, Vec<PointHistory<f64>>)>, ShellError> {
+        const D: usize = DOFS_PER_PARTICLE;
+        if dofs.len() != self.n_dofs() {
+            return Err(invalid(
+                "dofs",
+                dofs.len(),
+                self.n_dofs(),
+                "5 per real particle",
+            ));
+        }
+        for (s, sd) in seeds.iter().enumerate() {
+            self.check_model_seeds(s, sd)?;
+        }
+        let ns = seeds.len();
+        let nl = self.thickness_rule.len();
+        let n_sf = self.particles.len() + self.symmetry.images.len();
+        // Per shape-function particle: f64 state, local DOFs and increment (as the analysis
+        // forms them), then the derivatives of every seed set.
+        type PerParticle = (
+            ParticleState<f64>,
+            [f64; D],
+            V3,
+            [V3; 2],
+            Vec<(ParticleState<f64>, V3, V3, [V3; 2])>,
+        );
+        let per: Vec<PerParticle> = (0..n_sf)
+            .into_par_iter()
+            .map(|j| {
+                let (src, q, det) = self.seed_map(j);
+                let real = j < self.particles.len();
+                let state = self.particle_state(j);
+                let map_dofs = |g: &[f64]| -> [f64; D] {
+                    let g = &g[D * src..D * src + D];
+                    if real {
+                        [g[0], g[1], g[2], g[3], g[4]]
+                    } else {
+                        [
+                            g[0] * q[(0, 0)] + g[1] * q[(0, 1)] + g[2] * q[(0, 2)],
+                            g[0] * q[(1, 0)] + g[1] * q[(1, 1)] + g[2] * q[(1, 2)],
+                            g[0] * q[(2, 0)] + g[1] * q[(2, 1)] + g[2] * q[(2, 2)],
+                            g[3] * det,
+                            g[4] * det,
+                        ]
+                    }
+                };
+                let x = map_dofs(dofs);
+                let inc = PointIncrement::new(std::slice::from_ref(&state), &x)?;
+                let dots = seeds
+                    .iter()
+                    .map(|sd| {
+                        let s = sd.particles[src];
+                        let sdot = if real {
+                            s
+                        } else {
+                            ParticleState {
+                                u: q * s.u,
+                                d: q * s.d,
+                                d0: q * s.d0,
+                                e: [q * s.e[0], q * s.e[1]],
+                            }
+                        };
+                        let xd = map_dofs(sd.dofs);
+                        let (du, dd, da) = particle_increment_dot(&state, &sdot, &x, &xd);
+                        (sdot, du, dd, da)
+                    })
+                    .collect();
+                Ok((state, x, inc.dd[0], inc.d_alpha[0], dots))
+            })
+            .collect::<Result<_, ShellError>>()?;
+        let per_point = (0..self.points.len())
+            .into_par_iter()
+            .map(|k| {
+                let p = &self.points[k];
+                let nb = &p.neighbours;
+                let parts: Vec<ParticleState<f64>> = nb.iter().map(|&j| per[j].0).collect();
+                let inc = PointIncrement {
+                    du: nb
+                        .iter()
+                        .map(|&j| V3::new(per[j].1[0], per[j].1[1], per[j].1[2]))
+                        .collect(),
+                    dd: nb.iter().map(|&j| per[j].2).collect(),
+                    d_alpha: nb.iter().map(|&j| per[j].3).collect(),
+                };
+                let values = ValueSums::new(&p.surface, &p.shape, &parts, &inc);
+                let (sums, incr_dots): (Vec<SeedSums>, Vec<PointIncrementDot>) = seeds
+                    .iter()
+                    .enumerate()
+                    .map(|(s, sd)| {
+                        let states: Vec<ParticleState<f64>> =
+                            nb.iter().map(|&j| per[j].4[s].0).collect();
+                        let incr_dot = PointIncrementDot {
+                            du: nb.iter().map(|&j| per[j].4[s].1).collect(),
+                            dd: nb.iter().map(|&j| per[j].4[s].2).collect(),
+                            d_alpha: nb.iter().map(|&j| per[j].4[s].3).collect(),
+                        };
+                        let surface = sd.surface.map(|sp| &sp[k]);
+                        (
+                            SeedSums::new(&p.shape, surface, &states, &incr_dot),
+                            incr_dot,
+                        )
+                    })
+                    .unzip();
+                let mut residuals = vec![vec![0.0; D * nb.len()]; ns];
+                let mut histories = vec![Vec::with_capacity(nl); ns];
+                for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
+                    let inp = PointInput {
+                        surface: &p.surface,
+                        zeta,
+                        thickness: self.thickness,
+                        weight: p.weight * wz,
+                        shape: &p.shape,
+                        particles: &parts,
+                        material: &self.material,
+                        history: &self.history[k * nl + l],
+                    };
+                    let res = point_residual_with(&inp, &inc)?;
+                    let layer = LayerData::new(&inp, &res)?;
+                    for (s, sd) in seeds.iter().enumerate() {
+                        let h = layer.apply(
+                            &p.shape,
+                            &inc.d_alpha,
+                            &values,
+                            &sums[s],
+                            &incr_dots[s],
+                            sd.thickness,
+                            &sd.material,
+                            &sd.history[k * nl + l],
+                            &mut residuals[s],
+                        );
+                        histories[s].push(h);
+                    }
+                }
+                Ok((residuals, histories))
+            })
+            .collect::<Result<Vec<_>, ShellError>>()?;
+        let mut out: Vec<(Vec<f64>, Vec<PointHistory<f64>>)> = (0..ns)
+            .map(|_| {
+                (
+                    vec![0.0; self.n_dofs()],
+                    Vec::with_capacity(self.history.len()),
+                )
+            })
+            .collect();
+        for (k, (residuals, histories)) in per_point.into_iter().enumerate() {
+            for ((f, h), (r, hs)) in out.iter_mut().zip(residuals.into_iter().zip(histories)) {
+                self.scatter_local(k, &r, f);
+                h.extend(hs);
+            }
+        }
+        Ok(out)
+    }
+}
