@@ -43,11 +43,13 @@ enum Command {
         /// Output directory (created if missing).
         #[arg(long, default_value = "out")]
         out: PathBuf,
-        /// Methods, comma-separated: `dual`, `fd` (default: the case's `[dsa] methods`, else
-        /// both; `continuum` is not implemented yet).
+        /// Methods, comma-separated: `continuum`, `dual`, `fd` (default: the case's
+        /// `[dsa] methods`, else all three).
         #[arg(long, value_delimiter = ',')]
         methods: Option<Vec<String>>,
-        /// Term-by-term breakdown at this load step (needs the continuum method: not yet).
+        /// Term-by-term breakdown at this converged load step (1-based): each group of the
+        /// continuum fictitious load against the dual reference seeded with that group only;
+        /// printed and written to DIR/terms.json.
         #[arg(long)]
         terms: Option<usize>,
     },
@@ -137,13 +139,6 @@ fn dsa(case: &Case, out: &Path, methods: Option<&[String]>, terms: Option<usize>
             return 1;
         }
     };
-    if let Some(step) = terms {
-        println!(
-            "note: --terms {step}: the term-by-term breakdown compares the groups of the \
-             hand-derived continuum right-hand side with the dual reference; the continuum \
-             method is not implemented yet, so no breakdown is printed"
-        );
-    }
     if let Err(e) = std::fs::create_dir_all(out) {
         eprintln!(
             "error: cannot create output directory {}: {e}",
@@ -180,9 +175,11 @@ fn dsa(case: &Case, out: &Path, methods: Option<&[String]>, terms: Option<usize>
     }
     let fmt = |t: Option<f64>| t.map_or("—".to_string(), |t| format!("{t:.3} s"));
     println!(
-        "timing: analysis {:.3} s (separate plain run), continuum — (not implemented), dual {} \
-         (reference inside a hooked run of {}), fd {}",
+        "timing: analysis {:.3} s (separate plain run), continuum {} (DSA inside a hooked run of \
+         {}), dual {} (reference inside a hooked run of {}), fd {}",
         result.time_analysis,
+        fmt(result.time_continuum),
+        fmt(result.time_continuum_run),
         fmt(result.time_dual),
         fmt(result.time_dual_run),
         fmt(result.time_fd)
@@ -201,6 +198,28 @@ fn dsa(case: &Case, out: &Path, methods: Option<&[String]>, terms: Option<usize>
         return 1;
     }
     println!("wrote {}", path.display());
+    if let Some(step) = terms {
+        println!("term breakdown at step {step} (analysis with the dual reference, Dual64):");
+        let bs = match dsa_run::terms(c, &spec, step) {
+            Ok(b) => b,
+            Err(e) => {
+                eprintln!("error: --terms {step}: {e}");
+                return 1;
+            }
+        };
+        for b in &bs {
+            println!("{}", dsa_run::terms_table(b));
+        }
+        let path = out.join("terms.json");
+        let written = serde_json::to_string_pretty(&dsa_run::terms_json(&bs))
+            .map_err(|e| e.to_string())
+            .and_then(|t| std::fs::write(&path, t).map_err(|e| e.to_string()));
+        if let Err(e) = written {
+            eprintln!("error: cannot write {}: {e}", path.display());
+            return 1;
+        }
+        println!("wrote {}", path.display());
+    }
     0
 }
 

@@ -11,134 +11,26 @@
 //! step 5), so steps 1–3 are elastic. The collapse load of the clamped plate
 //! (≈ 42.8 M_p/a², M_p = σ0 t²/4) is ≈ 0.027, above the last step.
 
-use nalgebra::Vector3;
 use shelldsa::geometry::{Rectangle, Surface};
 use shelldsa::material::MaterialParams;
-use shelldsa::meshfree::quadrature::{gauss_legendre, gauss_lobatto, CellQuadrature};
+use shelldsa::meshfree::quadrature::{gauss_legendre, CellQuadrature};
 use shelldsa::meshfree::transform::Edge;
 use shelldsa::meshfree::{regular_grid, Basis, ParamBox};
-use shelldsa::sensitivity::dual::{run_dual, DualLoad, DualMode, DualRun, SensitivityError};
-use shelldsa::sensitivity::fd::{
-    central_differences, fit_rate, response, taylor_remainders, Analysis,
-};
+use shelldsa::sensitivity::dual::{run_dual, DualLoad, DualMode, DualRun};
+use shelldsa::sensitivity::fd::{central_differences, fit_rate, response, taylor_remainders};
 use shelldsa::sensitivity::{
     validate_design, Design, DesignError, DesignKind, DesignVariable, MaterialParameter, Monitor,
 };
-use shelldsa::shell::constraints::{edge_constraints, EdgeCondition, LinearConstraint};
-use shelldsa::shell::load::{ExternalLoad, PointForce, Pressure};
+use shelldsa::shell::constraints::{edge_constraints, EdgeCondition};
+use shelldsa::shell::load::{ExternalLoad, PointForce};
 use shelldsa::shell::model::{Discretisation, ShellModel};
 use shelldsa::shell::problem::ShellProblem;
-use shelldsa::solver::{LoadStepping, NewtonOptions, NewtonSolver, Predictor, SolverOptions};
+use shelldsa::solver::SolverOptions;
 use std::time::Instant;
 
-type V3 = Vector3<f64>;
-
-const PRESSURE: f64 = 0.02;
-const STEPS: usize = 5;
-
-fn nominal_design() -> Design {
-    Design {
-        thickness: 0.05,
-        material: MaterialParams::new(1000.0, 0.3, 1.0, 100.0, 0.5).unwrap(),
-    }
-}
-
-/// Tolerances at the round-off floor (the driver accepts there: `Acceptance::RoundoffFloor`),
-/// so that the re-runs' responses carry no convergence error at the size of a finite
-/// difference; equal steps landing exactly on every level (the re-runs take the same steps).
-fn driver(steps: usize) -> NewtonSolver {
-    let dl = 1.0 / steps as f64;
-    NewtonSolver {
-        options: NewtonOptions {
-            residual_rtol: 1e-13,
-            energy_rtol: 1e-26,
-            ..NewtonOptions::default()
-        },
-        stepping: LoadStepping {
-            start: 0.0,
-            end: 1.0,
-            initial_step: dl,
-            min_step: dl,
-            max_step: dl,
-            grow_factor: 1.0,
-            predictor: Predictor::Zero,
-            stops: (1..=steps).map(|k| k as f64 * dl).collect(),
-            ..LoadStepping::default()
-        },
-    }
-}
-
-struct Plate;
-
-impl Plate {
-    fn model(design: &Design) -> ShellModel {
-        let grid = regular_grid(ParamBox::unit(), 7, 7);
-        let cq = CellQuadrature::for_particle_grid(&grid, 1, 2).unwrap();
-        let lob = gauss_lobatto(5).unwrap();
-        let disc = Discretisation {
-            supports: grid.supports(3.0),
-            particle_uv: grid.positions,
-            basis: Basis::Quadratic,
-            quadrature: cq.iter().map(|(p, w, _)| (p, w)).collect(),
-            thickness_rule: lob.nodes.iter().copied().zip(lob.weights).collect(),
-            thickness: design.thickness,
-            symmetry: Vec::new(),
-        };
-        let surface = Surface::Rectangle(Rectangle::new(V3::zeros(), V3::x(), V3::y()).unwrap());
-        ShellModel::new(&surface, disc, design.material).unwrap()
-    }
-
-    fn pressure() -> Pressure {
-        // n⁰ = +z: a negative pressure pushes the plate down (−z).
-        Pressure::new(-PRESSURE).unwrap()
-    }
-
-    fn problem(design: &Design) -> ShellProblem {
-        let model = Self::model(design);
-        // Clamped: three displacements and two rotations held at every boundary particle
-        // (each particle once: the corners belong to two edges).
-        let mut rows = Vec::new();
-        for &uv in &model.particle_uv {
-            if uv.iter().any(|&x| x == 0.0 || x == 1.0) {
-                for axis in [V3::x(), V3::y(), V3::z()] {
-                    rows.push(LinearConstraint::displacement(&model, uv, axis, 0.0).unwrap());
-                }
-                for b in 0..2 {
-                    rows.push(LinearConstraint::rotation(&model, uv, b, 0.0).unwrap());
-                }
-            }
-        }
-        let loads: Vec<Box<dyn ExternalLoad>> = vec![Box::new(Self::pressure())];
-        ShellProblem::new(model, loads, rows).unwrap()
-    }
-
-    fn monitors() -> Vec<Monitor> {
-        vec![
-            Monitor::new("w(centre)", [0.5, 0.5], 2).unwrap(),
-            Monitor::new("w(quarter, mid)", [0.25, 0.5], 2).unwrap(),
-            Monitor::new("w(quarter, quarter)", [0.25, 0.25], 2).unwrap(),
-            Monitor::new("u(quarter, mid)", [0.25, 0.5], 0).unwrap(),
-            Monitor::new("v(quarter, quarter)", [0.25, 0.25], 1).unwrap(),
-        ]
-    }
-}
-
-impl Analysis for Plate {
-    fn build(&self, design: &Design) -> Result<(ShellProblem, NewtonSolver), SensitivityError> {
-        Ok((Self::problem(design), driver(STEPS)))
-    }
-}
-
-fn variables() -> Vec<DesignVariable> {
-    vec![
-        DesignVariable::thickness(),
-        DesignVariable::material(MaterialParameter::Young),
-        DesignVariable::material(MaterialParameter::Sigma0),
-        DesignVariable::material(MaterialParameter::Hardening),
-        DesignVariable::material(MaterialParameter::Poisson),
-        DesignVariable::material(MaterialParameter::Beta),
-    ]
-}
+#[path = "common/plate.rs"]
+mod plate;
+use plate::*;
 
 fn dual_run(mode: DualMode) -> DualRun {
     let d = nominal_design();

@@ -9,7 +9,7 @@
 //! fd_steps = [1e-3, 1e-4]         # relative steps h/|τ| of the finite-difference study
 //!
 //! [dsa]
-//! methods = ["dual", "fd"]        # default: both ("continuum" is not implemented yet)
+//! methods = ["continuum", "dual", "fd"]   # default: all three
 //! monitors = ["A.ux", "B"]        # `<monitor>.<ux|uy|uz>` or `<monitor>` (all three);
 //!                                 # default: every [[monitor]], all three components
 //! ```
@@ -60,6 +60,8 @@ pub(crate) struct DsaFile {
 /// A sensitivity method.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum DsaMethod {
+    /// The hand-derived continuum DSA (`sensitivity::continuum`, eqs 37–65).
+    Continuum,
     /// The dual-number reference (`sensitivity::dual`).
     Dual,
     /// Central differences of complete re-runs (`sensitivity::fd`).
@@ -70,6 +72,7 @@ impl DsaMethod {
     /// The name used in case files and on the command line.
     pub fn name(self) -> &'static str {
         match self {
+            DsaMethod::Continuum => "continuum",
             DsaMethod::Dual => "dual",
             DsaMethod::Fd => "fd",
         }
@@ -78,19 +81,14 @@ impl DsaMethod {
     /// Parse a method name; `key` names where it was written (for the error).
     pub fn parse(s: &str, key: &str, path: &Path) -> Result<Self, CaseError> {
         match s {
+            "continuum" => Ok(DsaMethod::Continuum),
             "dual" => Ok(DsaMethod::Dual),
             "fd" => Ok(DsaMethod::Fd),
-            "continuum" => Err(invalid(
-                path,
-                key,
-                format!("{s:?}"),
-                "\"dual\" or \"fd\": the continuum method (eqs 37-65) is not implemented yet",
-            )),
             _ => Err(invalid(
                 path,
                 key,
                 format!("{s:?}"),
-                "\"dual\" or \"fd\" (\"continuum\" is not implemented yet)",
+                "\"continuum\", \"dual\" or \"fd\"",
             )),
         }
     }
@@ -118,7 +116,7 @@ impl DesignEntry {
 pub struct DsaSpec {
     /// The design variables (at least one).
     pub design: Vec<DesignEntry>,
-    /// The methods to run (default: dual and fd).
+    /// The methods to run (default: continuum, dual and fd).
     pub methods: Vec<DsaMethod>,
     /// The monitored components (default: every case monitor, ux, uy, uz).
     pub monitors: Vec<Monitor>,
@@ -290,7 +288,7 @@ pub(crate) fn check(
     let dsa = dsa.unwrap_or_default();
     let methods = match &dsa.methods {
         Some(m) => parse_methods(m, "dsa.methods", path)?,
-        None => vec![DsaMethod::Dual, DsaMethod::Fd],
+        None => vec![DsaMethod::Continuum, DsaMethod::Dual, DsaMethod::Fd],
     };
     let sel = match &dsa.monitors {
         Some(m) => {

@@ -1,21 +1,24 @@
-//! `shelldsa dsa`: the design sensitivities of a shell case by the dual-number reference and by
-//! central differences of complete re-runs, the table in the format of the paper's Tables 1–2,
-//! and `sensitivity.json` (`docs/sensitivity.md` §6).
+//! `shelldsa dsa`: the design sensitivities of a shell case by the hand-derived continuum DSA,
+//! the dual-number reference and central differences of complete re-runs, the table in the
+//! format of the paper's Tables 1–2, and `sensitivity.json` (`docs/sensitivity.md`).
 //!
 //! Order of the runs: (1) the plain analysis (no hook; its wall time is `timing_s.analysis`,
-//! and its monitors are the nominal responses `ψ(τ)` of the finite differences); (2) the
-//! analysis with the dual reference in its convergence hook (one run gives the responses and
-//! the derivatives of every design variable; `timing_s.dual` is the reference's own time inside
-//! it); (3) per design variable and relative step, the re-runs at `τ ± h` (`timing_s.fd`, all
-//! of them). The Taylor remainder `|ψ(τ + h) − ψ(τ) − h ψ'_dual|` of every step size reuses the
-//! `τ + h` re-run.
+//! and its monitors are the nominal responses `ψ(τ)` of the finite differences); (2a) the
+//! analysis with the continuum DSA in its convergence hook (`timing_s.continuum` is the DSA's
+//! own time inside it); (2b) the analysis with the dual reference in its convergence hook
+//! (one run gives the responses and the derivatives of every design variable;
+//! `timing_s.dual` is the reference's own time inside it); (3) per design variable and
+//! relative step, the re-runs at `τ ± h` (`timing_s.fd`, all of them). The Taylor remainder
+//! `|ψ(τ + h) − ψ(τ) − h ψ'|` of every step size reuses the `τ + h` re-run.
 
 use super::dsa_case::{dual_loads, DesignEntry, DsaMethod, DsaSpec};
 use super::shell_build;
 use super::shell_case::ShellCase;
 use super::CaseError;
+use crate::sensitivity::continuum::run_continuum;
 use crate::sensitivity::dual::{run_dual, DualMode, SensitivityError};
 use crate::sensitivity::fd::{self, fit_rate, Analysis, RunResponse, TaylorFit, TaylorRow};
+use crate::sensitivity::terms::{breakdown, TermBreakdown};
 use crate::sensitivity::{validate_design, Design, DesignVariable};
 use crate::shell::problem::ShellProblem;
 use crate::shell::ShellError;
@@ -87,6 +90,8 @@ pub struct VariableResult {
     pub entry: DesignEntry,
     /// Its value `τ`.
     pub value: f64,
+    /// `continuum[step][monitor]` (when the continuum DSA ran).
+    pub continuum: Option<Vec<Vec<f64>>>,
     /// `dual[step][monitor]` (when the dual reference ran).
     pub dual: Option<Vec<Vec<f64>>>,
     /// One column per step size (when finite differences ran).
@@ -111,8 +116,15 @@ pub struct DsaResult {
     /// the value parts of the dual state against the f64 analysis state (round-off when the
     /// reference follows the analysis).
     pub dual_state_mismatch: Option<f64>,
+    /// Largest difference between the continuum run's monitor values and the plain analysis',
+    /// relative to the largest monitor magnitude.
+    pub continuum_value_difference: Option<f64>,
     /// Wall time of the plain analysis (s).
     pub time_analysis: f64,
+    /// The continuum DSA's own time inside its run (s).
+    pub time_continuum: Option<f64>,
+    /// Wall time of the whole run with the continuum hook (analysis + DSA, s).
+    pub time_continuum_run: Option<f64>,
     /// The dual reference's own time inside its run (s).
     pub time_dual: Option<f64>,
     /// Wall time of the whole run with the dual hook (analysis + reference, s).
@@ -130,7 +142,7 @@ pub fn validate(case: &ShellCase, methods: &[DsaMethod]) -> Result<DsaSpec, DsaE
         .clone()
         .ok_or_else(|| DsaError::NoDesign(case.path.display().to_string()))?;
     spec.methods = methods.to_vec();
-    if methods.contains(&DsaMethod::Dual) {
+    if methods.contains(&DsaMethod::Dual) || methods.contains(&DsaMethod::Continuum) {
         dual_loads(case)?;
     }
     Ok(spec)
@@ -163,7 +175,54 @@ pub fn run(
         time_analysis
     ));
 
-    // (2) The dual reference.
+    // (2a) The continuum DSA.
+    let mut continuum: Option<Vec<Vec<Vec<f64>>>> = None; // [variable][step][monitor]
+    let (mut time_continuum, mut time_continuum_run) = (None, None);
+    let mut continuum_value_difference = None;
+    if spec.methods.contains(&DsaMethod::Continuum) {
+        let loads = dual_loads(case)?;
+        let (problem, newton) = analysis.build(&base)?;
+        let r = run_continuum(
+            problem,
+            vars.clone(),
+            loads,
+            monitors.clone(),
+            &newton,
+            analysis.solver(),
+        )?;
+        let loads: Vec<f64> = r.records.iter().map(|s| s.load).collect();
+        if loads != nominal.loads {
+            return Err(DsaError::Inconsistent(format!(
+                "continuum: converged load levels {loads:?}, plain analysis {:?}: prescribe \
+                 the steps",
+                nominal.loads
+            )));
+        }
+        continuum_value_difference = Some(value_difference(
+            &nominal.values,
+            r.records.iter().map(|s| s.values.as_slice()),
+        ));
+        time_continuum = Some(r.dsa.as_secs_f64());
+        time_continuum_run = Some(r.total.as_secs_f64());
+        progress(&format!(
+            "continuum: {} variable(s), DSA {:.3} s in a run of {:.2} s",
+            vars.len(),
+            r.dsa.as_secs_f64(),
+            r.total.as_secs_f64()
+        ));
+        continuum = Some(
+            (0..vars.len())
+                .map(|v| {
+                    r.records
+                        .iter()
+                        .map(|s| s.derivatives.iter().map(|d| d[v]).collect())
+                        .collect()
+                })
+                .collect(),
+        );
+    }
+
+    // (2b) The dual reference.
     let mut dual: Option<Vec<Vec<Vec<f64>>>> = None; // [variable][step][monitor]
     let (mut time_dual, mut time_dual_run, mut dual_value_difference) = (None, None, None);
     let mut dual_state_mismatch = None;
@@ -191,18 +250,10 @@ pub fn run(
                 nominal.loads
             )));
         }
-        let scale = nominal
-            .values
-            .iter()
-            .flatten()
-            .fold(0.0f64, |a, v| a.max(v.abs()));
-        let diff = r
-            .records
-            .iter()
-            .zip(&nominal.values)
-            .flat_map(|(s, n)| s.values.iter().zip(n).map(|(a, b)| (a - b).abs()))
-            .fold(0.0f64, f64::max);
-        dual_value_difference = Some(if scale > 0.0 { diff / scale } else { diff });
+        dual_value_difference = Some(value_difference(
+            &nominal.values,
+            r.records.iter().map(|s| s.values.as_slice()),
+        ));
         dual_state_mismatch = Some(
             r.records
                 .iter()
@@ -242,6 +293,9 @@ pub fn run(
     for (v, entry) in spec.design.iter().enumerate() {
         let var = &entry.variable;
         let dual_v = dual.as_ref().map(|d| d[v].clone());
+        let continuum_v = continuum.as_ref().map(|d| d[v].clone());
+        // The Taylor test checks the continuum derivative when it ran, else the dual one.
+        let taylor_v = continuum_v.clone().or_else(|| dual_v.clone());
         let mut cols = Vec::new();
         if run_fd {
             for (&relative, h) in entry.fd_steps.iter().zip(entry.absolute_steps(&base)) {
@@ -281,7 +335,7 @@ pub fn run(
                     .zip(&minus.values)
                     .map(|(p, m)| p.iter().zip(m).map(|(a, b)| (a - b) / (2.0 * h)).collect())
                     .collect();
-                let taylor = dual_v.as_ref().map(|d| TaylorRow {
+                let taylor = taylor_v.as_ref().map(|d| TaylorRow {
                     h,
                     remainder: plus
                         .values
@@ -318,6 +372,7 @@ pub fn run(
         variables.push(VariableResult {
             entry: entry.clone(),
             value: var.value(&base),
+            continuum: continuum_v,
             dual: dual_v,
             fd: cols,
             taylor,
@@ -330,11 +385,29 @@ pub fn run(
         variables,
         dual_value_difference,
         dual_state_mismatch,
+        continuum_value_difference,
         time_analysis,
+        time_continuum,
+        time_continuum_run,
         time_dual,
         time_dual_run,
         time_fd,
     })
+}
+
+/// Largest difference of a hooked run's monitor values from the plain analysis', relative to
+/// the largest monitor magnitude.
+fn value_difference<'a>(nominal: &[Vec<f64>], run: impl Iterator<Item = &'a [f64]>) -> f64 {
+    let scale = nominal.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
+    let diff = run
+        .zip(nominal)
+        .flat_map(|(s, n)| s.iter().zip(n).map(|(a, b)| (a - b).abs()))
+        .fold(0.0f64, f64::max);
+    if scale > 0.0 {
+        diff / scale
+    } else {
+        diff
+    }
 }
 
 /// A number for JSON: `null` when not finite (JSON has no NaN).
@@ -348,20 +421,23 @@ fn num(v: f64) -> Value {
 
 /// The notes written at the top of `sensitivity.json`.
 pub const NOTES: [&str; 4] = [
-    "continuum: null everywhere -- the hand-derived continuum method (eqs 37-65) is not \
-     implemented yet",
+    "continuum: the hand-derived continuum DSA (eqs 37-65: fictitious loads solved with the \
+     converged, factorised tangent at every step); dual: the dual-number reference through \
+     the same kernels; continuum_vs_dual: per variable, the largest |continuum - dual| \
+     relative to max |dual| over the steps and monitors",
     "timing_s.analysis: wall time of a separate plain run of the analysis (no sensitivity \
-     hook), the nominal run of the finite differences; timing_s.dual: the dual reference's own \
-     time inside the analysis run with the hook (the whole hooked run: dual_run_total_s); \
-     timing_s.fd: all finite-difference re-runs",
+     hook), the nominal run of the finite differences; timing_s.continuum and timing_s.dual: \
+     each method's own time inside its analysis run with the hook (the whole hooked runs: \
+     continuum_run_total_s, dual_run_total_s); timing_s.fd: all finite-difference re-runs",
     "fd_central and fd_step are lists, one entry per step size of the variable's fd_steps \
      (relative steps h/|tau|; fd_step holds the absolute h); fd_flagged[k] marks load steps \
      where the yield status of some layer point differs among the runs at tau-h, tau, tau+h \
      (at that step or an earlier one): such differences straddle a kink and are not \
      comparable",
-    "taylor: per load step, the least-squares slope of log |psi(tau+h) - psi(tau) - h psi'_dual| \
-     (max over the monitors) against log h over the unflagged step sizes; 2 when psi'_dual is \
-     the derivative of the discrete response",
+    "taylor: per load step, the least-squares slope of log |psi(tau+h) - psi(tau) - h psi'| \
+     (max over the monitors; psi' the continuum derivative when it ran, else the dual one) \
+     against log h over the unflagged step sizes; 2 when psi' is the derivative of the \
+     discrete response",
 ];
 
 /// `sensitivity.json`. Everything but `timing_s` and `dual_run_total_s` is a deterministic
@@ -385,7 +461,7 @@ pub fn to_json(case: &ShellCase, r: &DsaResult) -> Value {
                             mon.label.clone(),
                             json!({
                                 "value": num(r.nominal.values[s][m]),
-                                "continuum": Value::Null,
+                                "continuum": v.continuum.as_ref().map_or(Value::Null, |d| num(d[s][m])),
                                 "dual": v.dual.as_ref().map_or(Value::Null, |d| num(d[s][m])),
                                 "fd_central": v.fd.iter().map(|c| num(c.derivatives[s][m])).collect::<Vec<_>>(),
                                 "fd_step": v.fd.iter().map(|c| num(c.h)).collect::<Vec<_>>(),
@@ -423,6 +499,7 @@ pub fn to_json(case: &ShellCase, r: &DsaResult) -> Value {
                 "fd_steps_relative": v.entry.fd_steps,
                 "fd_steps": v.fd.iter().map(|c| c.h).collect::<Vec<_>>(),
                 "flagged_steps": flagged_steps(v),
+                "continuum_vs_dual": continuum_vs_dual(v).map_or(Value::Null, num),
                 "taylor": {
                     "rate_min": rates.iter().copied().reduce(f64::min),
                     "rate_max": rates.iter().copied().reduce(f64::max),
@@ -442,13 +519,15 @@ pub fn to_json(case: &ShellCase, r: &DsaResult) -> Value {
         "loads": r.nominal.loads,
         "dual_value_difference": r.dual_value_difference.map_or(Value::Null, num),
         "dual_state_mismatch": r.dual_state_mismatch.map_or(Value::Null, num),
+        "continuum_value_difference": r.continuum_value_difference.map_or(Value::Null, num),
         "timing_s": {
             "analysis": r.time_analysis,
-            "continuum": Value::Null,
+            "continuum": r.time_continuum,
             "dual": r.time_dual,
             "fd": r.time_fd,
         },
         "dual_run_total_s": r.time_dual_run,
+        "continuum_run_total_s": r.time_continuum_run,
         "variables": variables,
     })
 }
@@ -459,6 +538,19 @@ pub fn kind_name(v: &DesignVariable) -> String {
         crate::sensitivity::DesignKind::Material(p) => format!("material.{}", p.name()),
         _ => "thickness".into(),
     }
+}
+
+/// The largest `|continuum − dual|` over the steps and monitors, relative to the largest
+/// `|dual|` (`None` unless both ran).
+pub fn continuum_vs_dual(v: &VariableResult) -> Option<f64> {
+    let (c, d) = (v.continuum.as_ref()?, v.dual.as_ref()?);
+    let big = d.iter().flatten().fold(0.0f64, |a, x| a.max(x.abs()));
+    let diff = c
+        .iter()
+        .flatten()
+        .zip(d.iter().flatten())
+        .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+    Some(if big > 0.0 { diff / big } else { diff })
 }
 
 /// Per step size, the 1-based load steps flagged by the active-set test.
@@ -483,9 +575,9 @@ fn cell(v: Option<f64>) -> String {
 
 /// The table of one design variable in the format of the paper's Tables 1–2, at its first
 /// step size `h` (`Δτ`): per load step and monitor component ψ, `Δψ = (ψ(τ+h) − ψ(τ−h))/2`
-/// (central differences), `ψ'Δτ` per method (continuum: not implemented yet), and
-/// `Δψ / ψ'Δτ × 100` (finite differences against the dual reference). `*` marks a step
-/// flagged by the active-set test.
+/// (central differences), `ψ'Δτ` per method, and `Δψ / ψ'Δτ × 100` (finite differences
+/// against the continuum derivative when it ran, else the dual one: the paper's ratio).
+/// `*` marks a step flagged by the active-set test.
 pub fn table(r: &DsaResult, v: usize) -> String {
     let var = &r.variables[v];
     let col = var.fd.first();
@@ -512,11 +604,10 @@ pub fn table(r: &DsaResult, v: usize) -> String {
         let flag = col.is_some_and(|c| c.flagged[st]);
         for (m, mon) in r.spec.monitors.iter().enumerate() {
             let fd = col.map(|c| c.derivatives[st][m] * c.h);
-            let dual = var
-                .dual
-                .as_ref()
-                .and_then(|d| col.map(|c| d[st][m] * c.h).or(Some(d[st][m])));
-            let ratio = match (fd, dual) {
+            let scaled = |d: &Vec<Vec<f64>>| col.map(|c| d[st][m] * c.h).or(Some(d[st][m]));
+            let dual = var.dual.as_ref().and_then(scaled);
+            let cont = var.continuum.as_ref().and_then(scaled);
+            let ratio = match (fd, cont.or(dual)) {
                 (Some(a), Some(b)) if b != 0.0 => format!("{:>10.4}", 100.0 * a / b),
                 (Some(0.0), Some(_)) => format!("{:>10}", "0 = 0"),
                 _ => format!("{:>10}", "—"),
@@ -529,7 +620,7 @@ pub fn table(r: &DsaResult, v: usize) -> String {
                 cell(Some(r.nominal.values[st][m])),
                 cell(fd),
                 cell(dual),
-                cell(None),
+                cell(cont),
                 ratio,
                 if flag { " *" } else { "" }
             ));
@@ -540,6 +631,11 @@ pub fn table(r: &DsaResult, v: usize) -> String {
             "h/|τ| = {:e}: max |Δψ/ψ'Δτ − 1| over unflagged components with |ψ'| ≥ 1e-6 max|ψ'|: {}\n",
             c.relative,
             max_rel_diff(var, c).map_or("—".into(), |e| format!("{e:.3e}"))
+        ));
+    }
+    if let Some(e) = continuum_vs_dual(var) {
+        s.push_str(&format!(
+            "continuum vs dual: max |ψ'_cont − ψ'_dual| / max |ψ'_dual| = {e:.3e}\n"
         ));
     }
     let rates: Vec<String> = var
@@ -568,11 +664,12 @@ pub fn table(r: &DsaResult, v: usize) -> String {
     s
 }
 
-/// The largest `|fd/dual − 1|` of one step size over the unflagged steps and the components
-/// with `|ψ'_dual| ≥ 1e-6 · max|ψ'_dual|` (the variable's largest over all steps and
-/// monitors); `None` without both methods or without an unflagged non-zero component.
+/// The largest `|fd/ψ' − 1|` of one step size (`ψ'` continuum when it ran, else dual) over the
+/// unflagged steps and the components with `|ψ'| ≥ 1e-6 · max|ψ'|` (the variable's largest
+/// over all steps and monitors); `None` without a derivative method or without an unflagged
+/// non-zero component.
 pub fn max_rel_diff(v: &VariableResult, c: &FdColumn) -> Option<f64> {
-    let d = v.dual.as_ref()?;
+    let d = v.continuum.as_ref().or(v.dual.as_ref())?;
     let big = d.iter().flatten().fold(0.0f64, |a, x| a.max(x.abs()));
     let mut out: Option<f64> = None;
     for (s, row) in d.iter().enumerate() {
@@ -587,4 +684,131 @@ pub fn max_rel_diff(v: &VariableResult, c: &FdColumn) -> Option<f64> {
         }
     }
     out
+}
+
+/// `--terms STEP`: the term-by-term breakdown of the continuum fictitious load against the dual
+/// reference at converged step `step` (1-based), one entry per design variable
+/// ([`crate::sensitivity::terms`]).
+pub fn terms(
+    case: &ShellCase,
+    spec: &DsaSpec,
+    step: usize,
+) -> Result<Vec<TermBreakdown>, DsaError> {
+    let analysis = CaseAnalysis { case };
+    let base = Design {
+        thickness: case.thickness,
+        material: case.material,
+    };
+    let (problem, newton) = analysis.build(&base)?;
+    let vars: Vec<DesignVariable> = spec.design.iter().map(|d| d.variable.clone()).collect();
+    Ok(breakdown(
+        problem,
+        vars,
+        dual_loads(case)?,
+        spec.monitors.clone(),
+        &newton,
+        analysis.solver(),
+        step,
+    )?)
+}
+
+/// The breakdown of one variable as a table: per group the largest continuum and dual entries
+/// and their largest difference with its row (particle, DOF); then the end-of-step
+/// sensitivities field by field with the worst integration point or particle.
+pub fn terms_table(b: &TermBreakdown) -> String {
+    let mut s = format!(
+        "terms at step {} (λ = {:e}), design variable `{}` ({}):\n",
+        b.step,
+        b.load,
+        b.variable.name,
+        kind_name(&b.variable)
+    );
+    s.push_str(&format!(
+        "{:<10} {:>13} {:>13} {:>13} {:>10}  worst row\n",
+        "group", "max|cont.|", "max|dual|", "max|diff|", "rel."
+    ));
+    for g in &b.groups {
+        let worst = match g.worst_dof {
+            _ if g.max_difference == 0.0 => "—".to_string(),
+            Some((p, c)) => format!("particle {p} dof {c}"),
+            None => format!("constraint row {}", g.worst_row),
+        };
+        s.push_str(&format!(
+            "{:<10} {:>13.5e} {:>13.5e} {:>13.5e} {:>10.2e}  {}\n",
+            g.group.map_or("total", |t| t.name()),
+            g.continuum_max,
+            g.dual_max,
+            g.max_difference,
+            g.relative(),
+            worst
+        ));
+    }
+    s.push_str(&format!(
+        "{:<12} {:>13} {:>13} {:>10}  worst point\n",
+        "n+1 field", "max|dual|", "max|diff|", "rel."
+    ));
+    for f in &b.update {
+        let at = match f.worst.1 {
+            _ if f.max_difference == 0.0 => "—".to_string(),
+            Some(l) => format!(
+                "point {} layer {l} at ({:.4}, {:.4})",
+                f.worst.0, f.worst_uv[0], f.worst_uv[1]
+            ),
+            None => format!(
+                "particle {} at ({:.4}, {:.4})",
+                f.worst.0, f.worst_uv[0], f.worst_uv[1]
+            ),
+        };
+        s.push_str(&format!(
+            "{:<12} {:>13.5e} {:>13.5e} {:>10.2e}  {}\n",
+            f.field,
+            f.dual_max,
+            f.max_difference,
+            f.relative(),
+            at
+        ));
+    }
+    s
+}
+
+/// `terms.json`: the breakdowns of all variables.
+pub fn terms_json(bs: &[TermBreakdown]) -> Value {
+    let one = |b: &TermBreakdown| {
+        json!({
+            "step": b.step,
+            "load": b.load,
+            "variable": b.variable.name,
+            "kind": kind_name(&b.variable),
+            "groups": b.groups.iter().map(|g| json!({
+                "group": g.group.map_or("total", |t| t.name()),
+                "continuum_max": num(g.continuum_max),
+                "dual_max": num(g.dual_max),
+                "max_difference": num(g.max_difference),
+                "relative": num(g.relative()),
+                "worst_row": g.worst_row,
+                "worst_particle_dof": g.worst_dof,
+            })).collect::<Vec<_>>(),
+            "update": b.update.iter().map(|f| json!({
+                "field": f.field,
+                "dual_max": num(f.dual_max),
+                "max_difference": num(f.max_difference),
+                "relative": num(f.relative()),
+                "worst_index": f.worst.0,
+                "worst_layer": f.worst.1,
+                "worst_uv": f.worst_uv,
+            })).collect::<Vec<_>>(),
+        })
+    };
+    json!({
+        "kind": "shell-dsa-terms",
+        "notes": [
+            "groups: the continuum fictitious load (eq 65's right-hand side) of each term group, \
+             seeded with the dual reference's committed sensitivities at the step start, against \
+             the dual residual's derivative part with only that group seeded; total = all groups",
+            "update: the continuum end-of-step sensitivities (its own solve of eq 65 with the \
+             converged tangent, history update eqs 44-51, particle update) against the dual \
+             reference's committed dual state",
+        ],
+        "breakdowns": bs.iter().map(one).collect::<Vec<_>>(),
+    })
 }

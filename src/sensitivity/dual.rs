@@ -351,7 +351,7 @@ impl<D: DesignDual> DualShellProblem<D> {
 
     /// The dual residual `R(Δu; ⁿs, τ)` of group `g` (all unknowns' rows) at the converged
     /// unknowns `u` and load `load`.
-    fn dual_residual(
+    pub(crate) fn dual_residual(
         &self,
         g: &DualState<D>,
         dq: &[D],
@@ -410,30 +410,6 @@ impl<D: DesignDual> DualShellProblem<D> {
         Ok(r)
     }
 
-    /// Check that the loads given to the reference are the problem's: equal forces at `dq`.
-    fn check_loads(&self, dq: &[f64], load: f64) -> Result<(), ProblemError> {
-        let model = &self.problem.model;
-        let reference = self.problem.external_force(dq, load).map_err(fatal)?;
-        let mut mine = vec![0.0; reference.len()];
-        for l in &self.loads {
-            l.add_force_f64(model, dq, load, &mut mine).map_err(fatal)?;
-        }
-        let scale = reference.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
-        let diff = reference
-            .iter()
-            .zip(&mine)
-            .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
-        // Same loads summed in the same order give equal forces; 1e-12 of the largest
-        // component leaves room for a different summation order only.
-        if diff > 1e-12 * scale || (scale == 0.0 && diff > 0.0) {
-            return Err(fatal(format!(
-                "the loads given to the reference differ from the problem's at load {load}: \
-                 largest force difference {diff:e} (largest force {scale:e})"
-            )));
-        }
-        Ok(())
-    }
-
     fn hook(&mut self, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
         if step.factorised_at != FactorisedAt::Converged {
             return Err(fatal(
@@ -445,7 +421,7 @@ impl<D: DesignDual> DualShellProblem<D> {
         let n_q = self.problem.n_generalised();
         let committed = self.problem.state();
         let du: Vec<f64> = step.u.iter().zip(committed).map(|(a, b)| a - b).collect();
-        self.check_loads(&du[..n_q], step.load)?;
+        check_loads(&self.problem, &self.loads, &du[..n_q], step.load)?;
         let dq_const: Vec<D> = du[..n_q].iter().map(|&v| D::cst(v)).collect();
         // 1. Right-hand sides of all variables, column-major n × n_variables.
         let nv = self.variables.len();
@@ -554,6 +530,36 @@ impl<D: DesignDual> DualShellProblem<D> {
         });
         Ok(())
     }
+}
+
+/// Check that `loads` (given to a sensitivity method) are the problem's: equal forces at the
+/// increment `dq` and load level `load`.
+pub(crate) fn check_loads(
+    problem: &ShellProblem,
+    loads: &[DualLoad],
+    dq: &[f64],
+    load: f64,
+) -> Result<(), ProblemError> {
+    let model = &problem.model;
+    let reference = problem.external_force(dq, load).map_err(fatal)?;
+    let mut mine = vec![0.0; reference.len()];
+    for l in loads {
+        l.add_force_f64(model, dq, load, &mut mine).map_err(fatal)?;
+    }
+    let scale = reference.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+    let diff = reference
+        .iter()
+        .zip(&mine)
+        .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
+    // Same loads summed in the same order give equal forces; 1e-12 of the largest
+    // component leaves room for a different summation order only.
+    if diff > 1e-12 * scale || (scale == 0.0 && diff > 0.0) {
+        return Err(fatal(format!(
+            "the loads given to the sensitivity method differ from the problem's at load \
+             {load}: largest force difference {diff:e} (largest force {scale:e})"
+        )));
+    }
+    Ok(())
 }
 
 /// Largest difference between the value parts of a dual state and the model, relative to the

@@ -11,8 +11,10 @@
 //!
 //! Layout: `docs/sensitivity.md`.
 
+pub mod continuum;
 pub mod dual;
 pub mod fd;
+pub mod terms;
 
 use crate::material::{MaterialError, MaterialParams, PARAM_NAMES};
 use crate::shell::model::ShellModel;
@@ -332,4 +334,12 @@ pub enum DesignError {
     /// Material validation.
     #[error(transparent)]
     Material(#[from] MaterialError),
+    /// A method that does not support the variable's kind.
+    #[error("design variable `{name}`: the {method} method does not support its kind yet")]
+    Unsupported {
+        /// Variable name.
+        name: String,
+        /// Method (`continuum`, `dual`, ...).
+        method: &'static str,
+    },
 }

@@ -21,6 +21,7 @@ pub mod dirichlet;
 pub mod krylov;
 pub mod linear;
 pub mod newton;
+pub mod observe;
 pub mod pattern;
 
 pub use assembly::{

@@ -1,0 +1,592 @@
+//! The continuum (hand-derived) design sensitivity analysis, path 2 of `/work/shared/design.md`:
+//! the paper's §3 (eqs 37–65) on the discretised shell, at every converged load step, with the
+//! tangent the Newton driver holds factorised at the converged state and no iteration.
+//!
+//! At the converged step `n → n+1` (increment `Δu`, unknowns `u = [q, μ]`), for every design
+//! variable `τ` at once (the columns of one multi-right-hand-side solve):
+//!
+//! 1. **Fictitious load** (eq 65's right-hand side): the derivative of the step's residual
+//!    `R(Δu; ⁿs, τ)` at fixed `Δu`, from the hand-derived point kernel
+//!    ([`crate::shell::point_sensitivity`]) seeded with the committed sensitivities
+//!    `ⁿṡ = (ⁿū̇, ⁿḋ, ⁿė; ⁿQ̇, ⁿσ̇, ⁿα̇, ⁿė^p; ⁿμ̇)` and the design's own terms
+//!    (`ṫ`, `Ė, ν̇, …`, the design velocity of the surface for shape variables). This is
+//!    `a'_V` of eq (64) with `σ^fic` of eqs (49, 61) and the rotation terms (50–58), minus the
+//!    load term `l'_V` of eq (37) (a follower pressure's dependence on `ⁿū̇`), plus the
+//!    constraint rows' terms `k_c a_c · ⁿq̇` and `k_c μ̇_c`.
+//! 2. **Solve** `K Δu̇ = −(fictitious load)` with the factorised tangent (eq 65); the essential
+//!    rows are zero.
+//! 3. **History update**: the point kernel's derivative seeded with `Δu̇` as well gives the
+//!    sensitivities of the trial histories `ⁿ⁺¹(Q̇, σ̇, α̇, ė^p)` (eqs 44–51); the particle update
+//!    (Rodrigues' rotation of the director and the lamina vectors) differentiated by hand gives
+//!    `ⁿ⁺¹(ū̇, ḋ, ė)`. They become the committed sensitivities when the analysis commits.
+//!
+//! The geometry of the discretisation is the CAD surface's parameter domain: shape functions
+//! and quadrature are design-free, and the current configuration is `x⁰(ξ; τ) + ū(ξ)`. The
+//! paper's design-velocity update (eq 74, the updated reference configuration
+//! `ⁿV = V⁰ + ⁿu̇`) is therefore carried by the committed `ⁿū̇` and `ⁿḋ`: the current
+//! configuration's sensitivity is `V⁰ + Σ Ψ_I ⁿū̇_I`.
+//!
+//! **Term groups** (the `--terms` breakdown): the fictitious load splits, by linearity, into
+//! [`TermGroup::History`] (the committed state's sensitivities), [`TermGroup::Design`] (the
+//! explicit dependence on the thickness and the design velocity of the geometry),
+//! [`TermGroup::Material`] (the material parameters) and [`TermGroup::Load`] (the loads'
+//! explicit design dependence). Each can be compared with the dual-number reference seeded with
+//! that group only ([`super::terms`]).
+
+use super::dual::{DualLoad, SensitivityError};
+use super::{validate_design, DesignError, DesignKind, DesignVariable, Monitor};
+use crate::kinematics::M3;
+use crate::material::{MaterialParams, MaterialState};
+use crate::shell::load::ExternalLoad;
+use crate::shell::model::ShellModel;
+use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
+use crate::shell::point_sensitivity::{commit_particle_dot, ModelSeeds};
+use crate::shell::problem::ShellProblem;
+use crate::solver::observe::{Observed, StepObserver};
+use crate::solver::NonlinearProblem;
+use crate::solver::{
+    ConvergedStep, ConvergedTangent, FactorisedAt, LinearSolver, NewtonReport, NewtonSolver,
+    ProblemError, SolverOptions,
+};
+use nalgebra::Vector3;
+use std::time::{Duration, Instant};
+
+/// A named group of terms of the fictitious load.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum TermGroup {
+    /// The committed state's sensitivities `ⁿṡ` (history terms of eq 49, the particles'
+    /// `ⁿū̇, ⁿḋ, ⁿė`, the multipliers' `ⁿμ̇`, a follower load's dependence on `ⁿū̇`).
+    History,
+    /// The explicit dependence on the geometry: thickness and the design velocity of the
+    /// surface (eqs 37–43, 50–58).
+    Design,
+    /// The material parameters (the `Ḋ` and yield-radius terms of `σ^fic`).
+    Material,
+    /// The loads' explicit design dependence (eq 37's `l'_V` for a shape variable).
+    Load,
+}
+
+impl TermGroup {
+    /// All groups, in output order.
+    pub const ALL: [TermGroup; 4] = [
+        TermGroup::History,
+        TermGroup::Design,
+        TermGroup::Material,
+        TermGroup::Load,
+    ];
+    /// Name in tables and JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            TermGroup::History => "history",
+            TermGroup::Design => "design",
+            TermGroup::Material => "material",
+            TermGroup::Load => "load",
+        }
+    }
+}
+
+/// The committed sensitivities of one design variable, parallel to the model's state.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SensitivityState {
+    /// `ⁿ(ū̇, ḋ, ḋ⁰, ė)` of the real particles.
+    pub particles: Vec<ParticleState<f64>>,
+    /// `ⁿ(Q̇, σ̇, α̇, ė^p)`, point-major as `ShellModel::history`.
+    pub history: Vec<PointHistory<f64>>,
+    /// `ⁿ(q̇, μ̇)`.
+    pub unknowns: Vec<f64>,
+    /// Design velocity of the initial geometry at every in-plane point (shape variables).
+    pub surface: Option<Vec<SurfacePoint<f64>>>,
+    /// `ṫ`.
+    pub thickness: f64,
+    /// `Ė, ν̇, k̇, σ̇0, Ḣ, β̇`.
+    pub material: MaterialParams<f64>,
+}
+
+/// A zero particle-state sensitivity.
+pub fn zero_particle() -> ParticleState<f64> {
+    let z = Vector3::zeros();
+    ParticleState {
+        u: z,
+        d: z,
+        d0: z,
+        e: [z, z],
+    }
+}
+
+/// A zero history sensitivity.
+pub fn zero_history() -> PointHistory<f64> {
+    PointHistory {
+        frame: M3::zeros(),
+        material: MaterialState::zero(),
+    }
+}
+
+impl SensitivityState {
+    /// The initial sensitivities of a non-shape variable of `problem` (at its unloaded state):
+    /// zero state, the variable's unit seed.
+    pub fn initial(problem: &ShellProblem, var: &DesignVariable) -> Result<Self, DesignError> {
+        let mut s = Self::zero(problem);
+        match var.kind {
+            DesignKind::Thickness => s.thickness = 1.0,
+            DesignKind::Material(p) => {
+                let mut a = [0.0; 6];
+                a[p.index()] = 1.0;
+                s.material = MaterialParams::from_array(a);
+            }
+            #[allow(unreachable_patterns)]
+            _ => {
+                return Err(DesignError::Unsupported {
+                    name: var.name.clone(),
+                    method: "continuum",
+                })
+            }
+        }
+        Ok(s)
+    }
+
+    /// The seeds of the point kernel for `group` (all groups: `None`), with the increment
+    /// sensitivity `dofs`; `zero` supplies the zero state of the groups left out.
+    fn seeds<'a>(
+        &'a self,
+        group: Option<TermGroup>,
+        dofs: &'a [f64],
+        zero: &'a SensitivityState,
+    ) -> ModelSeeds<'a> {
+        let on = |g: TermGroup| group.is_none_or(|x| x == g);
+        let state = if on(TermGroup::History) { self } else { zero };
+        ModelSeeds {
+            surface: if on(TermGroup::Design) {
+                self.surface.as_deref()
+            } else {
+                None
+            },
+            thickness: if on(TermGroup::Design) {
+                self.thickness
+            } else {
+                0.0
+            },
+            material: if on(TermGroup::Material) {
+                self.material
+            } else {
+                MaterialParams::zero()
+            },
+            particles: &state.particles,
+            history: &state.history,
+            dofs,
+        }
+    }
+
+    /// All sensitivities zero (the seeds of a group left out).
+    pub fn zero(problem: &ShellProblem) -> Self {
+        let model = &problem.model;
+        SensitivityState {
+            particles: vec![zero_particle(); model.particles.len()],
+            history: vec![zero_history(); model.history.len()],
+            unknowns: vec![0.0; problem.n_dofs()],
+            surface: None,
+            thickness: 0.0,
+            material: MaterialParams::zero(),
+        }
+    }
+}
+
+/// The sensitivities recorded at one converged step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ContinuumStepRecord {
+    /// Converged step index (0-based).
+    pub step: usize,
+    /// Load factor.
+    pub load: f64,
+    /// Monitor values (f64 analysis).
+    pub values: Vec<f64>,
+    /// `derivatives[m][v]`: d(monitor m)/d(variable v).
+    pub derivatives: Vec<Vec<f64>>,
+}
+
+/// The continuum DSA as an observer of the analysis' converged steps.
+#[derive(Debug)]
+pub struct ContinuumDsa {
+    variables: Vec<DesignVariable>,
+    loads: Vec<DualLoad>,
+    monitors: Vec<Monitor>,
+    states: Vec<SensitivityState>,
+    zero: SensitivityState,
+    pending: Option<Vec<SensitivityState>>,
+    records: Vec<ContinuumStepRecord>,
+    time: Duration,
+    failure: Option<String>,
+}
+
+fn fatal(e: impl std::fmt::Display) -> ProblemError {
+    ProblemError::Fatal(format!("continuum sensitivity: {e}"))
+}
+
+impl ContinuumDsa {
+    /// The continuum DSA of `variables` for `problem` (at its initial state), with the
+    /// problem's loads as `loads` (checked at every step) and `monitors` recorded at every
+    /// converged step.
+    pub fn new(
+        problem: &ShellProblem,
+        variables: Vec<DesignVariable>,
+        loads: Vec<DualLoad>,
+        monitors: Vec<Monitor>,
+    ) -> Result<Self, SensitivityError> {
+        validate_design(&variables, &problem.model, 0.0)?;
+        if let Some((index, &value)) = problem.state().iter().enumerate().find(|(_, v)| **v != 0.0)
+        {
+            return Err(SensitivityError::NotInitial { index, value });
+        }
+        for m in &monitors {
+            m.value(&problem.model)
+                .map_err(|e| DesignError::InvalidMonitor {
+                    label: m.label.clone(),
+                    detail: e.to_string(),
+                })?;
+        }
+        let states = variables
+            .iter()
+            .map(|v| SensitivityState::initial(problem, v))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(ContinuumDsa {
+            variables,
+            loads,
+            monitors,
+            states,
+            zero: SensitivityState::zero(problem),
+            pending: None,
+            records: Vec::new(),
+            time: Duration::ZERO,
+            failure: None,
+        })
+    }
+
+    /// The design variables.
+    pub fn variables(&self) -> &[DesignVariable] {
+        &self.variables
+    }
+    /// The records of the converged steps.
+    pub fn records(&self) -> &[ContinuumStepRecord] {
+        &self.records
+    }
+    /// The committed sensitivities, one per variable.
+    pub fn states(&self) -> &[SensitivityState] {
+        &self.states
+    }
+    /// Wall time spent in the continuum DSA.
+    pub fn time(&self) -> Duration {
+        self.time
+    }
+
+    /// The fictitious load (eq 65's right-hand side, the derivative of the residual at fixed
+    /// `Δu`) of every variable restricted to `group` (`None`: all groups), all unknowns' rows.
+    pub fn fictitious_loads(
+        &self,
+        problem: &ShellProblem,
+        at: StepState<'_>,
+        group: Option<TermGroup>,
+    ) -> Result<Vec<Vec<f64>>, SensitivityError> {
+        fictitious_loads(problem, &self.loads, &self.states, &self.zero, at, group)
+    }
+
+    fn hook(
+        &mut self,
+        problem: &ShellProblem,
+        step: &ConvergedStep<'_>,
+    ) -> Result<(), ProblemError> {
+        if step.factorised_at != FactorisedAt::Converged {
+            return Err(fatal(
+                "the solver's tangent is not the converged one (the observer must ask for \
+                 ConvergedTangent::Required)",
+            ));
+        }
+        let n = step.u.len();
+        let n_q = problem.n_generalised();
+        let du: Vec<f64> = step
+            .u
+            .iter()
+            .zip(problem.state())
+            .map(|(a, b)| a - b)
+            .collect();
+        super::dual::check_loads(problem, &self.loads, &du[..n_q], step.load)?;
+        // 1. Fictitious loads of all variables (eq 65's right-hand side).
+        let rhs = self
+            .fictitious_loads(
+                problem,
+                StepState {
+                    du: &du,
+                    u: step.u,
+                    load: step.load,
+                },
+                None,
+            )
+            .map_err(fatal)?;
+        let nv = self.variables.len();
+        let mut b = vec![0.0; n * nv];
+        for (v, r) in rhs.iter().enumerate() {
+            let col = &mut b[v * n..(v + 1) * n];
+            for (c, ri) in col.iter_mut().zip(r) {
+                *c = -ri;
+            }
+            step.essential.zero_constrained(col);
+        }
+        // 2. One multi-RHS solve with the converged tangent (eq 65).
+        step.solver
+            .solve_columns_in_place(&mut b, nv)
+            .map_err(fatal)?;
+        // 3. History and particle updates with Δu̇ (eqs 44–51).
+        let model = &problem.model;
+        let seeds: Vec<ModelSeeds> = self
+            .states
+            .iter()
+            .enumerate()
+            .map(|(v, s)| s.seeds(None, &b[v * n..v * n + n_q], &self.zero))
+            .collect();
+        let dots = model
+            .internal_force_dots(&du[..n_q], &seeds)
+            .map_err(fatal)?;
+        let next = self
+            .states
+            .iter()
+            .zip(dots)
+            .enumerate()
+            .map(|(v, (s, (_, history)))| {
+                let dq = &b[v * n..(v + 1) * n];
+                let particles = model
+                    .particles
+                    .iter()
+                    .zip(&s.particles)
+                    .enumerate()
+                    .map(|(i, (p, pd))| {
+                        let r = DOFS_PER_PARTICLE * i..DOFS_PER_PARTICLE * (i + 1);
+                        commit_particle_dot(p, pd, &du[r.clone()], &dq[r])
+                    })
+                    .collect();
+                SensitivityState {
+                    particles,
+                    history,
+                    unknowns: s.unknowns.iter().zip(dq).map(|(a, d)| a + d).collect(),
+                    surface: s.surface.clone(),
+                    thickness: s.thickness,
+                    material: s.material,
+                }
+            })
+            .collect();
+        self.pending = Some(next);
+        Ok(())
+    }
+
+    fn record(&mut self, problem: &ShellProblem, load: f64) -> Result<(), String> {
+        let next = self
+            .pending
+            .take()
+            .ok_or("commit without a converged-step hook")?;
+        self.states = next;
+        let model = &problem.model;
+        let n_q = problem.n_generalised();
+        let mut values = Vec::with_capacity(self.monitors.len());
+        let mut derivatives = vec![vec![0.0; self.variables.len()]; self.monitors.len()];
+        let udot: Vec<Vec<f64>> = self
+            .states
+            .iter()
+            .map(|s| {
+                let mut g = vec![0.0; n_q];
+                for (i, p) in s.particles.iter().enumerate() {
+                    for c in 0..3 {
+                        g[DOFS_PER_PARTICLE * i + c] = p.u[c];
+                    }
+                }
+                g
+            })
+            .collect();
+        for (mi, m) in self.monitors.iter().enumerate() {
+            values.push(m.value(model).map_err(|e| e.to_string())?);
+            for (v, ud) in udot.iter().enumerate() {
+                derivatives[mi][v] = model
+                    .interpolate_translation(m.uv, ud)
+                    .map_err(|e| e.to_string())?[m.component];
+            }
+        }
+        self.records.push(ContinuumStepRecord {
+            step: self.records.len(),
+            load,
+            values,
+            derivatives,
+        });
+        Ok(())
+    }
+}
+
+/// A converged step as the sensitivity methods see it.
+#[derive(Clone, Copy, Debug)]
+pub struct StepState<'a> {
+    /// The converged increment `Δu` from the committed state.
+    pub du: &'a [f64],
+    /// The converged unknowns `u`.
+    pub u: &'a [f64],
+    /// The load level.
+    pub load: f64,
+}
+
+/// The fictitious loads of `states` (one per variable) at the converged step `at` of
+/// `problem`, restricted to `group` (`None`: all groups):
+/// internal force terms from the hand-derived point kernel, the follower loads' dependence
+/// on `ⁿū̇`, and the constraint rows.
+pub fn fictitious_loads(
+    problem: &ShellProblem,
+    loads: &[DualLoad],
+    states: &[SensitivityState],
+    zero: &SensitivityState,
+    at: StepState<'_>,
+    group: Option<TermGroup>,
+) -> Result<Vec<Vec<f64>>, SensitivityError> {
+    let StepState { du, u, load } = at;
+    let model = &problem.model;
+    let n = u.len();
+    let n_q = problem.n_generalised();
+    let zero_dofs = vec![0.0; n_q];
+    let seeds: Vec<ModelSeeds> = states
+        .iter()
+        .map(|s| s.seeds(group, &zero_dofs, zero))
+        .collect();
+    let history_terms = group.is_none_or(|g| g == TermGroup::History);
+    let dots = model.internal_force_dots(&du[..n_q], &seeds)?;
+    let mut out = Vec::with_capacity(states.len());
+    for (s, (f_int, _)) in states.iter().zip(dots) {
+        let mut r = f_int;
+        r.resize(n, 0.0);
+        if history_terms {
+            // A follower pressure depends on ⁿū + Δū only: its history term is its load
+            // stiffness at Δu applied to ⁿū̇ (eq 37's l'_V for non-shape variables).
+            let mut shift = vec![0.0; n_q];
+            for (i, p) in s.particles.iter().enumerate() {
+                for c in 0..3 {
+                    shift[DOFS_PER_PARTICLE * i + c] = p.u[c];
+                }
+            }
+            let mut trip = Vec::new();
+            for l in loads {
+                if let DualLoad::Pressure(p) = l {
+                    p.add_stiffness(model, &du[..n_q], load, &mut trip)?;
+                }
+            }
+            for (i, j, k) in trip {
+                r[i] -= k * shift[j];
+            }
+            // Constraint rows: k_c a_c · ⁿq̇ and k_c μ̇_c (the committed unknowns' sensitivities).
+            for (c, (row, &k)) in problem
+                .constraints()
+                .iter()
+                .zip(problem.constraint_scales())
+                .enumerate()
+            {
+                let mu_dot = s.unknowns[n_q + c];
+                let mut g = 0.0;
+                for &(d, a) in &row.terms {
+                    r[d] += mu_dot * k * a;
+                    g += s.unknowns[d] * a;
+                }
+                r[n_q + c] = g * k;
+            }
+        }
+        out.push(r);
+    }
+    Ok(out)
+}
+
+impl StepObserver<ShellProblem> for ContinuumDsa {
+    fn converged_tangent(&self, _problem: ConvergedTangent) -> ConvergedTangent {
+        ConvergedTangent::Required
+    }
+    fn on_converged(
+        &mut self,
+        problem: &ShellProblem,
+        step: &ConvergedStep<'_>,
+    ) -> Result<(), ProblemError> {
+        let t0 = Instant::now();
+        let out = self.hook(problem, step);
+        self.time += t0.elapsed();
+        out
+    }
+    fn after_commit(&mut self, problem: &ShellProblem, _u: &[f64], load: f64) {
+        let t0 = Instant::now();
+        if let Err(e) = self.record(problem, load) {
+            self.failure.get_or_insert(e);
+        }
+        self.time += t0.elapsed();
+    }
+    fn on_restore(&mut self) {
+        self.pending = None;
+    }
+    fn failure(&self) -> Option<String> {
+        self.failure
+            .as_ref()
+            .map(|f| format!("continuum sensitivity: {f}"))
+    }
+}
+
+/// The result of [`run_continuum`].
+#[derive(Clone, Debug)]
+pub struct ContinuumRun {
+    /// The design variables.
+    pub variables: Vec<DesignVariable>,
+    /// Per converged step.
+    pub records: Vec<ContinuumStepRecord>,
+    /// The committed sensitivities at the end, one per variable.
+    pub states: Vec<SensitivityState>,
+    /// The Newton report.
+    pub report: NewtonReport,
+    /// Wall time of the whole run (analysis and continuum DSA).
+    pub total: Duration,
+    /// Wall time of the continuum DSA alone.
+    pub dsa: Duration,
+}
+
+impl ContinuumRun {
+    /// Cost of the continuum DSA per design variable as a fraction of the analysis (the run's
+    /// time without the DSA).
+    pub fn cost_per_variable(&self) -> f64 {
+        let analysis = (self.total - self.dsa).as_secs_f64();
+        self.dsa.as_secs_f64() / analysis / self.variables.len() as f64
+    }
+}
+
+/// Run the analysis of `problem` with the continuum DSA of `variables` at every converged step.
+pub fn run_continuum(
+    problem: ShellProblem,
+    variables: Vec<DesignVariable>,
+    loads: Vec<DualLoad>,
+    monitors: Vec<Monitor>,
+    newton: &NewtonSolver,
+    solver: SolverOptions,
+) -> Result<ContinuumRun, SensitivityError> {
+    let t0 = Instant::now();
+    let pattern = problem.pattern().clone();
+    let mut linear = LinearSolver::new(&pattern, crate::solver::Method::auto(&pattern), solver)?;
+    let dsa = ContinuumDsa::new(&problem, variables, loads, monitors)?;
+    let mut obs = Observed::new(problem, dsa);
+    let u0 = obs.problem.state().to_vec();
+    let report = newton
+        .run(&mut obs, &pattern, &mut linear, &u0)
+        .map_err(SensitivityError::Newton)?;
+    if let Some(f) = obs.observer.failure() {
+        return Err(SensitivityError::Shell(
+            crate::shell::ShellError::InvalidInput(f),
+        ));
+    }
+    let dsa = obs.observer;
+    Ok(ContinuumRun {
+        variables: dsa.variables,
+        records: dsa.records,
+        states: dsa.states,
+        report,
+        total: t0.elapsed(),
+        dsa: dsa.time,
+    })
+}
+
+/// Monitor derivatives of a model for generalised sensitivities `q̇` (translations used).
+pub fn monitor_derivative(model: &ShellModel, m: &Monitor, qdot: &[f64]) -> Result<f64, String> {
+    Ok(model
+        .interpolate_translation(m.uv, qdot)
+        .map_err(|e| e.to_string())?[m.component])
+}

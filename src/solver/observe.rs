@@ -1,0 +1,146 @@
+//! A problem with an observer of its converged steps: the one wrapper through which analysis
+//! output, finite-difference recording and the design-sensitivity methods see the Newton
+//! driver's converged steps, without each re-implementing [`NonlinearProblem`].
+//!
+//! [`Observed`] delegates every evaluation to the problem and calls the [`StepObserver`] at the
+//! three points of a converged step's life: [`StepObserver::on_converged`] (the tangent at the
+//! converged state is factorised in the step's solver when the observer asks for it,
+//! [`StepObserver::converged_tangent`]), [`StepObserver::after_commit`] (the problem holds the
+//! committed state) and [`StepObserver::on_restore`] (the trial state was rejected). An observer
+//! that fails after a commit (which cannot return an error) reports it through
+//! [`StepObserver::failure`]; the next evaluation stops the run with it.
+
+use super::newton::{ConvergedStep, ConvergedTangent, NonlinearProblem, ProblemError};
+
+/// What an observer of converged steps does (all hooks default to nothing).
+pub trait StepObserver<P: ?Sized> {
+    /// The tangent policy the observer needs, given the problem's own (default: the problem's).
+    fn converged_tangent(&self, problem: ConvergedTangent) -> ConvergedTangent {
+        problem
+    }
+    /// A step converged (before the commit): `problem` holds the trial state at `step.u`.
+    fn on_converged(
+        &mut self,
+        _problem: &P,
+        _step: &ConvergedStep<'_>,
+    ) -> Result<(), ProblemError> {
+        Ok(())
+    }
+    /// Called just before the problem commits `u` at `load` (e.g. to keep the step-start state).
+    fn before_commit(&mut self, _problem: &P, _u: &[f64], _load: f64) {}
+    /// The problem committed `u` at `load`. A failure is kept and reported by
+    /// [`StepObserver::failure`].
+    fn after_commit(&mut self, _problem: &P, _u: &[f64], _load: f64) {}
+    /// The trial state was rejected.
+    fn on_restore(&mut self) {}
+    /// A failure recorded after a commit: stops the run at the next evaluation.
+    fn failure(&self) -> Option<String> {
+        None
+    }
+}
+
+/// Two observers, called in order (the first one's tangent policy wins if it needs the
+/// converged tangent).
+impl<P: ?Sized, A: StepObserver<P>, B: StepObserver<P>> StepObserver<P> for (A, B) {
+    fn converged_tangent(&self, problem: ConvergedTangent) -> ConvergedTangent {
+        match self.0.converged_tangent(problem) {
+            ConvergedTangent::Required => ConvergedTangent::Required,
+            ConvergedTangent::NotNeeded => self.1.converged_tangent(problem),
+        }
+    }
+    fn on_converged(&mut self, problem: &P, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
+        self.0.on_converged(problem, step)?;
+        self.1.on_converged(problem, step)
+    }
+    fn before_commit(&mut self, problem: &P, u: &[f64], load: f64) {
+        self.0.before_commit(problem, u, load);
+        self.1.before_commit(problem, u, load);
+    }
+    fn after_commit(&mut self, problem: &P, u: &[f64], load: f64) {
+        self.0.after_commit(problem, u, load);
+        self.1.after_commit(problem, u, load);
+    }
+    fn on_restore(&mut self) {
+        self.0.on_restore();
+        self.1.on_restore();
+    }
+    fn failure(&self) -> Option<String> {
+        self.0.failure().or_else(|| self.1.failure())
+    }
+}
+
+/// A problem (owned or `&mut`) and its observer.
+#[derive(Debug)]
+pub struct Observed<P, O> {
+    /// The observed problem.
+    pub problem: P,
+    /// The observer.
+    pub observer: O,
+}
+
+impl<P, O> Observed<P, O> {
+    /// Wrap `problem`.
+    pub fn new(problem: P, observer: O) -> Self {
+        Observed { problem, observer }
+    }
+}
+
+impl<P: NonlinearProblem, O: StepObserver<P>> Observed<P, O> {
+    fn check(&self) -> Result<(), ProblemError> {
+        match self.observer.failure() {
+            Some(f) => Err(ProblemError::Fatal(f)),
+            None => Ok(()),
+        }
+    }
+}
+
+impl<P: NonlinearProblem, O: StepObserver<P>> NonlinearProblem for Observed<P, O> {
+    fn n_dofs(&self) -> usize {
+        self.problem.n_dofs()
+    }
+    fn residual(&mut self, u: &[f64], load: f64, r: &mut [f64]) -> Result<(), ProblemError> {
+        self.check()?;
+        self.problem.residual(u, load, r)
+    }
+    fn tangent(&mut self, u: &[f64], load: f64, values: &mut [f64]) -> Result<(), ProblemError> {
+        self.check()?;
+        self.problem.tangent(u, load, values)
+    }
+    fn residual_and_tangent(
+        &mut self,
+        u: &[f64],
+        load: f64,
+        r: &mut [f64],
+        values: &mut [f64],
+    ) -> Result<(), ProblemError> {
+        self.check()?;
+        self.problem.residual_and_tangent(u, load, r, values)
+    }
+    fn essential(&self, load: f64) -> Vec<(usize, f64)> {
+        self.problem.essential(load)
+    }
+    fn force_norm(&self, load: f64) -> f64 {
+        self.problem.force_norm(load)
+    }
+    fn residual_scale(&self) -> f64 {
+        self.problem.residual_scale()
+    }
+    fn on_converged(&mut self, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
+        self.check()?;
+        self.problem.on_converged(step)?;
+        self.observer.on_converged(&self.problem, step)
+    }
+    fn converged_tangent(&self) -> ConvergedTangent {
+        self.observer
+            .converged_tangent(self.problem.converged_tangent())
+    }
+    fn commit(&mut self, u: &[f64], load: f64) {
+        self.observer.before_commit(&self.problem, u, load);
+        self.problem.commit(u, load);
+        self.observer.after_commit(&self.problem, u, load);
+    }
+    fn restore(&mut self) {
+        self.observer.on_restore();
+        self.problem.restore();
+    }
+}
