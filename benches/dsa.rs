@@ -1,0 +1,132 @@
+//! Cost of the design sensitivity methods against the analysis (issue 5, item 4): per case
+//! shipped in `verification/*-dsa/`, criterion times the whole plain analysis
+//! (`analysis`: no hook, residual-first acceptance), the analysis with the continuum DSA of all
+//! the case's design variables in its hook (`continuum`) and with the dual-number reference
+//! (`dual`, `DualSVec64<n>`). Each hooked run also reports its method's own time (the hook),
+//! printed once per case as a fraction of the plain analysis per design variable: the
+//! paper's measure (its Table 1–2 discussion: 3.1 % hemisphere, 14 % bending).
+//!
+//! `cargo bench --bench dsa` (≈ 3 min on 2 cores); one case:
+//! `cargo bench --bench dsa -- hemisphere-plastic-dsa`.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use std::hint::black_box;
+use shelldsa::io::dsa_case::dual_loads;
+use shelldsa::io::dsa_run::CaseAnalysis;
+use shelldsa::io::shell_case::{read_shell_case, ShellCase};
+use shelldsa::sensitivity::continuum::run_continuum;
+use shelldsa::sensitivity::dual::{run_dual, DualMode};
+use shelldsa::sensitivity::fd::{self, Analysis};
+use shelldsa::sensitivity::{Design, DesignVariable};
+use std::time::Instant;
+
+const CASES: [&str; 1] = ["verification/hemisphere-plastic-dsa/case.toml"];
+
+struct Setup {
+    case: ShellCase,
+    vars: Vec<DesignVariable>,
+}
+
+impl Setup {
+    fn new(rel: &str) -> Self {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(rel);
+        let case = read_shell_case(&path).unwrap();
+        let vars = case
+            .dsa
+            .as_ref()
+            .unwrap()
+            .design
+            .iter()
+            .map(|d| d.variable.clone())
+            .collect();
+        Setup { case, vars }
+    }
+    fn base(&self) -> Design {
+        Design {
+            thickness: self.case.thickness,
+            material: self.case.material,
+        }
+    }
+    fn analysis(&self) -> f64 {
+        let a = CaseAnalysis { case: &self.case };
+        let (p, n) = a.build(&self.base()).unwrap();
+        let monitors = &self.case.dsa.as_ref().unwrap().monitors;
+        fd::response(p, &n, a.solver(), monitors).unwrap().loads.len() as f64
+    }
+    /// (method time, whole run time) in seconds.
+    fn continuum(&self) -> (f64, f64) {
+        let a = CaseAnalysis { case: &self.case };
+        let (p, n) = a.build(&self.base()).unwrap();
+        let r = run_continuum(
+            p,
+            self.vars.clone(),
+            dual_loads(&self.case).unwrap(),
+            self.case.dsa.as_ref().unwrap().monitors.clone(),
+            &n,
+            a.solver(),
+        )
+        .unwrap();
+        (r.dsa.as_secs_f64(), r.total.as_secs_f64())
+    }
+    fn dual(&self) -> (f64, f64) {
+        let a = CaseAnalysis { case: &self.case };
+        let (p, n) = a.build(&self.base()).unwrap();
+        let r = run_dual(
+            p,
+            self.vars.clone(),
+            dual_loads(&self.case).unwrap(),
+            self.case.dsa.as_ref().unwrap().monitors.clone(),
+            &n,
+            a.solver(),
+            DualMode::Vector,
+        )
+        .unwrap();
+        (r.reference.as_secs_f64(), r.total.as_secs_f64())
+    }
+}
+
+fn bench(c: &mut Criterion) {
+    for rel in CASES {
+        let s = Setup::new(rel);
+        let name = rel.split('/').nth(1).unwrap();
+        // The methods' own time per variable against the plain analysis, best of 3 each (the
+        // machine is shared: the minimum is the least disturbed).
+        let best = |f: &dyn Fn() -> f64| (0..3).map(|_| f()).fold(f64::INFINITY, f64::min);
+        let t_analysis = best(&|| {
+            let t = Instant::now();
+            black_box(s.analysis());
+            t.elapsed().as_secs_f64()
+        });
+        let (t_cont, t_cont_run) = (0..3)
+            .map(|_| s.continuum())
+            .fold((f64::INFINITY, f64::INFINITY), |a, b| {
+                (a.0.min(b.0), a.1.min(b.1))
+            });
+        let (t_dual, t_dual_run) = (0..3)
+            .map(|_| s.dual())
+            .fold((f64::INFINITY, f64::INFINITY), |a, b| {
+                (a.0.min(b.0), a.1.min(b.1))
+            });
+        let nv = s.vars.len() as f64;
+        println!(
+            "{name}: {} design variables; plain analysis {t_analysis:.3} s; continuum DSA \
+             {t_cont:.3} s = {:.2} % of the analysis per variable (hooked run {t_cont_run:.3} s: \
+             {:.2} % per variable over the plain run, the converged tangent included); dual \
+             {t_dual:.3} s = {:.2} % per variable (hooked run {t_dual_run:.3} s: {:.2} %)",
+            s.vars.len(),
+            100.0 * t_cont / t_analysis / nv,
+            100.0 * (t_cont_run - t_analysis) / t_analysis / nv,
+            100.0 * t_dual / t_analysis / nv,
+            100.0 * (t_dual_run - t_analysis) / t_analysis / nv,
+        );
+        let mut g = c.benchmark_group(name);
+        g.sample_size(10);
+        g.bench_function("analysis", |b| b.iter(|| black_box(s.analysis())));
+        g.bench_function("continuum", |b| b.iter(|| black_box(s.continuum())));
+        g.bench_function("dual", |b| b.iter(|| black_box(s.dual())));
+        g.finish();
+    }
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
