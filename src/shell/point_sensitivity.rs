@@ -573,6 +573,10 @@ fn check_point_sizes(
     Ok(())
 }
 
+/// One seed set's result of [`ShellModel::internal_force_dots`]: `d f_int/dτ` (`n_dofs`) and the
+/// trial history sensitivities (point-major, as [`ShellModel::history`]).
+pub type InternalForceDot = (Vec<f64>, Vec<PointHistory<f64>>);
+
 /// The seeds of one design variable for the whole model ([`ShellModel::internal_force_dots`]).
 #[derive(Clone, Copy, Debug)]
 pub struct ModelSeeds<'a> {
@@ -671,7 +675,7 @@ impl ShellModel {
         &self,
         dofs: &[f64],
         seeds: &[ModelSeeds],
-    ) -> Result<Vec<(Vec<f64>, Vec<PointHistory<f64>>)>, ShellError> {
+    ) -> Result<Vec<InternalForceDot>, ShellError> {
         const D: usize = DOFS_PER_PARTICLE;
         if dofs.len() != self.n_dofs() {
             return Err(invalid(
@@ -806,7 +810,7 @@ impl ShellModel {
                 Ok((residuals, histories))
             })
             .collect::<Result<Vec<_>, ShellError>>()?;
-        let mut out: Vec<(Vec<f64>, Vec<PointHistory<f64>>)> = (0..ns)
+        let mut out: Vec<InternalForceDot> = (0..ns)
             .map(|_| {
                 (
                     vec![0.0; self.n_dofs()],
