@@ -108,19 +108,19 @@ fn view(o: &Owned) -> ModelSeeds<'_> {
     }
 }
 
+type D = DualSVec64<6>;
+
+/// The arguments of `internal_force_with` in `D`.
+type DualInputs = (
+    Vec<ParticleState<D>>,
+    Vec<PointHistory<D>>,
+    MaterialParams<D>,
+    D,
+    Vec<D>,
+);
+
 /// The dual reference's inputs for 6 seed sets in one `DualSVec64<6>` pass.
-fn dual_inputs(
-    m: &ShellModel,
-    q: &[f64],
-    s: &[Owned],
-) -> (
-    Vec<ParticleState<DualSVec64<6>>>,
-    Vec<PointHistory<DualSVec64<6>>>,
-    MaterialParams<DualSVec64<6>>,
-    DualSVec64<6>,
-    Vec<DualSVec64<6>>,
-) {
-    type D = DualSVec64<6>;
+fn dual_inputs(m: &ShellModel, q: &[f64], s: &[Owned]) -> DualInputs {
     let d = |x: f64, parts: [f64; 6]| D::from_parts(x, &parts);
     let v3 = |x: &Vector3<f64>, f: &dyn Fn(&Owned) -> Vector3<f64>| {
         Vector3::from_fn(|i, _| d(x[i], std::array::from_fn(|k| f(&s[k])[i])))
