@@ -183,6 +183,29 @@ fn dual_inputs(m: &ShellModel, q: &[f64], s: &[Owned]) -> DualInputs {
     (particles, history, material, thickness, dofs)
 }
 
+/// CPU time (user + system, all threads) of this process in seconds, from `/proc/self/stat`
+/// (Linux; `None` elsewhere). The machine the figures were taken on is shared, so the CPU time
+/// per call is reported beside criterion's wall time.
+fn cpu_seconds() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which is in parentheses and may contain spaces).
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    // utime and stime are fields 14 and 15 of the full line, 12 and 13 after the name.
+    let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
+    // USER_HZ is 100 on Linux.
+    Some(ticks / 100.0)
+}
+
+/// CPU milliseconds per call of `f` over `n` calls.
+fn cpu_ms_per_call(n: usize, mut f: impl FnMut()) -> Option<f64> {
+    let t0 = cpu_seconds()?;
+    for _ in 0..n {
+        f();
+    }
+    Some((cpu_seconds()? - t0) * 1e3 / n as f64)
+}
+
 fn bench(c: &mut Criterion) {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("verification/hemisphere-plastic/case.toml");
@@ -229,6 +252,28 @@ fn bench(c: &mut Criterion) {
             err / scale
         );
     }
+    let n = 40;
+    let cpu = [
+        cpu_ms_per_call(n, || {
+            black_box(
+                m.internal_force_with(&m.particles, &m.history, &m.material, m.thickness, &q)
+                    .unwrap(),
+            );
+        }),
+        cpu_ms_per_call(n, || {
+            black_box(m.internal_force_dots(&q, &views[..1]).unwrap());
+        }),
+        cpu_ms_per_call(n, || {
+            black_box(m.internal_force_dots(&q, &views).unwrap());
+        }),
+        cpu_ms_per_call(n / 4, || {
+            black_box(m.internal_force_with(&dp, &dh, &dm, dt, &dq).unwrap());
+        }),
+    ];
+    println!(
+        "CPU time per call (all threads), ms: internal_force_with f64 {:?}, internal_force_dots 1 set {:?}, 6 sets {:?}, internal_force_with DualSVec64<6> {:?}",
+        cpu[0], cpu[1], cpu[2], cpu[3]
+    );
     let mut g = c.benchmark_group("continuum_hemisphere_plastic");
     g.sample_size(10);
     g.bench_function("internal_force_with_f64", |b| {

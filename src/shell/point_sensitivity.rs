@@ -282,11 +282,11 @@ struct SeedSums {
 }
 
 impl SeedSums {
-    fn new(
+    /// `nb(i)`: neighbour i's state sensitivity, `Δū̇_I` and `Δḋ_I`.
+    fn new<'p>(
         shape: &[ShapeData],
         surface: Option<&SurfacePoint<f64>>,
-        particles: &[ParticleState<f64>],
-        incr_dot: &PointIncrementDot,
+        nb: impl Fn(usize) -> (&'p ParticleState<f64>, V3, V3),
     ) -> Self {
         let mut s = match surface {
             Some(sp) => SeedSums {
@@ -297,12 +297,8 @@ impl SeedSums {
             },
             None => SeedSums::default(),
         };
-        for (((sh, p), du), dd) in shape
-            .iter()
-            .zip(particles)
-            .zip(&incr_dot.du)
-            .zip(&incr_dot.dd)
-        {
+        for (i, sh) in shape.iter().enumerate() {
+            let (p, du, dd) = nb(i);
             let ddir = p.d - p.d0;
             for a in 0..2 {
                 s.xa[a] += p.u * sh.dpsi[a];
@@ -419,7 +415,7 @@ impl<'a> LayerData<'a> {
         d_alpha: &[[V3; 2]],
         values: &ValueSums,
         sums: &SeedSums,
-        incr_dot: &PointIncrementDot,
+        d_alpha_dot: impl Fn(usize) -> [V3; 2],
         t_dot: f64,
         material_dot: &MaterialParams<f64>,
         history_dot: &PointHistory<f64>,
@@ -479,12 +475,13 @@ impl<'a> LayerData<'a> {
         let p_dot = self.p * tr + sigma_g_dot * jinv_t * (self.det1 * self.weight)
             - self.p * j1_dot.transpose() * jinv_t;
         let (p, pd) = (&self.p, &p_dot);
-        for (((sh, da), dad), o) in shape
+        for (i, ((sh, da), o)) in shape
             .iter()
             .zip(d_alpha)
-            .zip(&incr_dot.d_alpha)
             .zip(out.chunks_exact_mut(DOFS_PER_PARTICLE))
+            .enumerate()
         {
+            let dad = d_alpha_dot(i);
             let [t0, t1] = sh.dpsi_test;
             let f = p.column(0) * t0 + p.column(1) * t1;
             let f_dot = pd.column(0) * t0 + pd.column(1) * t1;
@@ -522,7 +519,9 @@ pub fn point_residual_dot(
     let n = inp.shape.len();
     check_point_sizes(inp, incr, incr_dot, res, seeds)?;
     let values = ValueSums::new(inp.surface, inp.shape, inp.particles, incr);
-    let sums = SeedSums::new(inp.shape, seeds.surface, seeds.particles, incr_dot);
+    let sums = SeedSums::new(inp.shape, seeds.surface, |i| {
+        (&seeds.particles[i], incr_dot.du[i], incr_dot.dd[i])
+    });
     let layer = LayerData::new(inp, res)?;
     let mut residual = vec![0.0; DOFS_PER_PARTICLE * n];
     let history = layer.apply(
@@ -530,7 +529,7 @@ pub fn point_residual_dot(
         &incr.d_alpha,
         &values,
         &sums,
-        incr_dot,
+        |i| incr_dot.d_alpha[i],
         seeds.thickness,
         &seeds.material,
         seeds.history,
@@ -594,6 +593,27 @@ pub struct ModelSeeds<'a> {
     pub history: &'a [PointHistory<f64>],
     /// `Δq̇` on the global DOFs (`n_dofs`).
     pub dofs: &'a [f64],
+}
+
+/// Per-thread buffers of [`ShellModel::internal_force_dots`], reused from point to point.
+struct Scratch {
+    parts: Vec<ParticleState<f64>>,
+    inc: PointIncrement<f64>,
+    sums: Vec<SeedSums>,
+}
+
+impl Default for Scratch {
+    fn default() -> Self {
+        Scratch {
+            parts: Vec::new(),
+            inc: PointIncrement {
+                du: Vec::new(),
+                dd: Vec::new(),
+                d_alpha: Vec::new(),
+            },
+            sums: Vec::new(),
+        }
+    }
 }
 
 impl ShellModel {
@@ -692,93 +712,92 @@ impl ShellModel {
         let nl = self.thickness_rule.len();
         let n_sf = self.particles.len() + self.symmetry.images.len();
         // Per shape-function particle: f64 state, local DOFs and increment (as the analysis
-        // forms them), then the derivatives of every seed set.
-        type PerParticle = (
-            ParticleState<f64>,
-            [f64; D],
-            V3,
-            [V3; 2],
-            Vec<(ParticleState<f64>, V3, V3, [V3; 2])>,
-        );
-        let per: Vec<PerParticle> = (0..n_sf)
+        // forms them), then, seed-major (`s · n_sf + j`), the derivatives of every seed set.
+        let local_dofs = |j: usize, g: &[f64]| -> [f64; D] {
+            let (src, q, det) = self.seed_map(j);
+            let g = &g[D * src..D * src + D];
+            if j < self.particles.len() {
+                [g[0], g[1], g[2], g[3], g[4]]
+            } else {
+                [
+                    g[0] * q[(0, 0)] + g[1] * q[(0, 1)] + g[2] * q[(0, 2)],
+                    g[0] * q[(1, 0)] + g[1] * q[(1, 1)] + g[2] * q[(1, 2)],
+                    g[0] * q[(2, 0)] + g[1] * q[(2, 1)] + g[2] * q[(2, 2)],
+                    g[3] * det,
+                    g[4] * det,
+                ]
+            }
+        };
+        type Particle = (ParticleState<f64>, [f64; D], V3, [V3; 2]);
+        let per: Vec<Particle> = (0..n_sf)
             .into_par_iter()
             .map(|j| {
-                let (src, q, det) = self.seed_map(j);
-                let real = j < self.particles.len();
                 let state = self.particle_state(j);
-                let map_dofs = |g: &[f64]| -> [f64; D] {
-                    let g = &g[D * src..D * src + D];
-                    if real {
-                        [g[0], g[1], g[2], g[3], g[4]]
-                    } else {
-                        [
-                            g[0] * q[(0, 0)] + g[1] * q[(0, 1)] + g[2] * q[(0, 2)],
-                            g[0] * q[(1, 0)] + g[1] * q[(1, 1)] + g[2] * q[(1, 2)],
-                            g[0] * q[(2, 0)] + g[1] * q[(2, 1)] + g[2] * q[(2, 2)],
-                            g[3] * det,
-                            g[4] * det,
-                        ]
-                    }
-                };
-                let x = map_dofs(dofs);
+                let x = local_dofs(j, dofs);
                 let inc = PointIncrement::new(std::slice::from_ref(&state), &x)?;
-                let dots = seeds
-                    .iter()
-                    .map(|sd| {
-                        let s = sd.particles[src];
-                        let sdot = if real {
-                            s
-                        } else {
-                            ParticleState {
-                                u: q * s.u,
-                                d: q * s.d,
-                                d0: q * s.d0,
-                                e: [q * s.e[0], q * s.e[1]],
-                            }
-                        };
-                        let xd = map_dofs(sd.dofs);
-                        let (du, dd, da) = particle_increment_dot(&state, &sdot, &x, &xd);
-                        (sdot, du, dd, da)
-                    })
-                    .collect();
-                Ok((state, x, inc.dd[0], inc.d_alpha[0], dots))
+                Ok((state, x, inc.dd[0], inc.d_alpha[0]))
             })
             .collect::<Result<_, ShellError>>()?;
+        let per_dot: Vec<(ParticleState<f64>, V3, V3, [V3; 2])> = (0..ns * n_sf)
+            .into_par_iter()
+            .map(|idx| {
+                let (sd, j) = (&seeds[idx / n_sf], idx % n_sf);
+                let (src, q, _) = self.seed_map(j);
+                let ps = sd.particles[src];
+                let sdot = if j < self.particles.len() {
+                    ps
+                } else {
+                    ParticleState {
+                        u: q * ps.u,
+                        d: q * ps.d,
+                        d0: q * ps.d0,
+                        e: [q * ps.e[0], q * ps.e[1]],
+                    }
+                };
+                let (state, x) = (&per[j].0, &per[j].1);
+                let (du, dd, da) = particle_increment_dot(state, &sdot, x, &local_dofs(j, sd.dofs));
+                (sdot, du, dd, da)
+            })
+            .collect();
+        // Per in-plane point: the f64 layers once, every seed set on each; results flat
+        // (seed-major) so that a point allocates two vectors whatever the number of seed sets.
+        type PointOut = (Vec<f64>, Vec<PointHistory<f64>>);
         let per_point = (0..self.points.len())
             .into_par_iter()
-            .map(|k| {
+            .map_init(Scratch::default, |sc, k| -> Result<PointOut, ShellError> {
                 let p = &self.points[k];
                 let nb = &p.neighbours;
-                let parts: Vec<ParticleState<f64>> = nb.iter().map(|&j| per[j].0).collect();
-                let inc = PointIncrement {
-                    du: nb
-                        .iter()
-                        .map(|&j| V3::new(per[j].1[0], per[j].1[1], per[j].1[2]))
-                        .collect(),
-                    dd: nb.iter().map(|&j| per[j].2).collect(),
-                    d_alpha: nb.iter().map(|&j| per[j].3).collect(),
-                };
-                let values = ValueSums::new(&p.surface, &p.shape, &parts, &inc);
-                let (sums, incr_dots): (Vec<SeedSums>, Vec<PointIncrementDot>) = seeds
-                    .iter()
-                    .enumerate()
-                    .map(|(s, sd)| {
-                        let states: Vec<ParticleState<f64>> =
-                            nb.iter().map(|&j| per[j].4[s].0).collect();
-                        let incr_dot = PointIncrementDot {
-                            du: nb.iter().map(|&j| per[j].4[s].1).collect(),
-                            dd: nb.iter().map(|&j| per[j].4[s].2).collect(),
-                            d_alpha: nb.iter().map(|&j| per[j].4[s].3).collect(),
-                        };
-                        let surface = sd.surface.map(|sp| &sp[k]);
-                        (
-                            SeedSums::new(&p.shape, surface, &states, &incr_dot),
-                            incr_dot,
-                        )
+                let nr = D * nb.len();
+                sc.parts.clear();
+                sc.parts.extend(nb.iter().map(|&j| per[j].0));
+                let inc = &mut sc.inc;
+                inc.du.clear();
+                inc.du.extend(
+                    nb.iter()
+                        .map(|&j| V3::new(per[j].1[0], per[j].1[1], per[j].1[2])),
+                );
+                inc.dd.clear();
+                inc.dd.extend(nb.iter().map(|&j| per[j].2));
+                inc.d_alpha.clear();
+                inc.d_alpha.extend(nb.iter().map(|&j| per[j].3));
+                let values = ValueSums::new(&p.surface, &p.shape, &sc.parts, inc);
+                sc.sums.clear();
+                sc.sums.extend(seeds.iter().enumerate().map(|(s, sd)| {
+                    let base = s * n_sf;
+                    SeedSums::new(&p.shape, sd.surface.map(|sp| &sp[k]), |i| {
+                        let d = &per_dot[base + nb[i]];
+                        (&d.0, d.1, d.2)
                     })
-                    .unzip();
-                let mut residuals = vec![vec![0.0; D * nb.len()]; ns];
-                let mut histories = vec![Vec::with_capacity(nl); ns];
+                }));
+                let mut residuals = vec![0.0; ns * nr];
+                let mut histories = Vec::with_capacity(ns * nl);
+                histories.resize(
+                    ns * nl,
+                    PointHistory {
+                        frame: M3::zeros(),
+                        material: crate::material::MaterialState::zero(),
+                    },
+                );
                 for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
                     let inp = PointInput {
                         surface: &p.surface,
@@ -786,25 +805,26 @@ impl ShellModel {
                         thickness: self.thickness,
                         weight: p.weight * wz,
                         shape: &p.shape,
-                        particles: &parts,
+                        particles: &sc.parts,
                         material: &self.material,
                         history: &self.history[k * nl + l],
                     };
-                    let res = point_residual_with(&inp, &inc)?;
+                    let res = point_residual_with(&inp, &sc.inc)?;
                     let layer = LayerData::new(&inp, &res)?;
-                    for (s, sd) in seeds.iter().enumerate() {
-                        let h = layer.apply(
+                    for (s, (sd, r)) in seeds.iter().zip(residuals.chunks_exact_mut(nr)).enumerate()
+                    {
+                        let base = s * n_sf;
+                        histories[s * nl + l] = layer.apply(
                             &p.shape,
-                            &inc.d_alpha,
+                            &sc.inc.d_alpha,
                             &values,
-                            &sums[s],
-                            &incr_dots[s],
+                            &sc.sums[s],
+                            |i| per_dot[base + nb[i]].3,
                             sd.thickness,
                             &sd.material,
                             &sd.history[k * nl + l],
-                            &mut residuals[s],
+                            r,
                         );
-                        histories[s].push(h);
                     }
                 }
                 Ok((residuals, histories))
@@ -818,10 +838,14 @@ impl ShellModel {
                 )
             })
             .collect();
-        for (k, (residuals, histories)) in per_point.into_iter().enumerate() {
-            for ((f, h), (r, hs)) in out.iter_mut().zip(residuals.into_iter().zip(histories)) {
-                self.scatter_local(k, &r, f);
-                h.extend(hs);
+        for (k, (residuals, histories)) in per_point.iter().enumerate() {
+            let nr = D * self.points[k].neighbours.len();
+            for ((f, h), (r, hs)) in out
+                .iter_mut()
+                .zip(residuals.chunks_exact(nr).zip(histories.chunks_exact(nl)))
+            {
+                self.scatter_local(k, r, f);
+                h.extend_from_slice(hs);
             }
         }
         Ok(out)
