@@ -406,20 +406,16 @@ impl<'a> LayerData<'a> {
         })
     }
 
-    /// Add the derivative of the layer's residual for one seed set into `out` and return the
-    /// trial history's derivative.
-    #[allow(clippy::too_many_arguments)]
+    /// The layer's `Ṗ` for one seed set, added into `acc` (with its `z`-moment), and the trial
+    /// history's derivative.
     fn apply(
         &self,
-        shape: &[ShapeData],
-        d_alpha: &[[V3; 2]],
         values: &ValueSums,
         sums: &SeedSums,
-        d_alpha_dot: impl Fn(usize) -> [V3; 2],
         t_dot: f64,
         material_dot: &MaterialParams<f64>,
         history_dot: &PointHistory<f64>,
-        out: &mut [f64],
+        acc: &mut StressSums,
     ) -> PointHistory<f64> {
         let (z, half_t) = (self.z, self.half_t);
         let half_t_dot = t_dot * 0.5;
@@ -474,32 +470,81 @@ impl<'a> LayerData<'a> {
         let tr = (self.j1_inv * j1_dot).trace();
         let p_dot = self.p * tr + sigma_g_dot * jinv_t * (self.det1 * self.weight)
             - self.p * j1_dot.transpose() * jinv_t;
-        let (p, pd) = (&self.p, &p_dot);
-        for (i, ((sh, da), o)) in shape
-            .iter()
-            .zip(d_alpha)
-            .zip(out.chunks_exact_mut(DOFS_PER_PARTICLE))
-            .enumerate()
-        {
-            let dad = d_alpha_dot(i);
-            let [t0, t1] = sh.dpsi_test;
-            let f = p.column(0) * t0 + p.column(1) * t1;
-            let f_dot = pd.column(0) * t0 + pd.column(1) * t1;
-            let m = f * z + p.column(2) * (half_t * sh.psi);
-            let m_dot = f_dot * z
-                + f * z_dot
-                + pd.column(2) * (half_t * sh.psi)
-                + p.column(2) * (half_t_dot * sh.psi);
-            o[0] += f_dot[0];
-            o[1] += f_dot[1];
-            o[2] += f_dot[2];
-            o[3] += dad[0].dot(&m) + da[0].dot(&m_dot);
-            o[4] += dad[1].dot(&m) + da[1].dot(&m_dot);
-        }
+        acc.add(&p_dot, z);
         PointHistory {
             frame: q1_dot,
             material: mat_dot,
         }
+    }
+}
+
+/// Thickness sums of the nominal stress `P` of the layers of one point: `Σ_l P_l`, `Σ_l z_l P_l`
+/// (the first two columns only are used with `z`) and `Σ_l ζ_l P_l`. The rows are linear in
+/// them (`f_I = Ψ_I,α P:α`, `m_I = z f_I + t/2 Ψ_I P:3`), so the rows of all layers are formed
+/// once per point from these sums rather than once per layer.
+#[derive(Clone, Copy, Debug)]
+struct StressSums {
+    p: M3<f64>,
+    pz: M3<f64>,
+    pzeta: M3<f64>,
+}
+
+impl StressSums {
+    fn zero() -> Self {
+        StressSums {
+            p: M3::zeros(),
+            pz: M3::zeros(),
+            pzeta: M3::zeros(),
+        }
+    }
+    fn add(&mut self, p: &M3<f64>, z: f64) {
+        self.p += p;
+        self.pz += p * z;
+    }
+    fn add_value(&mut self, p: &M3<f64>, z: f64, zeta: f64) {
+        self.add(p, z);
+        self.pzeta += p * zeta;
+    }
+}
+
+/// Add the residual rows' derivative (eq 64's internal-force part) into `out` from the layer
+/// sums of the nominal stress `val` and of its derivative `dot`:
+/// `ḟ_I = Ψ_I,α Σ Ṗ:α`, `m_I = Ψ_I,α Σ z P:α + t/2 Ψ_I Σ P:3`,
+/// `ṁ_I = Ψ_I,α (Σ z Ṗ:α + ṫ/2 Σ ζ P:α) + Ψ_I (t/2 Σ Ṗ:3 + ṫ/2 Σ P:3)` (`ż = ζ ṫ/2`),
+/// `ṙ_Iβ = (∂d_I/∂α_β)˙ · m_I + ∂d_I/∂α_β · ṁ_I`.
+#[allow(clippy::too_many_arguments)]
+fn add_rows_dot(
+    shape: &[ShapeData],
+    d_alpha: &[[V3; 2]],
+    d_alpha_dot: impl Fn(usize) -> [V3; 2],
+    half_t: f64,
+    t_dot: f64,
+    val: &StressSums,
+    dot: &StressSums,
+    out: &mut [f64],
+) {
+    let half_t_dot = t_dot * 0.5;
+    let (p3, pd3) = (val.p.column(2), dot.p.column(2));
+    for (i, ((sh, da), o)) in shape
+        .iter()
+        .zip(d_alpha)
+        .zip(out.chunks_exact_mut(DOFS_PER_PARTICLE))
+        .enumerate()
+    {
+        let dad = d_alpha_dot(i);
+        let [t0, t1] = sh.dpsi_test;
+        let f_dot = dot.p.column(0) * t0 + dot.p.column(1) * t1;
+        let m = val.pz.column(0) * t0 + val.pz.column(1) * t1 + p3 * (half_t * sh.psi);
+        let m_dot = dot.pz.column(0) * t0
+            + dot.pz.column(1) * t1
+            + (val.pzeta.column(0) * t0 + val.pzeta.column(1) * t1) * half_t_dot
+            + pd3 * (half_t * sh.psi)
+            + p3 * (half_t_dot * sh.psi);
+        o[0] += f_dot[0];
+        o[1] += f_dot[1];
+        o[2] += f_dot[2];
+        o[3] += dad[0].dot(&m) + da[0].dot(&m_dot);
+        o[4] += dad[1].dot(&m) + da[1].dot(&m_dot);
     }
 }
 
@@ -523,16 +568,26 @@ pub fn point_residual_dot(
         (&seeds.particles[i], incr_dot.du[i], incr_dot.dd[i])
     });
     let layer = LayerData::new(inp, res)?;
-    let mut residual = vec![0.0; DOFS_PER_PARTICLE * n];
+    let mut dot = StressSums::zero();
     let history = layer.apply(
-        inp.shape,
-        &incr.d_alpha,
         &values,
         &sums,
-        |i| incr_dot.d_alpha[i],
         seeds.thickness,
         &seeds.material,
         seeds.history,
+        &mut dot,
+    );
+    let mut val = StressSums::zero();
+    val.add_value(&layer.p, layer.z, layer.zeta);
+    let mut residual = vec![0.0; DOFS_PER_PARTICLE * n];
+    add_rows_dot(
+        inp.shape,
+        &incr.d_alpha,
+        |i| incr_dot.d_alpha[i],
+        layer.half_t,
+        seeds.thickness,
+        &val,
+        &dot,
         &mut residual,
     );
     Ok(PointDot { residual, history })
@@ -600,6 +655,7 @@ struct Scratch {
     parts: Vec<ParticleState<f64>>,
     inc: PointIncrement<f64>,
     sums: Vec<SeedSums>,
+    dots: Vec<StressSums>,
 }
 
 impl Default for Scratch {
@@ -612,6 +668,7 @@ impl Default for Scratch {
                 d_alpha: Vec::new(),
             },
             sums: Vec::new(),
+            dots: Vec::new(),
         }
     }
 }
@@ -798,6 +855,9 @@ impl ShellModel {
                         material: crate::material::MaterialState::zero(),
                     },
                 );
+                sc.dots.clear();
+                sc.dots.resize(ns, StressSums::zero());
+                let mut val = StressSums::zero();
                 for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
                     let inp = PointInput {
                         surface: &p.surface,
@@ -811,21 +871,36 @@ impl ShellModel {
                     };
                     let res = point_residual_with(&inp, &sc.inc)?;
                     let layer = LayerData::new(&inp, &res)?;
-                    for (s, (sd, r)) in seeds.iter().zip(residuals.chunks_exact_mut(nr)).enumerate()
-                    {
-                        let base = s * n_sf;
+                    val.add_value(&layer.p, layer.z, zeta);
+                    for (s, (sd, acc)) in seeds.iter().zip(sc.dots.iter_mut()).enumerate() {
                         histories[s * nl + l] = layer.apply(
-                            &p.shape,
-                            &sc.inc.d_alpha,
                             &values,
                             &sc.sums[s],
-                            |i| per_dot[base + nb[i]].3,
                             sd.thickness,
                             &sd.material,
                             &sd.history[k * nl + l],
-                            r,
+                            acc,
                         );
                     }
+                }
+                let half_t = self.thickness * 0.5;
+                for (s, ((sd, r), dot)) in seeds
+                    .iter()
+                    .zip(residuals.chunks_exact_mut(nr))
+                    .zip(&sc.dots)
+                    .enumerate()
+                {
+                    let base = s * n_sf;
+                    add_rows_dot(
+                        &p.shape,
+                        &sc.inc.d_alpha,
+                        |i| per_dot[base + nb[i]].3,
+                        half_t,
+                        sd.thickness,
+                        &val,
+                        dot,
+                        r,
+                    );
                 }
                 Ok((residuals, histories))
             })
