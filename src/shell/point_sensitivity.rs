@@ -13,17 +13,20 @@
 //!   columns).
 //!
 //! The chain, stage by stage (point.rs's notation; `˙ = d/dτ`):
-//! - `J̇ⁿ = [ẋ,1 + ḋ,1 z + d,1 ż | ẋ,2 + ḋ,2 z + d,2 ż | ḋ t/2 + d ṫ/2]`, `z = ζt/2` (eq 37's
-//!   configuration at step n, with `x̄,α = x̄⁰,α + Σ Ψ_I,α ū_I`, `d = n⁰ + Σ Ψ_I (d_I − d⁰_I)`),
+//! - `J̇ⁿ = [ẋ,1 + ḋ,1 z + d,1 ż | ẋ,2 + ḋ,2 z + d,2 ż | ḋ t/2 + d ṫ/2]`, `z = ζt/2`: the
+//!   parametric gradient of the design velocity `ⁿV` of the step-start configuration (with
+//!   `x̄,α = x̄⁰,α + Σ Ψ_I,α ū_I`, `d = n⁰ + Σ Ψ_I (d_I − d⁰_I)`), so `∇ⁿV = J̇ⁿ Jⁿ⁻¹`,
 //! - `Ġ` from `Δū̇_I, Δḋ_I` ([`PointIncrementDot`]) and `ż, ṫ`,
-//! - `Ḣ = (Ġ − H J̇ⁿ) Jⁿ⁻¹` (the design-velocity term `−H ∇V` of eqs 38–39),
+//! - `Ḣ = (Ġ − H J̇ⁿ) Jⁿ⁻¹`: the increment's gradient rate with the term `−H ∇ⁿV` of eqs 39–40,
 //! - `L̇ = F½⁻¹ Ḣ F½⁻¹` (eqs 56–57, [`crate::kinematics::mid_step_gradient_dot`]),
 //! - `Δε̇, Δω̇, ṙ, ½ṙ` (eqs 54–55, 58, [`hughes_winget_dot`]),
 //! - `Δε̇ˡ` with `ⁿQ̇` (eq 50, [`local_strain_increment_dot`]),
 //! - the return-map sensitivity `ⁿ⁺¹(σ̇, α̇, ė^p)` (eqs 44–49, [`material_sensitivity`]),
 //! - `ⁿ⁺¹Q̇ = ⁿQ̇ rᵀ + ⁿQ ṙᵀ` (eq 51), `σ̇ᵍ` (eq 42),
-//! - `Ṗ = tr(J⁻¹J̇) P + w det J σ̇ᵍ J⁻ᵀ − P J̇ᵀ J⁻ᵀ` on `ⁿ⁺¹J = Jⁿ + G`,
-//! - the rows (eq 64's internal-force part): `ḟ_I = Ψ_I,α Ṗ:α`, and
+//! - `Ṗ = tr(J⁻¹J̇) P + w det J σ̇ᵍ J⁻ᵀ − P J̇ᵀ J⁻ᵀ` on `ⁿ⁺¹J = Jⁿ + G` (the `J̇` and `Ḟ⁻¹`
+//!   terms of eqs 38 and 41, with the parametric volume element carrying `div V`),
+//! - the rows (the structural form's derivative, eqs 38, 62–64: `a*` with `Δż` plus `a'_V`):
+//!   `ḟ_I = Ψ_I,α Ṗ:α`, and
 //!   `ṙ_Iβ = (∂d_I/∂α_β)˙ · m_I + ∂d_I/∂α_β · ṁ_I` with `ṁ_I = ḟ_I z + f_I ż + Ṗ:3 Ψ_I t/2 +
 //!   P:3 Ψ_I ṫ/2`.
 //!
@@ -420,7 +423,7 @@ impl<'a> LayerData<'a> {
         let (z, half_t) = (self.z, self.half_t);
         let half_t_dot = t_dot * 0.5;
         let z_dot = half_t_dot * self.zeta;
-        // J̇ⁿ (configuration at step n, eq 37).
+        // J̇ⁿ: the parametric gradient of the step-start design velocity ⁿV.
         let jn_dot = M3::from_columns(&[
             sums.xa[0] + sums.da[0] * z + values.da[0] * z_dot,
             sums.xa[1] + sums.da[1] * z + values.da[1] * z_dot,
@@ -432,7 +435,7 @@ impl<'a> LayerData<'a> {
             sums.g_u[1] + sums.g_d[1] * z + values.g_d[1] * z_dot,
             sums.g_d3 * half_t + values.g_d3 * half_t_dot,
         ]);
-        // Ḣ = Ġ Jⁿ⁻¹ − G Jⁿ⁻¹ J̇ⁿ Jⁿ⁻¹ = (Ġ − H J̇ⁿ) Jⁿ⁻¹ (eqs 38–39).
+        // Ḣ = Ġ Jⁿ⁻¹ − G Jⁿ⁻¹ J̇ⁿ Jⁿ⁻¹ = (Ġ − H J̇ⁿ) Jⁿ⁻¹ (the −H ∇ⁿV term of eqs 39–40).
         let h_dot = (g_dot - self.h * jn_dot) * self.jn_inv;
         // L̇ = F½⁻¹ Ḣ F½⁻¹ (eqs 56–57, kinematics::mid_step_gradient_dot).
         let l_dot = self.f_half_inv * h_dot * self.f_half_inv;
@@ -507,7 +510,7 @@ impl StressSums {
     }
 }
 
-/// Add the residual rows' derivative (eq 64's internal-force part) into `out` from the layer
+/// Add the residual rows' derivative (eqs 62–64) into `out` from the layer
 /// sums of the nominal stress `val` and of its derivative `dot`:
 /// `ḟ_I = Ψ_I,α Σ Ṗ:α`, `m_I = Ψ_I,α Σ z P:α + t/2 Ψ_I Σ P:3`,
 /// `ṁ_I = Ψ_I,α (Σ z Ṗ:α + ṫ/2 Σ ζ P:α) + Ψ_I (t/2 Σ Ṗ:3 + ṫ/2 Σ P:3)` (`ż = ζ ṫ/2`),
@@ -738,16 +741,22 @@ impl ShellModel {
     }
 
     /// Sensitivities of the global internal force (eq 32) and of the trial histories for several
-    /// seed sets at once (the residual part of the continuum DSA's right-hand side, eq 64–65).
+    /// seed sets at once (the internal-force part of the continuum DSA's sensitivity equation,
+    /// eqs 62–65: with `Δq̇` seeded alone it is the tangent times `Δq̇`, with the other seeds the
+    /// fictitious load).
     ///
     /// `dofs` is the converged increment `Δq` (f64, `n_dofs`); `seeds[v]` the seeds of design
     /// variable `v` ([`ModelSeeds`]). Returns, per seed set, `d f_int/dτ` (`n_dofs`) and the
     /// trial history sensitivities (point-major, as [`ShellModel::history`]). The f64 point
     /// evaluation ([`point_residual_with`]) is done once per layer point and shared by all seed
-    /// sets; the per-particle increment derivatives once per shape-function particle. Images
-    /// follow their sources: an image's state dot is `Q ṡ`, its DOF dot `T q̇`. Points run in
-    /// parallel and are summed in point order (deterministic). Equal to the derivative part of
-    /// [`ShellModel::internal_force_with`] in dual numbers with the same seeds.
+    /// sets; the per-particle increment derivatives once per shape-function particle; the
+    /// residual rows once per in-plane point from the thickness sums of `P` and `Ṗ` (the rows
+    /// are linear in them), not once per layer. Images follow their sources: an image's state
+    /// dot is `Q ṡ`, its DOF dot `T q̇`. Points run in parallel and are summed in point order
+    /// (deterministic, bit-identical run to run). Equal to the derivative part of
+    /// [`ShellModel::internal_force_with`] in dual numbers with the same seeds (to round-off:
+    /// `tests/point_sensitivity.rs`). Errors name the seed set and field of a wrong length or a
+    /// non-finite rate.
     pub fn internal_force_dots(
         &self,
         dofs: &[f64],
