@@ -492,3 +492,567 @@ fn point_residual_dot_three_ways_plastic_step() {
 fn point_residual_dot_three_ways_elastic_step() {
     three_way(false);
 }
+
+/// With only `Δq̇ = e_j` seeded, the residual derivative is column j of the consistent tangent
+/// (both hand-derived, by different compositions of the same stages: round-off, 1e-10).
+#[test]
+fn dofs_seed_reproduces_point_tangent() {
+    for plastic in [true, false] {
+        let f = Fixture::new(11, plastic);
+        let inp = f.input();
+        let res = point_residual(&inp, &f.dofs).unwrap();
+        let k = point_tangent(&inp, &f.dofs, &res).unwrap();
+        let nd = 5 * N_NB;
+        let mut cols = DMatrix::zeros(nd, nd);
+        for j in 0..nd {
+            let mut s = Seeds::zero(N_NB);
+            s.dofs[j] = 1.0;
+            let h = f.hand(&s);
+            cols.set_column(j, &nalgebra::DVector::from_column_slice(&h[..nd]));
+        }
+        let c = compare_matrices(
+            "point_residual_dot vs point_tangent",
+            &cols,
+            &k,
+            Tolerance::rel(1e-10),
+            &[],
+            &|i, j| (format!("r[{i}]"), format!("q[{j}]")),
+        );
+        println!("plastic={plastic}: {c}");
+        assert!(c.passed(), "{c}");
+    }
+}
+
+fn dual_state(p: &ParticleState<f64>, d: &ParticleState<f64>) -> ParticleState<Dual64> {
+    let l = |a: &V3, b: &V3| Vector3::from_fn(|i, _| Dual64::new(a[i], b[i]));
+    ParticleState {
+        u: l(&p.u, &d.u),
+        d: l(&p.d, &d.d),
+        d0: l(&p.d0, &d.d0),
+        e: [l(&p.e[0], &d.e[0]), l(&p.e[1], &d.e[1])],
+    }
+}
+
+fn state_parts(p: &ParticleState<f64>) -> Vec<f64> {
+    [p.u, p.d, p.d0, p.e[0], p.e[1]]
+        .iter()
+        .flat_map(|v| v.iter().copied().collect::<Vec<_>>())
+        .collect()
+}
+
+/// `commit_particle_dot` = dual derivative of `commit_particle`, for rotations on both sides of
+/// the series/closed-form switch of Rodrigues' coefficients (|θ| = 2) and at θ = 0. Round-off:
+/// 1e-12 relative to the largest entry (a handful of products of unit vectors).
+#[test]
+fn commit_particle_dot_matches_dual() {
+    let mut rng = Rng::new(5);
+    for alpha_scale in [0.0, 0.3, 1.2, 2.5] {
+        for _ in 0..4 {
+            let d = (V3::new(0.2, -0.3, 0.9) + rng.v(0.3)).normalize();
+            let p = ParticleState {
+                u: rng.v(0.1),
+                d,
+                d0: (d + rng.v(0.1)).normalize(),
+                e: perp(&d),
+            };
+            let pd = ParticleState {
+                u: rng.v(1.0),
+                d: rng.v(1.0),
+                d0: rng.v(1.0),
+                e: [rng.v(1.0), rng.v(1.0)],
+            };
+            let q = [
+                rng.r(0.1),
+                rng.r(0.1),
+                rng.r(0.1),
+                rng.r(alpha_scale),
+                rng.r(alpha_scale),
+            ];
+            let qd: Vec<f64> = (0..5).map(|_| rng.r(1.0)).collect();
+            let hand = commit_particle_dot(&p, &pd, &q, &qd);
+            let qdual: Vec<Dual64> = q
+                .iter()
+                .zip(&qd)
+                .map(|(a, b)| Dual64::new(*a, *b))
+                .collect();
+            let dual = commit_particle(&dual_state(&p, &pd), &qdual);
+            let dual_eps = ParticleState {
+                u: dual.u.map(|x| x.eps),
+                d: dual.d.map(|x| x.eps),
+                d0: dual.d0.map(|x| x.eps),
+                e: [dual.e[0].map(|x| x.eps), dual.e[1].map(|x| x.eps)],
+            };
+            let (a, b) = (state_parts(&hand), state_parts(&dual_eps));
+            let scale = b.iter().fold(0.0_f64, |m, v| m.max(v.abs()));
+            let err = a
+                .iter()
+                .zip(&b)
+                .fold(0.0_f64, |m, (x, y)| m.max((x - y).abs()));
+            assert!(
+                err <= 1e-12 * scale,
+                "α scale {alpha_scale}: |hand − dual| = {err:e}, scale {scale:e}"
+            );
+        }
+    }
+}
+
+/// Point-level input errors are typed and name the field.
+#[test]
+fn point_level_bad_sizes_are_named_errors() {
+    let f = Fixture::new(11, true);
+    let mut s = Seeds::zero(N_NB);
+    s.particles.pop();
+    let err = PointIncrementDot::new(&f.particles, &s.particles, &f.dofs, &s.dofs).unwrap_err();
+    assert!(
+        matches!(&err, ShellError::InvalidInput(m) if m.contains("particles_dot")),
+        "{err}"
+    );
+    let inp = f.input();
+    let incr = PointIncrement::new(&f.particles, &f.dofs).unwrap();
+    let res = point_residual_with(&inp, &incr).unwrap();
+    let full = Seeds::zero(N_NB);
+    let incr_dot =
+        PointIncrementDot::new(&f.particles, &full.particles, &f.dofs, &full.dofs).unwrap();
+    let short_dofs = vec![0.0; 5 * N_NB - 1];
+    let seeds = PointSeeds {
+        surface: None,
+        thickness: 0.0,
+        material: MaterialParams::zero(),
+        particles: &full.particles,
+        history: &full.history,
+        dofs: &short_dofs,
+    };
+    let err = point_residual_dot(&inp, &incr, &incr_dot, &res, &seeds).unwrap_err();
+    assert!(
+        matches!(&err, ShellError::InvalidInput(m) if m.contains("seeds.dofs")),
+        "{err}"
+    );
+}
+
+// ---------------------------------------------------------------------------------------------
+// Model level
+// ---------------------------------------------------------------------------------------------
+
+/// The shipped plastic hemisphere (quarter model, two symmetry planes, so image particles) on
+/// 7 × 7 particles, after one committed plastic step: an equibiaxial stretch `Δū = ε x⁰`
+/// (ε = 6e-3, above the yield strain σ0(1 − ν)/E ≈ 2.5e-3) with random rotations of 0.01 rad.
+/// The returned increment of the next step stretches by `8e-3 (x − y)/R`: part of the layer
+/// points yield further, part unload elastically.
+fn committed_model() -> (ShellModel, Vec<f64>) {
+    let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let path = root.join("verification/hemisphere-plastic/case.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let text: String = text
+        .lines()
+        .map(|l| {
+            if l.starts_with("grid =") {
+                "grid = [7, 7]\n".to_string()
+            } else {
+                format!("{l}\n")
+            }
+        })
+        .collect();
+    let case = parse_shell_case(&text, &path).unwrap();
+    let built = build(&case).unwrap();
+    let mut model = problem_model(&built.problem).clone();
+    assert!(
+        !model.symmetry.images.is_empty(),
+        "the quarter model has images"
+    );
+    // Beta = 0.5 so the back stress is non-zero.
+    model.material.beta = 0.5;
+    let mut rng = Rng::new(21);
+    // On the sphere centred at the origin x⁰ = R d⁰ (R = 10).
+    let field = |m: &ShellModel, eps: f64, rot: f64, rng: &mut Rng| -> Vec<f64> {
+        m.particles
+            .iter()
+            .flat_map(|p| {
+                // eps < 0: a stretch varying as (x − y)/R, loading on one side of x = y and
+                // unloading on the other.
+                let e = if eps < 0.0 {
+                    -eps * (p.d0.x - p.d0.y)
+                } else {
+                    eps
+                };
+                let u = p.d0 * (10.0 * e) + rng.v(1e-3);
+                [u.x, u.y, u.z, rng.r(rot), rng.r(rot)]
+            })
+            .collect()
+    };
+    let q1 = field(&model, 6e-3, 1e-2, &mut rng);
+    let (_, trial) = model
+        .internal_force_with(
+            &model.particles.clone(),
+            &model.history.clone(),
+            &model.material.clone(),
+            model.thickness,
+            &q1,
+        )
+        .unwrap();
+    let nl = model.thickness_rule.len();
+    model.commit_histories(&q1, trial.chunks(nl).map(|c| c.to_vec()).collect());
+    let q2 = field(&model, -8e-3, 1e-2, &mut rng);
+    (model, q2)
+}
+
+/// Owned seeds of one model-level group.
+struct OwnedModelSeeds {
+    surface: Option<Vec<SurfacePoint<f64>>>,
+    thickness: f64,
+    material: MaterialParams<f64>,
+    particles: Vec<ParticleState<f64>>,
+    history: Vec<PointHistory<f64>>,
+    dofs: Vec<f64>,
+}
+
+impl OwnedModelSeeds {
+    fn view(&self) -> ModelSeeds<'_> {
+        ModelSeeds {
+            surface: self.surface.as_deref(),
+            thickness: self.thickness,
+            material: self.material,
+            particles: &self.particles,
+            history: &self.history,
+            dofs: &self.dofs,
+        }
+    }
+}
+
+fn model_seeds(m: &ShellModel, group: &str, q: &[f64], rng: &mut Rng) -> OwnedModelSeeds {
+    let all = group == "all";
+    let surface = (group == "surface").then(|| {
+        m.points
+            .iter()
+            .map(|p| {
+                let xs = p.surface.x_a[0].norm();
+                let ns = p.surface.n_a[0].norm();
+                SurfacePoint {
+                    x_a: [rng.v(0.05 * xs), rng.v(0.05 * xs)],
+                    n: rng.v(0.02),
+                    n_a: [rng.v(0.05 * ns), rng.v(0.05 * ns)],
+                }
+            })
+            .collect()
+    });
+    let mat = m.material.to_array();
+    let material = MaterialParams::from_array(std::array::from_fn(|i| {
+        if all || group == PARAM_NAMES[i] {
+            (0.5 + rng.r(0.3)) * mat[i]
+        } else {
+            0.0
+        }
+    }));
+    let particles = m
+        .particles
+        .iter()
+        .map(|_| {
+            if all || group == "particles" {
+                ParticleState {
+                    u: rng.v(0.01),
+                    d: rng.v(0.01),
+                    d0: rng.v(0.005),
+                    e: [rng.v(0.01), rng.v(0.01)],
+                }
+            } else {
+                zero_state()
+            }
+        })
+        .collect();
+    let sig = m
+        .history
+        .iter()
+        .fold(0.0_f64, |a, h| a.max(h.material.stress.norm()));
+    let history = m
+        .history
+        .iter()
+        .map(|h| {
+            if all || group == "history" {
+                PointHistory {
+                    frame: rng.frame_rate(&h.frame, 0.05),
+                    material: MaterialState {
+                        stress: Vec5::from_fn(|_, _| rng.r(0.05 * sig)),
+                        back_stress: Vec5::from_fn(|_, _| rng.r(0.05 * sig)),
+                        eps_p: 0.1 * h.material.eps_p,
+                    },
+                }
+            } else {
+                zero_history()
+            }
+        })
+        .collect();
+    let dofs = q
+        .iter()
+        .map(|v| {
+            if all || group == "dofs" {
+                rng.r(0.5 * v.abs().max(1e-6))
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    OwnedModelSeeds {
+        surface,
+        thickness: if all || group == "thickness" {
+            0.3 * m.thickness
+        } else {
+            0.0
+        },
+        material,
+        particles,
+        history,
+        dofs,
+    }
+}
+
+/// Flatten (f, histories) into blocks: force, frames, stresses and back stresses, ē^p.
+fn model_blocks(f: &[f64], h: &[PointHistory<f64>]) -> [(&'static str, Vec<f64>); 4] {
+    [
+        ("force", f.to_vec()),
+        (
+            "frame",
+            h.iter().flat_map(|x| x.frame.as_slice().to_vec()).collect(),
+        ),
+        (
+            "stress, back stress",
+            h.iter()
+                .flat_map(|x| x.material.to_array()[..10].to_vec())
+                .collect(),
+        ),
+        ("ē^p", h.iter().map(|x| x.material.eps_p).collect()),
+    ]
+}
+
+fn dual_reference(
+    m: &ShellModel,
+    q: &[f64],
+    s: &OwnedModelSeeds,
+) -> (Vec<f64>, Vec<PointHistory<f64>>) {
+    let particles: Vec<ParticleState<Dual64>> = m
+        .particles
+        .iter()
+        .zip(&s.particles)
+        .map(|(p, d)| dual_state(p, d))
+        .collect();
+    let history: Vec<PointHistory<Dual64>> = m
+        .history
+        .iter()
+        .zip(&s.history)
+        .map(|(h, d)| PointHistory {
+            frame: Matrix3::from_fn(|i, j| Dual64::new(h.frame[(i, j)], d.frame[(i, j)])),
+            material: MaterialState {
+                stress: Vec5::from_fn(|i, _| {
+                    Dual64::new(h.material.stress[i], d.material.stress[i])
+                }),
+                back_stress: Vec5::from_fn(|i, _| {
+                    Dual64::new(h.material.back_stress[i], d.material.back_stress[i])
+                }),
+                eps_p: Dual64::new(h.material.eps_p, d.material.eps_p),
+            },
+        })
+        .collect();
+    let (mv, md) = (m.material.to_array(), s.material.to_array());
+    let material = MaterialParams::from_array(std::array::from_fn(|i| Dual64::new(mv[i], md[i])));
+    let dofs: Vec<Dual64> = q
+        .iter()
+        .zip(&s.dofs)
+        .map(|(a, b)| Dual64::new(*a, *b))
+        .collect();
+    let (f, h) = m
+        .internal_force_with(
+            &particles,
+            &history,
+            &material,
+            Dual64::new(m.thickness, s.thickness),
+            &dofs,
+        )
+        .unwrap();
+    let hist = h
+        .iter()
+        .map(|x| PointHistory {
+            frame: x.frame.map(|v| v.eps),
+            material: MaterialState {
+                stress: x.material.stress.map(|v| v.eps),
+                back_stress: x.material.back_stress.map(|v| v.eps),
+                eps_p: x.material.eps_p.eps,
+            },
+        })
+        .collect();
+    (f.iter().map(|v| v.eps).collect(), hist)
+}
+
+/// The surface seed has no dual path through `internal_force_with` (the initial geometry is
+/// the model's f64 data): central differences of the model with its points' geometry moved.
+fn surface_fd(
+    m: &ShellModel,
+    q: &[f64],
+    ds: &[SurfacePoint<f64>],
+    h: f64,
+) -> (Vec<f64>, Vec<PointHistory<f64>>, [Vec<bool>; 2]) {
+    let eval = |sign: f64| {
+        let mut mm = m.clone();
+        for (p, d) in mm.points.iter_mut().zip(ds) {
+            let s = &mut p.surface;
+            for a in 0..2 {
+                s.x_a[a] += d.x_a[a] * (sign * h);
+                s.n_a[a] += d.n_a[a] * (sign * h);
+            }
+            s.n += d.n * (sign * h);
+        }
+        let (f, hist) = mm
+            .internal_force_with(&m.particles, &m.history, &m.material, m.thickness, q)
+            .unwrap();
+        let yielded: Vec<bool> = hist
+            .iter()
+            .zip(&m.history)
+            .map(|(t, c)| t.material.eps_p > c.material.eps_p)
+            .collect();
+        (f, hist, yielded)
+    };
+    let (fp, hp, yp) = eval(1.0);
+    let (fm, hm, ym) = eval(-1.0);
+    let f = fp
+        .iter()
+        .zip(&fm)
+        .map(|(a, b)| (a - b) / (2.0 * h))
+        .collect();
+    let hist = hp
+        .iter()
+        .zip(&hm)
+        .map(|(a, b)| PointHistory {
+            frame: (a.frame - b.frame) / (2.0 * h),
+            material: MaterialState {
+                stress: (a.material.stress - b.material.stress) / (2.0 * h),
+                back_stress: (a.material.back_stress - b.material.back_stress) / (2.0 * h),
+                eps_p: (a.material.eps_p - b.material.eps_p) / (2.0 * h),
+            },
+        })
+        .collect();
+    (f, hist, [yp, ym])
+}
+
+/// Hand vs dual at model level: 1e-10 relative for entries above 1 % of the block's largest,
+/// 1e-12 of the largest below. Small entries are not small terms: e.g. the thickness derivative
+/// of the frames (~1e-5) is formed from products like `H J̇ⁿ`, `Qₙ ṙᵀ` whose terms are ~1e-3 and
+/// cancel, so their round-off is ~ε·1e-3 absolute; over 6480 frame entries the worst measured
+/// was 5e-14 of the largest (1e-18 on a 1e-19 entry), which the point tests' floor (2.2e-14 of
+/// the largest) would flag as a failure.
+fn model_dual_tol() -> Tolerance {
+    Tolerance {
+        rel: 1e-10,
+        floor: 1e-2,
+    }
+}
+
+/// `internal_force_dots` with every seed group as one seed set of a single multi-RHS call equals
+/// the dual-number `internal_force_with` with the same seeds (force and trial histories), 1e-10
+/// relative to each block's largest entry (the point kernel agrees to ~1e-13; the assembly adds
+/// the same contributions in the same order); the surface group, which has no dual path, equals
+/// central differences (the point test's tolerance). Deterministic: a second call is
+/// bit-identical.
+#[test]
+fn internal_force_dots_match_dual_model() {
+    let (model, q) = committed_model();
+    let mut rng = Rng::new(77);
+    let (f0, h0) = model
+        .internal_force_with(
+            &model.particles,
+            &model.history,
+            &model.material,
+            model.thickness,
+            &q,
+        )
+        .unwrap();
+    let yielded = h0
+        .iter()
+        .zip(&model.history)
+        .filter(|(t, c)| t.material.eps_p > c.material.eps_p)
+        .count();
+    println!("{yielded} of {} layer points yield in the step", h0.len());
+    assert!(
+        yielded > 0 && yielded < h0.len(),
+        "a mixed plastic/elastic step"
+    );
+    assert!(model.history.iter().any(|h| h.material.eps_p > 0.0));
+    let owned: Vec<OwnedModelSeeds> = GROUPS
+        .iter()
+        .map(|g| model_seeds(&model, g, &q, &mut rng))
+        .collect();
+    let views: Vec<ModelSeeds> = owned.iter().map(|s| s.view()).collect();
+    let dots = model.internal_force_dots(&q, &views).unwrap();
+    let again = model.internal_force_dots(&q, &views).unwrap();
+    assert!(
+        dots.iter()
+            .zip(&again)
+            .all(|(a, b)| a.0 == b.0 && a.1 == b.1),
+        "bit-identical run to run"
+    );
+    for ((group, s), (f, h)) in GROUPS.iter().zip(&owned).zip(&dots) {
+        let hand = model_blocks(f, h);
+        if *group == "surface" {
+            let (ff, hf, [yp, ym]) = surface_fd(&model, &q, s.surface.as_ref().unwrap(), FD_STEP);
+            assert_eq!(yp, ym, "a return-map branch flips within ±h");
+            let values = model_blocks(&f0, &h0);
+            for (((name, a), (_, b)), (_, v)) in hand.iter().zip(model_blocks(&ff, &hf)).zip(values)
+            {
+                let vs = v.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+                let (a, b) = (
+                    DMatrix::from_column_slice(a.len(), 1, a),
+                    DMatrix::from_column_slice(b.len(), 1, &b),
+                );
+                let c =
+                    compare_matrices("hand vs FD", &a, &b, fd_tol(vs, b.amax()), &[], &|i, _| {
+                        (format!("{name}[{i}]"), group.to_string())
+                    });
+                println!(
+                    "model {group:>12} {name:>20}: scale {:.3e}, fd {:.2e}",
+                    c.scale,
+                    c.max_error()
+                );
+                assert!(c.passed(), "{group} {name}: {c}");
+            }
+            continue;
+        }
+        let (fr, hr) = dual_reference(&model, &q, s);
+        for ((name, a), (_, b)) in hand.iter().zip(model_blocks(&fr, &hr)) {
+            let (a, b) = (
+                DMatrix::from_column_slice(a.len(), 1, a),
+                DMatrix::from_column_slice(b.len(), 1, &b),
+            );
+            let c = compare_matrices("hand vs dual", &a, &b, model_dual_tol(), &[], &|i, _| {
+                (format!("{name}[{i}]"), group.to_string())
+            });
+            println!(
+                "model {group:>12} {name:>20}: scale {:.3e}, dual {:.2e}",
+                c.scale,
+                c.max_error()
+            );
+            assert!(c.passed(), "{group} {name}: {c}");
+        }
+    }
+}
+
+/// Model-level input errors are typed and name the seed set and field.
+#[test]
+fn model_level_bad_seeds_are_named_errors() {
+    let (model, q) = committed_model();
+    let mut rng = Rng::new(3);
+    let mut s = model_seeds(&model, "all", &q, &mut rng);
+    s.history.pop();
+    let err = model.internal_force_dots(&q, &[s.view()]).unwrap_err();
+    assert!(
+        matches!(&err, ShellError::InvalidInput(m) if m.contains("seeds[0].history")),
+        "{err}"
+    );
+    let mut s = model_seeds(&model, "all", &q, &mut rng);
+    s.material.young = f64::NAN;
+    let err = model.internal_force_dots(&q, &[s.view()]).unwrap_err();
+    assert!(
+        matches!(&err, ShellError::InvalidInput(m) if m.contains("seeds[0].young")),
+        "{err}"
+    );
+    let err = model.internal_force_dots(&q[1..], &[]).unwrap_err();
+    assert!(
+        matches!(&err, ShellError::InvalidInput(m) if m.contains("dofs")),
+        "{err}"
+    );
+}

@@ -13,17 +13,20 @@
 //!   columns).
 //!
 //! The chain, stage by stage (point.rs's notation; `˙ = d/dτ`):
-//! - `J̇ⁿ = [ẋ,1 + ḋ,1 z + d,1 ż | ẋ,2 + ḋ,2 z + d,2 ż | ḋ t/2 + d ṫ/2]`, `z = ζt/2` (eq 37's
-//!   configuration at step n, with `x̄,α = x̄⁰,α + Σ Ψ_I,α ū_I`, `d = n⁰ + Σ Ψ_I (d_I − d⁰_I)`),
+//! - `J̇ⁿ = [ẋ,1 + ḋ,1 z + d,1 ż | ẋ,2 + ḋ,2 z + d,2 ż | ḋ t/2 + d ṫ/2]`, `z = ζt/2`: the
+//!   parametric gradient of the design velocity `ⁿV` of the step-start configuration (with
+//!   `x̄,α = x̄⁰,α + Σ Ψ_I,α ū_I`, `d = n⁰ + Σ Ψ_I (d_I − d⁰_I)`), so `∇ⁿV = J̇ⁿ Jⁿ⁻¹`,
 //! - `Ġ` from `Δū̇_I, Δḋ_I` ([`PointIncrementDot`]) and `ż, ṫ`,
-//! - `Ḣ = (Ġ − H J̇ⁿ) Jⁿ⁻¹` (the design-velocity term `−H ∇V` of eqs 38–39),
+//! - `Ḣ = (Ġ − H J̇ⁿ) Jⁿ⁻¹`: the increment's gradient rate with the term `−H ∇ⁿV` of eqs 39–40,
 //! - `L̇ = F½⁻¹ Ḣ F½⁻¹` (eqs 56–57, [`crate::kinematics::mid_step_gradient_dot`]),
 //! - `Δε̇, Δω̇, ṙ, ½ṙ` (eqs 54–55, 58, [`hughes_winget_dot`]),
 //! - `Δε̇ˡ` with `ⁿQ̇` (eq 50, [`local_strain_increment_dot`]),
 //! - the return-map sensitivity `ⁿ⁺¹(σ̇, α̇, ė^p)` (eqs 44–49, [`material_sensitivity`]),
 //! - `ⁿ⁺¹Q̇ = ⁿQ̇ rᵀ + ⁿQ ṙᵀ` (eq 51), `σ̇ᵍ` (eq 42),
-//! - `Ṗ = tr(J⁻¹J̇) P + w det J σ̇ᵍ J⁻ᵀ − P J̇ᵀ J⁻ᵀ` on `ⁿ⁺¹J = Jⁿ + G`,
-//! - the rows (eq 64's internal-force part): `ḟ_I = Ψ_I,α Ṗ:α`, and
+//! - `Ṗ = tr(J⁻¹J̇) P + w det J σ̇ᵍ J⁻ᵀ − P J̇ᵀ J⁻ᵀ` on `ⁿ⁺¹J = Jⁿ + G` (the `J̇` and `Ḟ⁻¹`
+//!   terms of eqs 38 and 41, with the parametric volume element carrying `div V`),
+//! - the rows (the structural form's derivative, eqs 38, 62–64: `a*` with `Δż` plus `a'_V`):
+//!   `ḟ_I = Ψ_I,α Ṗ:α`, and
 //!   `ṙ_Iβ = (∂d_I/∂α_β)˙ · m_I + ∂d_I/∂α_β · ṁ_I` with `ṁ_I = ḟ_I z + f_I ż + Ṗ:3 Ψ_I t/2 +
 //!   P:3 Ψ_I ṫ/2`.
 //!
@@ -282,11 +285,11 @@ struct SeedSums {
 }
 
 impl SeedSums {
-    fn new(
+    /// `nb(i)`: neighbour i's state sensitivity, `Δū̇_I` and `Δḋ_I`.
+    fn new<'p>(
         shape: &[ShapeData],
         surface: Option<&SurfacePoint<f64>>,
-        particles: &[ParticleState<f64>],
-        incr_dot: &PointIncrementDot,
+        nb: impl Fn(usize) -> (&'p ParticleState<f64>, V3, V3),
     ) -> Self {
         let mut s = match surface {
             Some(sp) => SeedSums {
@@ -297,12 +300,8 @@ impl SeedSums {
             },
             None => SeedSums::default(),
         };
-        for (((sh, p), du), dd) in shape
-            .iter()
-            .zip(particles)
-            .zip(&incr_dot.du)
-            .zip(&incr_dot.dd)
-        {
+        for (i, sh) in shape.iter().enumerate() {
+            let (p, du, dd) = nb(i);
             let ddir = p.d - p.d0;
             for a in 0..2 {
                 s.xa[a] += p.u * sh.dpsi[a];
@@ -410,25 +409,21 @@ impl<'a> LayerData<'a> {
         })
     }
 
-    /// Add the derivative of the layer's residual for one seed set into `out` and return the
-    /// trial history's derivative.
-    #[allow(clippy::too_many_arguments)]
+    /// The layer's `Ṗ` for one seed set, added into `acc` (with its `z`-moment), and the trial
+    /// history's derivative.
     fn apply(
         &self,
-        shape: &[ShapeData],
-        d_alpha: &[[V3; 2]],
         values: &ValueSums,
         sums: &SeedSums,
-        incr_dot: &PointIncrementDot,
         t_dot: f64,
         material_dot: &MaterialParams<f64>,
         history_dot: &PointHistory<f64>,
-        out: &mut [f64],
+        acc: &mut StressSums,
     ) -> PointHistory<f64> {
         let (z, half_t) = (self.z, self.half_t);
         let half_t_dot = t_dot * 0.5;
         let z_dot = half_t_dot * self.zeta;
-        // J̇ⁿ (configuration at step n, eq 37).
+        // J̇ⁿ: the parametric gradient of the step-start design velocity ⁿV.
         let jn_dot = M3::from_columns(&[
             sums.xa[0] + sums.da[0] * z + values.da[0] * z_dot,
             sums.xa[1] + sums.da[1] * z + values.da[1] * z_dot,
@@ -440,7 +435,7 @@ impl<'a> LayerData<'a> {
             sums.g_u[1] + sums.g_d[1] * z + values.g_d[1] * z_dot,
             sums.g_d3 * half_t + values.g_d3 * half_t_dot,
         ]);
-        // Ḣ = Ġ Jⁿ⁻¹ − G Jⁿ⁻¹ J̇ⁿ Jⁿ⁻¹ = (Ġ − H J̇ⁿ) Jⁿ⁻¹ (eqs 38–39).
+        // Ḣ = Ġ Jⁿ⁻¹ − G Jⁿ⁻¹ J̇ⁿ Jⁿ⁻¹ = (Ġ − H J̇ⁿ) Jⁿ⁻¹ (the −H ∇ⁿV term of eqs 39–40).
         let h_dot = (g_dot - self.h * jn_dot) * self.jn_inv;
         // L̇ = F½⁻¹ Ḣ F½⁻¹ (eqs 56–57, kinematics::mid_step_gradient_dot).
         let l_dot = self.f_half_inv * h_dot * self.f_half_inv;
@@ -478,31 +473,81 @@ impl<'a> LayerData<'a> {
         let tr = (self.j1_inv * j1_dot).trace();
         let p_dot = self.p * tr + sigma_g_dot * jinv_t * (self.det1 * self.weight)
             - self.p * j1_dot.transpose() * jinv_t;
-        let (p, pd) = (&self.p, &p_dot);
-        for (((sh, da), dad), o) in shape
-            .iter()
-            .zip(d_alpha)
-            .zip(&incr_dot.d_alpha)
-            .zip(out.chunks_exact_mut(DOFS_PER_PARTICLE))
-        {
-            let [t0, t1] = sh.dpsi_test;
-            let f = p.column(0) * t0 + p.column(1) * t1;
-            let f_dot = pd.column(0) * t0 + pd.column(1) * t1;
-            let m = f * z + p.column(2) * (half_t * sh.psi);
-            let m_dot = f_dot * z
-                + f * z_dot
-                + pd.column(2) * (half_t * sh.psi)
-                + p.column(2) * (half_t_dot * sh.psi);
-            o[0] += f_dot[0];
-            o[1] += f_dot[1];
-            o[2] += f_dot[2];
-            o[3] += dad[0].dot(&m) + da[0].dot(&m_dot);
-            o[4] += dad[1].dot(&m) + da[1].dot(&m_dot);
-        }
+        acc.add(&p_dot, z);
         PointHistory {
             frame: q1_dot,
             material: mat_dot,
         }
+    }
+}
+
+/// Thickness sums of the nominal stress `P` of the layers of one point: `Σ_l P_l`, `Σ_l z_l P_l`
+/// (the first two columns only are used with `z`) and `Σ_l ζ_l P_l`. The rows are linear in
+/// them (`f_I = Ψ_I,α P:α`, `m_I = z f_I + t/2 Ψ_I P:3`), so the rows of all layers are formed
+/// once per point from these sums rather than once per layer.
+#[derive(Clone, Copy, Debug)]
+struct StressSums {
+    p: M3<f64>,
+    pz: M3<f64>,
+    pzeta: M3<f64>,
+}
+
+impl StressSums {
+    fn zero() -> Self {
+        StressSums {
+            p: M3::zeros(),
+            pz: M3::zeros(),
+            pzeta: M3::zeros(),
+        }
+    }
+    fn add(&mut self, p: &M3<f64>, z: f64) {
+        self.p += p;
+        self.pz += p * z;
+    }
+    fn add_value(&mut self, p: &M3<f64>, z: f64, zeta: f64) {
+        self.add(p, z);
+        self.pzeta += p * zeta;
+    }
+}
+
+/// Add the residual rows' derivative (eqs 62–64) into `out` from the layer
+/// sums of the nominal stress `val` and of its derivative `dot`:
+/// `ḟ_I = Ψ_I,α Σ Ṗ:α`, `m_I = Ψ_I,α Σ z P:α + t/2 Ψ_I Σ P:3`,
+/// `ṁ_I = Ψ_I,α (Σ z Ṗ:α + ṫ/2 Σ ζ P:α) + Ψ_I (t/2 Σ Ṗ:3 + ṫ/2 Σ P:3)` (`ż = ζ ṫ/2`),
+/// `ṙ_Iβ = (∂d_I/∂α_β)˙ · m_I + ∂d_I/∂α_β · ṁ_I`.
+#[allow(clippy::too_many_arguments)]
+fn add_rows_dot(
+    shape: &[ShapeData],
+    d_alpha: &[[V3; 2]],
+    d_alpha_dot: impl Fn(usize) -> [V3; 2],
+    half_t: f64,
+    t_dot: f64,
+    val: &StressSums,
+    dot: &StressSums,
+    out: &mut [f64],
+) {
+    let half_t_dot = t_dot * 0.5;
+    let (p3, pd3) = (val.p.column(2), dot.p.column(2));
+    for (i, ((sh, da), o)) in shape
+        .iter()
+        .zip(d_alpha)
+        .zip(out.chunks_exact_mut(DOFS_PER_PARTICLE))
+        .enumerate()
+    {
+        let dad = d_alpha_dot(i);
+        let [t0, t1] = sh.dpsi_test;
+        let f_dot = dot.p.column(0) * t0 + dot.p.column(1) * t1;
+        let m = val.pz.column(0) * t0 + val.pz.column(1) * t1 + p3 * (half_t * sh.psi);
+        let m_dot = dot.pz.column(0) * t0
+            + dot.pz.column(1) * t1
+            + (val.pzeta.column(0) * t0 + val.pzeta.column(1) * t1) * half_t_dot
+            + pd3 * (half_t * sh.psi)
+            + p3 * (half_t_dot * sh.psi);
+        o[0] += f_dot[0];
+        o[1] += f_dot[1];
+        o[2] += f_dot[2];
+        o[3] += dad[0].dot(&m) + da[0].dot(&m_dot);
+        o[4] += dad[1].dot(&m) + da[1].dot(&m_dot);
     }
 }
 
@@ -522,18 +567,30 @@ pub fn point_residual_dot(
     let n = inp.shape.len();
     check_point_sizes(inp, incr, incr_dot, res, seeds)?;
     let values = ValueSums::new(inp.surface, inp.shape, inp.particles, incr);
-    let sums = SeedSums::new(inp.shape, seeds.surface, seeds.particles, incr_dot);
+    let sums = SeedSums::new(inp.shape, seeds.surface, |i| {
+        (&seeds.particles[i], incr_dot.du[i], incr_dot.dd[i])
+    });
     let layer = LayerData::new(inp, res)?;
-    let mut residual = vec![0.0; DOFS_PER_PARTICLE * n];
+    let mut dot = StressSums::zero();
     let history = layer.apply(
-        inp.shape,
-        &incr.d_alpha,
         &values,
         &sums,
-        incr_dot,
         seeds.thickness,
         &seeds.material,
         seeds.history,
+        &mut dot,
+    );
+    let mut val = StressSums::zero();
+    val.add_value(&layer.p, layer.z, layer.zeta);
+    let mut residual = vec![0.0; DOFS_PER_PARTICLE * n];
+    add_rows_dot(
+        inp.shape,
+        &incr.d_alpha,
+        |i| incr_dot.d_alpha[i],
+        layer.half_t,
+        seeds.thickness,
+        &val,
+        &dot,
         &mut residual,
     );
     Ok(PointDot { residual, history })
@@ -573,6 +630,10 @@ fn check_point_sizes(
     Ok(())
 }
 
+/// One seed set's result of [`ShellModel::internal_force_dots`]: `d f_int/dτ` (`n_dofs`) and the
+/// trial history sensitivities (point-major, as [`ShellModel::history`]).
+pub type InternalForceDot = (Vec<f64>, Vec<PointHistory<f64>>);
+
 /// The seeds of one design variable for the whole model ([`ShellModel::internal_force_dots`]).
 #[derive(Clone, Copy, Debug)]
 pub struct ModelSeeds<'a> {
@@ -590,6 +651,29 @@ pub struct ModelSeeds<'a> {
     pub history: &'a [PointHistory<f64>],
     /// `Δq̇` on the global DOFs (`n_dofs`).
     pub dofs: &'a [f64],
+}
+
+/// Per-thread buffers of [`ShellModel::internal_force_dots`], reused from point to point.
+struct Scratch {
+    parts: Vec<ParticleState<f64>>,
+    inc: PointIncrement<f64>,
+    sums: Vec<SeedSums>,
+    dots: Vec<StressSums>,
+}
+
+impl Default for Scratch {
+    fn default() -> Self {
+        Scratch {
+            parts: Vec::new(),
+            inc: PointIncrement {
+                du: Vec::new(),
+                dd: Vec::new(),
+                d_alpha: Vec::new(),
+            },
+            sums: Vec::new(),
+            dots: Vec::new(),
+        }
+    }
 }
 
 impl ShellModel {
@@ -657,21 +741,27 @@ impl ShellModel {
     }
 
     /// Sensitivities of the global internal force (eq 32) and of the trial histories for several
-    /// seed sets at once (the residual part of the continuum DSA's right-hand side, eq 64–65).
+    /// seed sets at once (the internal-force part of the continuum DSA's sensitivity equation,
+    /// eqs 62–65: with `Δq̇` seeded alone it is the tangent times `Δq̇`, with the other seeds the
+    /// fictitious load).
     ///
     /// `dofs` is the converged increment `Δq` (f64, `n_dofs`); `seeds[v]` the seeds of design
     /// variable `v` ([`ModelSeeds`]). Returns, per seed set, `d f_int/dτ` (`n_dofs`) and the
     /// trial history sensitivities (point-major, as [`ShellModel::history`]). The f64 point
     /// evaluation ([`point_residual_with`]) is done once per layer point and shared by all seed
-    /// sets; the per-particle increment derivatives once per shape-function particle. Images
-    /// follow their sources: an image's state dot is `Q ṡ`, its DOF dot `T q̇`. Points run in
-    /// parallel and are summed in point order (deterministic). Equal to the derivative part of
-    /// [`ShellModel::internal_force_with`] in dual numbers with the same seeds.
+    /// sets; the per-particle increment derivatives once per shape-function particle; the
+    /// residual rows once per in-plane point from the thickness sums of `P` and `Ṗ` (the rows
+    /// are linear in them), not once per layer. Images follow their sources: an image's state
+    /// dot is `Q ṡ`, its DOF dot `T q̇`. Points run in parallel and are summed in point order
+    /// (deterministic, bit-identical run to run). Equal to the derivative part of
+    /// [`ShellModel::internal_force_with`] in dual numbers with the same seeds (to round-off:
+    /// `tests/point_sensitivity.rs`). Errors name the seed set and field of a wrong length or a
+    /// non-finite rate.
     pub fn internal_force_dots(
         &self,
         dofs: &[f64],
         seeds: &[ModelSeeds],
-    ) -> Result<Vec<(Vec<f64>, Vec<PointHistory<f64>>)>, ShellError> {
+    ) -> Result<Vec<InternalForceDot>, ShellError> {
         const D: usize = DOFS_PER_PARTICLE;
         if dofs.len() != self.n_dofs() {
             return Err(invalid(
@@ -688,93 +778,95 @@ impl ShellModel {
         let nl = self.thickness_rule.len();
         let n_sf = self.particles.len() + self.symmetry.images.len();
         // Per shape-function particle: f64 state, local DOFs and increment (as the analysis
-        // forms them), then the derivatives of every seed set.
-        type PerParticle = (
-            ParticleState<f64>,
-            [f64; D],
-            V3,
-            [V3; 2],
-            Vec<(ParticleState<f64>, V3, V3, [V3; 2])>,
-        );
-        let per: Vec<PerParticle> = (0..n_sf)
+        // forms them), then, seed-major (`s · n_sf + j`), the derivatives of every seed set.
+        let local_dofs = |j: usize, g: &[f64]| -> [f64; D] {
+            let (src, q, det) = self.seed_map(j);
+            let g = &g[D * src..D * src + D];
+            if j < self.particles.len() {
+                [g[0], g[1], g[2], g[3], g[4]]
+            } else {
+                [
+                    g[0] * q[(0, 0)] + g[1] * q[(0, 1)] + g[2] * q[(0, 2)],
+                    g[0] * q[(1, 0)] + g[1] * q[(1, 1)] + g[2] * q[(1, 2)],
+                    g[0] * q[(2, 0)] + g[1] * q[(2, 1)] + g[2] * q[(2, 2)],
+                    g[3] * det,
+                    g[4] * det,
+                ]
+            }
+        };
+        type Particle = (ParticleState<f64>, [f64; D], V3, [V3; 2]);
+        let per: Vec<Particle> = (0..n_sf)
             .into_par_iter()
             .map(|j| {
-                let (src, q, det) = self.seed_map(j);
-                let real = j < self.particles.len();
                 let state = self.particle_state(j);
-                let map_dofs = |g: &[f64]| -> [f64; D] {
-                    let g = &g[D * src..D * src + D];
-                    if real {
-                        [g[0], g[1], g[2], g[3], g[4]]
-                    } else {
-                        [
-                            g[0] * q[(0, 0)] + g[1] * q[(0, 1)] + g[2] * q[(0, 2)],
-                            g[0] * q[(1, 0)] + g[1] * q[(1, 1)] + g[2] * q[(1, 2)],
-                            g[0] * q[(2, 0)] + g[1] * q[(2, 1)] + g[2] * q[(2, 2)],
-                            g[3] * det,
-                            g[4] * det,
-                        ]
-                    }
-                };
-                let x = map_dofs(dofs);
+                let x = local_dofs(j, dofs);
                 let inc = PointIncrement::new(std::slice::from_ref(&state), &x)?;
-                let dots = seeds
-                    .iter()
-                    .map(|sd| {
-                        let s = sd.particles[src];
-                        let sdot = if real {
-                            s
-                        } else {
-                            ParticleState {
-                                u: q * s.u,
-                                d: q * s.d,
-                                d0: q * s.d0,
-                                e: [q * s.e[0], q * s.e[1]],
-                            }
-                        };
-                        let xd = map_dofs(sd.dofs);
-                        let (du, dd, da) = particle_increment_dot(&state, &sdot, &x, &xd);
-                        (sdot, du, dd, da)
-                    })
-                    .collect();
-                Ok((state, x, inc.dd[0], inc.d_alpha[0], dots))
+                Ok((state, x, inc.dd[0], inc.d_alpha[0]))
             })
             .collect::<Result<_, ShellError>>()?;
+        let per_dot: Vec<(ParticleState<f64>, V3, V3, [V3; 2])> = (0..ns * n_sf)
+            .into_par_iter()
+            .map(|idx| {
+                let (sd, j) = (&seeds[idx / n_sf], idx % n_sf);
+                let (src, q, _) = self.seed_map(j);
+                let ps = sd.particles[src];
+                let sdot = if j < self.particles.len() {
+                    ps
+                } else {
+                    ParticleState {
+                        u: q * ps.u,
+                        d: q * ps.d,
+                        d0: q * ps.d0,
+                        e: [q * ps.e[0], q * ps.e[1]],
+                    }
+                };
+                let (state, x) = (&per[j].0, &per[j].1);
+                let (du, dd, da) = particle_increment_dot(state, &sdot, x, &local_dofs(j, sd.dofs));
+                (sdot, du, dd, da)
+            })
+            .collect();
+        // Per in-plane point: the f64 layers once, every seed set on each; results flat
+        // (seed-major) so that a point allocates two vectors whatever the number of seed sets.
+        type PointOut = (Vec<f64>, Vec<PointHistory<f64>>);
         let per_point = (0..self.points.len())
             .into_par_iter()
-            .map(|k| {
+            .map_init(Scratch::default, |sc, k| -> Result<PointOut, ShellError> {
                 let p = &self.points[k];
                 let nb = &p.neighbours;
-                let parts: Vec<ParticleState<f64>> = nb.iter().map(|&j| per[j].0).collect();
-                let inc = PointIncrement {
-                    du: nb
-                        .iter()
-                        .map(|&j| V3::new(per[j].1[0], per[j].1[1], per[j].1[2]))
-                        .collect(),
-                    dd: nb.iter().map(|&j| per[j].2).collect(),
-                    d_alpha: nb.iter().map(|&j| per[j].3).collect(),
-                };
-                let values = ValueSums::new(&p.surface, &p.shape, &parts, &inc);
-                let (sums, incr_dots): (Vec<SeedSums>, Vec<PointIncrementDot>) = seeds
-                    .iter()
-                    .enumerate()
-                    .map(|(s, sd)| {
-                        let states: Vec<ParticleState<f64>> =
-                            nb.iter().map(|&j| per[j].4[s].0).collect();
-                        let incr_dot = PointIncrementDot {
-                            du: nb.iter().map(|&j| per[j].4[s].1).collect(),
-                            dd: nb.iter().map(|&j| per[j].4[s].2).collect(),
-                            d_alpha: nb.iter().map(|&j| per[j].4[s].3).collect(),
-                        };
-                        let surface = sd.surface.map(|sp| &sp[k]);
-                        (
-                            SeedSums::new(&p.shape, surface, &states, &incr_dot),
-                            incr_dot,
-                        )
+                let nr = D * nb.len();
+                sc.parts.clear();
+                sc.parts.extend(nb.iter().map(|&j| per[j].0));
+                let inc = &mut sc.inc;
+                inc.du.clear();
+                inc.du.extend(
+                    nb.iter()
+                        .map(|&j| V3::new(per[j].1[0], per[j].1[1], per[j].1[2])),
+                );
+                inc.dd.clear();
+                inc.dd.extend(nb.iter().map(|&j| per[j].2));
+                inc.d_alpha.clear();
+                inc.d_alpha.extend(nb.iter().map(|&j| per[j].3));
+                let values = ValueSums::new(&p.surface, &p.shape, &sc.parts, inc);
+                sc.sums.clear();
+                sc.sums.extend(seeds.iter().enumerate().map(|(s, sd)| {
+                    let base = s * n_sf;
+                    SeedSums::new(&p.shape, sd.surface.map(|sp| &sp[k]), |i| {
+                        let d = &per_dot[base + nb[i]];
+                        (&d.0, d.1, d.2)
                     })
-                    .unzip();
-                let mut residuals = vec![vec![0.0; D * nb.len()]; ns];
-                let mut histories = vec![Vec::with_capacity(nl); ns];
+                }));
+                let mut residuals = vec![0.0; ns * nr];
+                let mut histories = Vec::with_capacity(ns * nl);
+                histories.resize(
+                    ns * nl,
+                    PointHistory {
+                        frame: M3::zeros(),
+                        material: crate::material::MaterialState::zero(),
+                    },
+                );
+                sc.dots.clear();
+                sc.dots.resize(ns, StressSums::zero());
+                let mut val = StressSums::zero();
                 for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
                     let inp = PointInput {
                         surface: &p.surface,
@@ -782,31 +874,47 @@ impl ShellModel {
                         thickness: self.thickness,
                         weight: p.weight * wz,
                         shape: &p.shape,
-                        particles: &parts,
+                        particles: &sc.parts,
                         material: &self.material,
                         history: &self.history[k * nl + l],
                     };
-                    let res = point_residual_with(&inp, &inc)?;
+                    let res = point_residual_with(&inp, &sc.inc)?;
                     let layer = LayerData::new(&inp, &res)?;
-                    for (s, sd) in seeds.iter().enumerate() {
-                        let h = layer.apply(
-                            &p.shape,
-                            &inc.d_alpha,
+                    val.add_value(&layer.p, layer.z, zeta);
+                    for (s, (sd, acc)) in seeds.iter().zip(sc.dots.iter_mut()).enumerate() {
+                        histories[s * nl + l] = layer.apply(
                             &values,
-                            &sums[s],
-                            &incr_dots[s],
+                            &sc.sums[s],
                             sd.thickness,
                             &sd.material,
                             &sd.history[k * nl + l],
-                            &mut residuals[s],
+                            acc,
                         );
-                        histories[s].push(h);
                     }
+                }
+                let half_t = self.thickness * 0.5;
+                for (s, ((sd, r), dot)) in seeds
+                    .iter()
+                    .zip(residuals.chunks_exact_mut(nr))
+                    .zip(&sc.dots)
+                    .enumerate()
+                {
+                    let base = s * n_sf;
+                    add_rows_dot(
+                        &p.shape,
+                        &sc.inc.d_alpha,
+                        |i| per_dot[base + nb[i]].3,
+                        half_t,
+                        sd.thickness,
+                        &val,
+                        dot,
+                        r,
+                    );
                 }
                 Ok((residuals, histories))
             })
             .collect::<Result<Vec<_>, ShellError>>()?;
-        let mut out: Vec<(Vec<f64>, Vec<PointHistory<f64>>)> = (0..ns)
+        let mut out: Vec<InternalForceDot> = (0..ns)
             .map(|_| {
                 (
                     vec![0.0; self.n_dofs()],
@@ -814,10 +922,14 @@ impl ShellModel {
                 )
             })
             .collect();
-        for (k, (residuals, histories)) in per_point.into_iter().enumerate() {
-            for ((f, h), (r, hs)) in out.iter_mut().zip(residuals.into_iter().zip(histories)) {
-                self.scatter_local(k, &r, f);
-                h.extend(hs);
+        for (k, (residuals, histories)) in per_point.iter().enumerate() {
+            let nr = D * self.points[k].neighbours.len();
+            for ((f, h), (r, hs)) in out
+                .iter_mut()
+                .zip(residuals.chunks_exact(nr).zip(histories.chunks_exact(nl)))
+            {
+                self.scatter_local(k, r, f);
+                h.extend_from_slice(hs);
             }
         }
         Ok(out)
