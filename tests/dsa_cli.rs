@@ -89,9 +89,9 @@ fn design_errors_name_the_key() {
     let t = "[[design]]\nname = \"t\"\nkind = \"thickness\"\n";
     let cases: &[(String, &str, &str)] = &[
         (
-            "[[design]]\nname = \"r\"\nkind = \"shape.radius\"\n".into(),
+            "[[design]]\nname = \"r\"\nkind = \"shape.height\"\n".into(),
             "design[0].kind",
-            "not supported yet",
+            "no parameter `height`",
         ),
         (
             "[[design]]\nname = \"x\"\nkind = \"tool.die.x\"\n".into(),
