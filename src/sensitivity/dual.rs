@@ -39,6 +39,16 @@
 //! ([`ShellProblem::external_force`]), so a missing or different load is an error, not a wrong
 //! derivative. Edge moments (which act through the director) and contact are not supported yet.
 //!
+//! **Shape design variables** ([`DesignKind::Shape`], [`DualShellProblem::new_on`],
+//! [`run_dual_on`]): the surface parameter is seeded and the initial geometry of the group is
+//! built in `D` as `ShellModel::new` builds it in `f64` ([`super::shape::dual_geometry`]):
+//! the quadrature points' `x̄⁰,α, n⁰, n⁰,α` ([`DualState::surfaces`], passed to
+//! `ShellModel::internal_force_with_surfaces`), the particles' `d = d⁰ = n(ξ_I)` and lamina
+//! vectors, the initial frames. The follower pressure (`x̄⁰,α`) and gravity (the initial area
+//! element) are evaluated on the dual surfaces (`Pressure::force_with_surfaces`,
+//! `Gravity::force_with_surfaces`); point forces, monitors, essential conditions, shape
+//! functions and quadrature weights live on the parameter domain and do not move.
+//!
 //! **Constraint scales.** The rows' scales `k_c` (`E t`, `E t³/12`) are a numerical balance
 //! set when the problem is built; they are held fixed here. The generalised DOFs do not depend
 //! on them, and the physical reactions `−k_c μ_c` differentiate correctly with `k_c` fixed

@@ -6,8 +6,11 @@
 //! residual (eq 32) only through the point kernel's `PointInput::thickness` and
 //! `PointInput::material`; the design velocity of eqs 37–43 is zero for them (the geometry does
 //! not move), so the structural fictitious load `a'_V` of eq (64) reduces to the material and
-//! history terms of eq (49). Shape design variables (NURBS control points, a surface parameter)
-//! and tool placements (`b'_N`, eq 83) are the next kinds of [`DesignKind`].
+//! history terms of eq (49). Shape design variables ([`DesignKind::Shape`]: a parameter of the
+//! mid-surface, `Surface::design_parameters`) move the initial geometry at fixed parameter
+//! coordinates; their design velocity field (eqs 37–43) is hand-derived in [`shape`], and the
+//! dual reference seeds the surface parameter ([`shape::dual_geometry`]). Tool placements
+//! (`b'_N`, eq 83) are the next kind.
 //!
 //! Layout: `docs/sensitivity.md`.
 
