@@ -663,3 +663,35 @@ fn dual_shape_derivative_matches_finite_differences_on_a_nurbs_panel() {
     // (here the Newton tolerance is 1e-12, so the noise is lower still).
     check_run("nurbs panel", &case, 1e-6, 3);
 }
+
+/// A finite-difference step that moves the hole's rim onto the pole leaves a valid sphere zone
+/// but a degenerate normal at the rim's particles: `shelldsa dsa` rejects it before the
+/// analysis, naming the variable; a step beyond the pole is rejected when the case is read.
+#[test]
+fn degenerate_shape_perturbations_are_rejected_before_the_analysis() {
+    let design = |step: f64| {
+        format!("[[design]]\nname = \"phi1\"\nkind = \"shape.latitude_end\"\nfd_steps = [{step}]\n")
+    };
+    // 72° · (1 + 0.25) = 90°: the pole.
+    let case = hemisphere_case(5, 1, &design(0.25));
+    let spec = case.dsa.clone().unwrap();
+    let t = std::time::Instant::now();
+    let e = shelldsa::io::dsa_run::run(&case, &spec, &mut |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("phi1") && e.contains("normal"), "{e}");
+    // Nothing was run: the error comes from the checks (a 5 × 5 build, well under a second
+    // even on a loaded machine; a run would take several).
+    assert!(t.elapsed().as_secs_f64() < 5.0);
+    // 72° · 1.3 = 93.6°: beyond the pole, an invalid surface, rejected with the case.
+    let t = hemisphere_text();
+    let k = t.find("[[design]]").unwrap();
+    let text = format!("{}{}", &t[..k], design(0.3));
+    let e = parse_shell_case(&text, Path::new("h.toml"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("design[0].fd_steps[0]") && e.contains("latitude"),
+        "{e}"
+    );
+}
