@@ -10,14 +10,14 @@
 //! `cargo bench --bench dsa -- hemisphere-plastic-dsa`.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use std::hint::black_box;
 use shelldsa::io::dsa_case::dual_loads;
 use shelldsa::io::dsa_run::CaseAnalysis;
 use shelldsa::io::shell_case::{read_shell_case, ShellCase};
 use shelldsa::sensitivity::continuum::run_continuum;
-use shelldsa::sensitivity::dual::{run_dual, DualMode};
+use shelldsa::sensitivity::dual::{run_dual_on, DualMode};
 use shelldsa::sensitivity::fd::{self, Analysis};
 use shelldsa::sensitivity::{Design, DesignVariable};
+use std::hint::black_box;
 use std::time::Instant;
 
 const CASES: [&str; 1] = ["verification/hemisphere-plastic-dsa/case.toml"];
@@ -42,16 +42,16 @@ impl Setup {
         Setup { case, vars }
     }
     fn base(&self) -> Design {
-        Design {
-            thickness: self.case.thickness,
-            material: self.case.material,
-        }
+        shelldsa::io::dsa_run::base_design(&self.case)
     }
     fn analysis(&self) -> f64 {
         let a = CaseAnalysis { case: &self.case };
         let (p, n) = a.build(&self.base()).unwrap();
         let monitors = &self.case.dsa.as_ref().unwrap().monitors;
-        fd::response(p, &n, a.solver(), monitors).unwrap().loads.len() as f64
+        fd::response(p, &n, a.solver(), monitors)
+            .unwrap()
+            .loads
+            .len() as f64
     }
     /// (method time, whole run time) in seconds.
     fn continuum(&self) -> (f64, f64) {
@@ -59,6 +59,7 @@ impl Setup {
         let (p, n) = a.build(&self.base()).unwrap();
         let r = run_continuum(
             p,
+            Some(&self.case.surface),
             self.vars.clone(),
             dual_loads(&self.case).unwrap(),
             self.case.dsa.as_ref().unwrap().monitors.clone(),
@@ -71,8 +72,9 @@ impl Setup {
     fn dual(&self) -> (f64, f64) {
         let a = CaseAnalysis { case: &self.case };
         let (p, n) = a.build(&self.base()).unwrap();
-        let r = run_dual(
+        let r = run_dual_on(
             p,
+            Some(&self.case.surface),
             self.vars.clone(),
             dual_loads(&self.case).unwrap(),
             self.case.dsa.as_ref().unwrap().monitors.clone(),

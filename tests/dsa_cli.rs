@@ -46,7 +46,7 @@ fn design_tables_parse() {
     let c = parse_shell_case(&ci_text(), Path::new("ci.toml")).unwrap();
     let d = c.dsa.clone().expect("[[design]] tables");
     let names: Vec<&str> = d.design.iter().map(|e| e.variable.name.as_str()).collect();
-    assert_eq!(names, ["t", "E", "sigma0"]);
+    assert_eq!(names, ["R", "phi1", "t", "sigma0"]);
     assert_eq!(d.design[0].fd_steps, [1e-3, 1e-4]);
     assert_eq!(
         d.methods,
@@ -92,9 +92,9 @@ fn design_errors_name_the_key() {
     let t = "[[design]]\nname = \"t\"\nkind = \"thickness\"\n";
     let cases: &[(String, &str, &str)] = &[
         (
-            "[[design]]\nname = \"r\"\nkind = \"shape.radius\"\n".into(),
+            "[[design]]\nname = \"r\"\nkind = \"shape.height\"\n".into(),
             "design[0].kind",
-            "not supported yet",
+            "no parameter `height`",
         ),
         (
             "[[design]]\nname = \"x\"\nkind = \"tool.die.x\"\n".into(),
@@ -311,7 +311,7 @@ fn hemisphere_dual_against_fd_through_the_cli() {
         serde_json::from_str(&std::fs::read_to_string(base.join("a").join("terms.json")).unwrap())
             .unwrap();
     let bs = terms["breakdowns"].as_array().unwrap();
-    assert_eq!(bs.len(), 3);
+    assert_eq!(bs.len(), 4);
     for b in bs {
         assert_eq!(b["step"].as_u64(), Some(12));
         let groups = b["groups"].as_array().unwrap();
@@ -339,7 +339,7 @@ fn hemisphere_dual_against_fd_through_the_cli() {
     let steps = a["loads"].as_array().unwrap().len();
     assert_eq!(steps, 14);
     let vars = a["variables"].as_array().unwrap();
-    assert_eq!(vars.len(), 3);
+    assert_eq!(vars.len(), 4);
     let plastic: Vec<u64> = vars[0]["steps"]
         .as_array()
         .unwrap()
@@ -412,7 +412,7 @@ fn hemisphere_dual_against_fd_through_the_cli() {
         }
     }
     // σ0 has no influence before first yield: exactly zero from both methods at step 1.
-    let s0 = &vars[2]["steps"][0]["monitors"]["A.ux"];
+    let s0 = &vars[3]["steps"][0]["monitors"]["A.ux"];
     assert_eq!(s0["dual"].as_f64().unwrap(), 0.0);
     assert_eq!(s0["continuum"].as_f64().unwrap(), 0.0);
     assert_eq!(s0["fd_central"][0].as_f64().unwrap(), 0.0);

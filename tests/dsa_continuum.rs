@@ -25,6 +25,7 @@ fn continuum() -> ContinuumRun {
     let d = nominal_design();
     run_continuum(
         Plate::problem(&d),
+        None,
         variables(),
         vec![DualLoad::Pressure(Plate::pressure())],
         Plate::monitors(),
@@ -117,9 +118,9 @@ fn term_groups_match_the_dual_reference_at_a_plastic_step() {
     let d = nominal_design();
     let bs = breakdown(
         Plate::problem(&d),
+        None,
         variables(),
         vec![DualLoad::Pressure(Plate::pressure())],
-        Plate::monitors(),
         &driver(STEPS),
         SolverOptions::default(),
         STEPS,

@@ -225,6 +225,7 @@ fn elastic_cantilever_sensitivities_follow_beam_theory() {
     let design = Design {
         thickness: T,
         material: MaterialParams::new(E, 0.0, 1e30, 0.0, 1.0).unwrap(),
+        surface: None,
     };
     let grid = regular_grid(ParamBox::unit(), 25, 3);
     let cq = CellQuadrature::for_particle_grid(&grid, 2, 4).unwrap();

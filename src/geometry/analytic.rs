@@ -504,3 +504,155 @@ fn check_radius(r: f64) -> Result<(), GeometryError> {
         })
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Hand-derived design velocities `∂/∂p` of `eval` (x and its first and second parametric
+// derivatives at fixed (u, v)), for the paper's design velocity field (eqs 37–43). Every patch
+// is differentiated by the product rule through its closed form; `pd` is the direction in the
+// space of its design parameters (a unit vector for one parameter).
+
+type V3 = Vector3<f64>;
+
+fn v3f(p: &[f64]) -> V3 {
+    V3::new(p[0], p[1], p[2])
+}
+
+/// `(v/|v|, ∂(v/|v|))` for a direction `vd` of `v`: `(vd − n (n·vd)) / |v|`.
+fn unit_dot(v: &V3, vd: &V3) -> (V3, V3) {
+    let len = v.norm();
+    let n = v / len;
+    (n, (vd - n * n.dot(vd)) / len)
+}
+
+/// The unit part of `r` orthogonal to the unit vector `a` ([`orthonormal`]) and its
+/// derivative for the directions `ad` of `a` and `rd` of `r`.
+fn orthonormal_dot(a: &V3, ad: &V3, r: &V3, rd: &V3) -> (V3, V3) {
+    let ra = r.dot(a);
+    let w = r - a * ra;
+    let wd = rd - ad * ra - a * (rd.dot(a) + r.dot(ad));
+    unit_dot(&w, &wd)
+}
+
+/// `(ρ, τ, ρ̇, τ̇)` of `ρ = e₁ cos θ + e₂ sin θ`, `τ = ∂ρ/∂θ = e₂ cos θ − e₁ sin θ` for the
+/// directions `ė₁, ė₂, θ̇`.
+fn polar_dot(e1: &V3, e2: &V3, e1d: &V3, e2d: &V3, th: f64, thd: f64) -> [V3; 4] {
+    let (s, c) = th.sin_cos();
+    let rho = e1 * c + e2 * s;
+    let tau = e2 * c - e1 * s;
+    let rhod = e1d * c + e2d * s + tau * thd;
+    let taud = e2d * c - e1d * s - rho * thd;
+    [rho, tau, rhod, taud]
+}
+
+/// `(value, ∂value)` of `lerp(range, t)` and of its span `range[1] − range[0]`.
+fn lerp_dot(range: [f64; 2], rd: [f64; 2], t: f64) -> (f64, f64, f64, f64) {
+    let d = range[1] - range[0];
+    let dd = rd[1] - rd[0];
+    (range[0] + d * t, rd[0] + dd * t, d, dd)
+}
+
+impl Rectangle<f64> {
+    /// `∂/∂p` of [`Rectangle::eval`] in the direction `pd` of the design parameters
+    /// (`origin`, `edge_u`, `edge_v`): `ẋ = ȯ + u ė_u + v ė_v`, `ẋ_u = ė_u`, `ẋ_v = ė_v`.
+    pub(crate) fn design_velocity(&self, pd: &[f64], u: f64, v: f64) -> SurfaceDerivs<f64> {
+        let (od, eud, evd) = (v3f(&pd[0..3]), v3f(&pd[3..6]), v3f(&pd[6..9]));
+        let z = V3::zeros();
+        SurfaceDerivs {
+            x: od + eud * u + evd * v,
+            xu: eud,
+            xv: evd,
+            xuu: z,
+            xuv: z,
+            xvv: z,
+        }
+    }
+}
+
+impl AnnulusSector<f64> {
+    /// `∂/∂p` of [`AnnulusSector::eval`] in the direction `pd` of the design parameters,
+    /// by the product rule through `x = c + r ρ(θ)`, `x_u = r' ρ`, `x_v = r θ' τ`,
+    /// `x_uv = r' θ' τ`, `x_vv = −r θ'² ρ` (`r' = r_out − r_in`, `θ' = θ₁ − θ₀`), with the
+    /// frame `n̂`, `e₁`, `e₂ = n̂ × e₁` differentiated through its normalisations.
+    pub(crate) fn design_velocity(&self, pd: &[f64], u: f64, v: f64) -> SurfaceDerivs<f64> {
+        let (cd, nd, refd) = (v3f(&pd[0..3]), v3f(&pd[3..6]), v3f(&pd[6..9]));
+        let (n, n_d) = unit_dot(&self.normal, &nd);
+        let (e1, e1d) = orthonormal_dot(&n, &n_d, &self.reference, &refd);
+        let e2 = n.cross(&e1);
+        let e2d = n_d.cross(&e1) + n.cross(&e1d);
+        let (r, rdot, dr, drdot) =
+            lerp_dot([self.inner_radius, self.outer_radius], [pd[9], pd[10]], u);
+        let (th, thdot, dth, dthdot) = lerp_dot(self.angle, [pd[11], pd[12]], v);
+        let [rho, tau, rhod, taud] = polar_dot(&e1, &e2, &e1d, &e2d, th, thdot);
+        SurfaceDerivs {
+            x: cd + rhod * r + rho * rdot,
+            xu: rhod * dr + rho * drdot,
+            xv: taud * (r * dth) + tau * (rdot * dth + r * dthdot),
+            xuu: V3::zeros(),
+            xuv: taud * (dr * dth) + tau * (drdot * dth + dr * dthdot),
+            xvv: -(rhod * (r * dth * dth) + rho * (rdot * dth * dth + r * 2.0 * dth * dthdot)),
+        }
+    }
+}
+
+impl CylinderSector<f64> {
+    /// `∂/∂p` of [`CylinderSector::eval`] in the direction `pd` of the design parameters,
+    /// by the product rule through `x = o + R ρ(θ) + s â`, `x_u = R θ' τ`, `x_v = s' â`,
+    /// `x_uu = −R θ'² ρ`, with `â` and `e₁`, `e₂ = â × e₁` differentiated through their
+    /// normalisations.
+    pub(crate) fn design_velocity(&self, pd: &[f64], u: f64, v: f64) -> SurfaceDerivs<f64> {
+        let (od, axd, refd) = (v3f(&pd[0..3]), v3f(&pd[3..6]), v3f(&pd[6..9]));
+        let (a, ad) = unit_dot(&self.axis, &axd);
+        let (e1, e1d) = orthonormal_dot(&a, &ad, &self.reference, &refd);
+        let e2 = a.cross(&e1);
+        let e2d = ad.cross(&e1) + a.cross(&e1d);
+        let (th, thdot, dth, dthdot) = lerp_dot(self.angle, [pd[10], pd[11]], u);
+        let (s, sdot, ds, dsdot) = lerp_dot(self.length, [pd[12], pd[13]], v);
+        let [rho, tau, rhod, taud] = polar_dot(&e1, &e2, &e1d, &e2d, th, thdot);
+        let (r, rdot) = (self.radius, pd[9]);
+        let z = V3::zeros();
+        SurfaceDerivs {
+            x: od + rhod * r + rho * rdot + ad * s + a * sdot,
+            xu: taud * (r * dth) + tau * (rdot * dth + r * dthdot),
+            xv: ad * ds + a * dsdot,
+            xuu: -(rhod * (r * dth * dth) + rho * (rdot * dth * dth + r * 2.0 * dth * dthdot)),
+            xuv: z,
+            xvv: z,
+        }
+    }
+}
+
+impl SphereZone<f64> {
+    /// `∂/∂p` of [`SphereZone::eval`] in the direction `pd` of the design parameters. With
+    /// `f(λ, φ) = (cos φ cos λ, cos φ sin λ, sin φ)`: `x = c + R f`, `x_u = R λ' f_λ`,
+    /// `x_v = R φ' f_φ`, `x_uu = R λ'² f_λλ`, `x_uv = R λ' φ' f_λφ`, `x_vv = −R φ'² f`; the
+    /// angles move with `λ̇ = λ̇₀ + u (λ̇₁ − λ̇₀)`, `φ̇` likewise, so the third angular
+    /// derivatives `f_λλλ = −f_λ`, `f_λλφ`, `f_λφφ = −f_λ`, `f_φφφ = −f_φ` enter.
+    pub(crate) fn design_velocity(&self, pd: &[f64], u: f64, v: f64) -> SurfaceDerivs<f64> {
+        let cd = v3f(&pd[0..3]);
+        let (r, rdot) = (self.radius, pd[3]);
+        let (phi, phid, dp, dpd) = lerp_dot(self.latitude, [pd[4], pd[5]], v);
+        let (lam, lamd, dl, dld) = lerp_dot(self.longitude, [pd[6], pd[7]], u);
+        let (sl, cl) = lam.sin_cos();
+        let (sp, cp) = phi.sin_cos();
+        let f = V3::new(cp * cl, cp * sl, sp);
+        let f_l = V3::new(-cp * sl, cp * cl, 0.0);
+        let f_p = V3::new(-sp * cl, -sp * sl, cp);
+        let f_ll = V3::new(-cp * cl, -cp * sl, 0.0);
+        let f_lp = V3::new(sp * sl, -sp * cl, 0.0);
+        let f_llp = V3::new(sp * cl, sp * sl, 0.0);
+        // Design derivatives of f and its angular derivatives (f_φφ = −f).
+        let fd = f_l * lamd + f_p * phid;
+        let f_ld = f_ll * lamd + f_lp * phid;
+        let f_pd = f_lp * lamd - f * phid;
+        let f_lld = -f_l * lamd + f_llp * phid;
+        let f_lpd = f_llp * lamd - f_l * phid;
+        SurfaceDerivs {
+            x: cd + fd * r + f * rdot,
+            xu: f_ld * (r * dl) + f_l * (rdot * dl + r * dld),
+            xv: f_pd * (r * dp) + f_p * (rdot * dp + r * dpd),
+            xuu: f_lld * (r * dl * dl) + f_ll * (rdot * dl * dl + r * 2.0 * dl * dld),
+            xuv: f_lpd * (r * dl * dp) + f_lp * (rdot * dl * dp + r * (dld * dp + dl * dpd)),
+            xvv: -(fd * (r * dp * dp) + f * (rdot * dp * dp + r * 2.0 * dp * dpd)),
+        }
+    }
+}

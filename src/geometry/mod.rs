@@ -295,6 +295,16 @@ pub enum GeometryError {
         /// Surface kind.
         kind: &'static str,
     },
+    /// A design-parameter index the surface does not have.
+    #[error("design parameter {index}: expected an index below {count} (the parameters of this {kind} surface)")]
+    ParameterIndex {
+        /// The index given.
+        index: usize,
+        /// Number of design parameters ([`Surface::n_design_parameters`]).
+        count: usize,
+        /// Surface kind.
+        kind: &'static str,
+    },
     /// The normal is undefined (`x_u × x_v = 0`).
     #[error("`normal` is undefined: |x_u × x_v| = {norm}: expected a regular point (x_u, x_v independent)")]
     DegenerateNormal {
@@ -482,6 +492,59 @@ impl<T: Real> Surface<T> {
 }
 
 impl Surface<f64> {
+    /// Design velocity of the surface: `∂/∂p` of [`Surface::eval`] (position and its first
+    /// and second parametric derivatives at fixed `(u, v)`) for design parameter `parameter`
+    /// (ordered as [`Surface::design_parameters`]). Hand-derived for every patch kind (no dual
+    /// numbers): analytic patches by the product rule through their closed forms (radius,
+    /// centre, frame vectors through their normalisations, angle and length ranges through
+    /// the linear maps of `(u, v)`); NURBS control-point coordinates linearly through the
+    /// rational basis, weights rationally. This is the geometric input of the paper's design
+    /// velocity field (eqs 37–43) on the parametric discretisation, where `(u, v)` does not
+    /// move with the design.
+    ///
+    /// Errors: an index beyond [`Surface::n_design_parameters`]
+    /// ([`GeometryError::ParameterIndex`]), a non-finite `(u, v)` or result
+    /// ([`GeometryError::NonFinite`]).
+    pub fn design_velocity(
+        &self,
+        parameter: usize,
+        u: f64,
+        v: f64,
+    ) -> Result<SurfaceDerivs<f64>, GeometryError> {
+        let count = self.n_design_parameters();
+        if parameter >= count {
+            return Err(GeometryError::ParameterIndex {
+                index: parameter,
+                count,
+                kind: self.kind(),
+            });
+        }
+        check_finite("u", u)?;
+        check_finite("v", v)?;
+        let mut pd = vec![0.0; count];
+        pd[parameter] = 1.0;
+        let d = match self {
+            Surface::Rectangle(s) => s.design_velocity(&pd, u, v),
+            Surface::AnnulusSector(s) => s.design_velocity(&pd, u, v),
+            Surface::CylinderSector(s) => s.design_velocity(&pd, u, v),
+            Surface::SphereZone(s) => s.design_velocity(&pd, u, v),
+            Surface::Nurbs(s) => s.design_velocity(parameter, u, v),
+        };
+        for (field, vec) in [
+            ("x", d.x),
+            ("xu", d.xu),
+            ("xv", d.xv),
+            ("xuu", d.xuu),
+            ("xuv", d.xuv),
+            ("xvv", d.xvv),
+        ] {
+            for c in vec.iter() {
+                check_finite(&format!("design velocity {field} at ({u}, {v})"), *c)?;
+            }
+        }
+        Ok(d)
+    }
+
     /// The same surface with scalar type `U` (derivative parts zero).
     pub fn lift<U: Real>(&self) -> Surface<U> {
         let p: Vec<U> = self.parameter_values().iter().map(|&x| U::cst(x)).collect();

@@ -527,3 +527,97 @@ fn check_knots(field: &str, k: &[f64], n: usize, p: usize) -> Result<(), Geometr
     }
     Ok(())
 }
+
+impl NurbsSurface<f64> {
+    /// `∂/∂p` of [`NurbsSurface::eval`] for design parameter `k` (ordered as
+    /// [`NurbsSurface::names`]: `cp[i][j].x|y|z`, `weight[i][j]`), hand-derived.
+    ///
+    /// With `W = Σ Nₖₗ wₖₗ` and `g = Nᵢⱼ / W` (so the rational basis function is
+    /// `Rᵢⱼ = wᵢⱼ g`): a control-point coordinate enters linearly, `∂S/∂Pᵢⱼ = Rᵢⱼ I`, and a
+    /// weight rationally, `∂S/∂wᵢⱼ = g (Pᵢⱼ − S)`. The parametric derivatives follow by the
+    /// Leibniz rule, with `g`'s from the quotient rule of A4.4 applied to the scalar
+    /// `Nᵢⱼ = g W`. Zero where `(i, j)` has no support on the span of `(u, v)`.
+    pub(crate) fn design_velocity(&self, k: usize, u: f64, v: f64) -> SurfaceDerivs<f64> {
+        let s = self.eval(u, v);
+        let z3 = Vector3::zeros();
+        let zero = SurfaceDerivs {
+            x: z3,
+            xu: z3,
+            xv: z3,
+            xuu: z3,
+            xuv: z3,
+            xvv: z3,
+        };
+        if !s.x.iter().all(|c| c.is_finite()) || k >= self.n_scalars() {
+            // eval already screened the structure; keep its NaN signal.
+            return SurfaceDerivs {
+                x: Vector3::from_element(f64::NAN),
+                ..zero
+            };
+        }
+        let [p, q] = self.degree;
+        let [nu, nv] = self.n;
+        let (cp, comp) = (k / 4, k % 4);
+        let (i, j) = (cp / nv, cp % nv);
+        let su = find_span(nu, p, u, &self.knots[0]);
+        let sv = find_span(nv, q, v, &self.knots[1]);
+        if i + p < su || i > su || j + q < sv || j > sv {
+            return zero;
+        }
+        let bu = basis_derivs_unchecked(su, u, p, &self.knots[0]);
+        let bv = basis_derivs_unchecked(sv, v, q, &self.knots[1]);
+        let (ii, jj) = (i + p - su, j + q - sv);
+        // Denominator derivatives w[k][l] = Σ N⁽ᵏ⁾ N⁽ˡ⁾ w and numerator a[k][l] = Nᵢ⁽ᵏ⁾ Nⱼ⁽ˡ⁾.
+        let mut w = [[0.0; 3]; 3];
+        for (b, jb) in (sv - q..=sv).enumerate() {
+            for (a, ia) in (su - p..=su).enumerate() {
+                let wt = self.weights[ia * nv + jb];
+                for kk in 0..3 {
+                    for l in 0..(3 - kk) {
+                        w[kk][l] += bu[kk][a] * bv[l][b] * wt;
+                    }
+                }
+            }
+        }
+        const BIN: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [1.0, 2.0, 1.0]];
+        let mut g = [[0.0; 3]; 3];
+        for kk in 0..3 {
+            for l in 0..(3 - kk) {
+                let mut val = bu[kk][ii] * bv[l][jj];
+                for m in 1..=l {
+                    val -= g[kk][l - m] * w[0][m] * BIN[l][m];
+                }
+                for n in 1..=kk {
+                    val -= g[kk - n][l] * w[n][0] * BIN[kk][n];
+                    let mut v2 = 0.0;
+                    for m in 1..=l {
+                        v2 += g[kk - n][l - m] * w[n][m] * BIN[l][m];
+                    }
+                    val -= v2 * BIN[kk][n];
+                }
+                g[kk][l] = val / w[0][0];
+            }
+        }
+        if comp < 3 {
+            let mut e = Vector3::zeros();
+            e[comp] = self.weights[cp];
+            return SurfaceDerivs {
+                x: e * g[0][0],
+                xu: e * g[1][0],
+                xv: e * g[0][1],
+                xuu: e * g[2][0],
+                xuv: e * g[1][1],
+                xvv: e * g[0][2],
+            };
+        }
+        let d = self.points[cp] - s.x;
+        SurfaceDerivs {
+            x: d * g[0][0],
+            xu: d * g[1][0] - s.xu * g[0][0],
+            xv: d * g[0][1] - s.xv * g[0][0],
+            xuu: d * g[2][0] - s.xu * (2.0 * g[1][0]) - s.xuu * g[0][0],
+            xuv: d * g[1][1] - s.xv * g[1][0] - s.xu * g[0][1] - s.xuv * g[0][0],
+            xvv: d * g[0][2] - s.xv * (2.0 * g[0][1]) - s.xvv * g[0][0],
+        }
+    }
+}

@@ -6,6 +6,7 @@
 //! name = "t"                      # unique, non-empty
 //! kind = "thickness"              # or "material.young" | "material.poisson" | "material.sigma0"
 //!                                 #    | "material.hardening" | "material.beta" | "material.shear_factor"
+//!                                 #    | "shape.<surface parameter>" ("shape.radius", "shape.cp[2][3].z")
 //! fd_steps = [1e-3, 1e-4]         # relative steps h/|τ| of the finite-difference study
 //!
 //! [dsa]
@@ -22,6 +23,7 @@
 
 use super::shell_case::{Load, LoadScalingSpec, Monitor as CaseMonitor, ShellCase};
 use super::CaseError;
+use crate::geometry::Surface;
 use crate::material::MaterialParams;
 use crate::sensitivity::dual::DualLoad;
 use crate::sensitivity::{Design, DesignKind, DesignVariable, Monitor};
@@ -177,6 +179,7 @@ pub(crate) fn check(
     thickness: f64,
     material: &MaterialParams<f64>,
     monitors: &[CaseMonitor],
+    surface: &Surface<f64>,
 ) -> Result<Option<DsaSpec>, CaseError> {
     if design.is_empty() {
         return match dsa {
@@ -192,6 +195,7 @@ pub(crate) fn check(
     let base = Design {
         thickness,
         material: *material,
+        surface: Some(surface.clone()),
     };
     let mut entries: Vec<DesignEntry> = Vec::with_capacity(design.len());
     for (k, d) in design.iter().enumerate() {
@@ -212,7 +216,7 @@ pub(crate) fn check(
                 format!("a name not used by an earlier design variable (design[{j}])"),
             ));
         }
-        let kind = design_kind(path, &format!("{key}.kind"), &d.kind)?;
+        let kind = design_kind(path, &format!("{key}.kind"), &d.kind, surface)?;
         if let Some(j) = entries.iter().position(|e| e.variable.kind == kind) {
             return Err(invalid(
                 path,
@@ -400,16 +404,15 @@ fn monitor_selection(
     Ok(vec![sens_monitor(path, key, m, c, comp)?])
 }
 
-fn design_kind(path: &Path, key: &str, s: &str) -> Result<DesignKind, CaseError> {
-    const EXPECTED: &str = "\"thickness\" or \"material.<young|poisson|shear_factor|sigma0|\
-                            hardening|beta>\"";
-    for (prefix, what) in [
-        (
-            "shape",
-            "shape design variables (surface parameters, control-point moves)",
-        ),
-        ("tool", "tool design variables (die and punch placement)"),
-    ] {
+fn design_kind(
+    path: &Path,
+    key: &str,
+    s: &str,
+    surface: &Surface<f64>,
+) -> Result<DesignKind, CaseError> {
+    const EXPECTED: &str = "\"thickness\", \"material.<young|poisson|shear_factor|sigma0|\
+                            hardening|beta>\" or \"shape.<surface parameter>\"";
+    for (prefix, what) in [("tool", "tool design variables (die and punch placement)")] {
         if s == prefix || s.starts_with(&format!("{prefix}.")) {
             return Err(invalid(
                 path,
@@ -419,7 +422,7 @@ fn design_kind(path: &Path, key: &str, s: &str) -> Result<DesignKind, CaseError>
             ));
         }
     }
-    DesignKind::parse(s)
+    DesignKind::parse_on(s, surface)
         .map_err(|e| invalid(path, key, format!("{s:?}"), format!("{EXPECTED} ({e})")))
 }
 

@@ -16,10 +16,10 @@ use super::shell_build;
 use super::shell_case::ShellCase;
 use super::CaseError;
 use crate::sensitivity::continuum::run_continuum;
-use crate::sensitivity::dual::{run_dual, DualMode, SensitivityError};
+use crate::sensitivity::dual::{run_dual_on, DualMode, SensitivityError};
 use crate::sensitivity::fd::{self, fit_rate, Analysis, RunResponse, TaylorFit, TaylorRow};
 use crate::sensitivity::terms::{breakdown, TermBreakdown};
-use crate::sensitivity::{validate_design, Design, DesignVariable};
+use crate::sensitivity::{validate_design_on, Design, DesignVariable};
 use crate::shell::problem::ShellProblem;
 use crate::shell::ShellError;
 use crate::solver::NewtonSolver;
@@ -57,6 +57,11 @@ impl Analysis for CaseAnalysis<'_> {
         let mut c = self.case.clone();
         c.thickness = design.thickness;
         c.material = design.material;
+        if let Some(surface) = &design.surface {
+            // A shape design: the same case on the perturbed surface (the discretisation,
+            // boundaries, loads and monitors live on the parameter domain and stay).
+            c.surface = surface.clone();
+        }
         let b = shell_build::build(&c).map_err(|e| {
             SensitivityError::Shell(ShellError::InvalidInput(format!(
                 "{}: {e}",
@@ -64,6 +69,15 @@ impl Analysis for CaseAnalysis<'_> {
             )))
         })?;
         Ok((b.problem, b.newton))
+    }
+}
+
+/// The case's nominal design: thickness, material and surface.
+pub fn base_design(case: &ShellCase) -> Design {
+    Design {
+        thickness: case.thickness,
+        material: case.material,
+        surface: Some(case.surface.clone()),
     }
 }
 
@@ -156,17 +170,26 @@ pub fn run(
     progress: &mut dyn FnMut(&str),
 ) -> Result<DsaResult, DsaError> {
     let analysis = CaseAnalysis { case };
-    let base = Design {
-        thickness: case.thickness,
-        material: case.material,
-    };
+    let base = base_design(case);
     let vars: Vec<DesignVariable> = spec.design.iter().map(|d| d.variable.clone()).collect();
     let monitors = &spec.monitors;
 
     // (1) The plain analysis.
     let t = Instant::now();
     let (problem, newton) = analysis.build(&base)?;
-    validate_design(&vars, &problem.model, 0.0).map_err(SensitivityError::from)?;
+    validate_design_on(&vars, &problem.model, &case.surface, 0.0)
+        .map_err(SensitivityError::from)?;
+    // Every finite-difference design (shape: the perturbed surface with a regular normal at
+    // every particle and point of the model) is checked before the analysis.
+    if spec.methods.contains(&DsaMethod::Fd) {
+        for d in &spec.design {
+            for h in d.absolute_steps(&base) {
+                d.variable
+                    .validate_on(&problem.model, &case.surface, h)
+                    .map_err(SensitivityError::from)?;
+            }
+        }
+    }
     let nominal = fd::response(problem, &newton, analysis.solver(), monitors)?;
     let time_analysis = t.elapsed().as_secs_f64();
     progress(&format!(
@@ -184,6 +207,7 @@ pub fn run(
         let (problem, newton) = analysis.build(&base)?;
         let r = run_continuum(
             problem,
+            Some(&case.surface),
             vars.clone(),
             loads,
             monitors.clone(),
@@ -234,8 +258,9 @@ pub fn run(
         } else {
             DualMode::PerVariable
         };
-        let r = run_dual(
+        let r = run_dual_on(
             problem,
+            Some(&case.surface),
             vars.clone(),
             loads,
             monitors.clone(),
@@ -532,10 +557,11 @@ pub fn to_json(case: &ShellCase, r: &DsaResult) -> Value {
     })
 }
 
-/// `thickness` or `material.<name>`.
+/// `thickness`, `material.<name>` or `shape.<surface parameter>`.
 pub fn kind_name(v: &DesignVariable) -> String {
-    match v.kind {
+    match &v.kind {
         crate::sensitivity::DesignKind::Material(p) => format!("material.{}", p.name()),
+        crate::sensitivity::DesignKind::Shape { name, .. } => format!("shape.{name}"),
         _ => "thickness".into(),
     }
 }
@@ -695,17 +721,14 @@ pub fn terms(
     step: usize,
 ) -> Result<Vec<TermBreakdown>, DsaError> {
     let analysis = CaseAnalysis { case };
-    let base = Design {
-        thickness: case.thickness,
-        material: case.material,
-    };
+    let base = base_design(case);
     let (problem, newton) = analysis.build(&base)?;
     let vars: Vec<DesignVariable> = spec.design.iter().map(|d| d.variable.clone()).collect();
     Ok(breakdown(
         problem,
+        Some(&case.surface),
         vars,
         dual_loads(case)?,
-        spec.monitors.clone(),
         &newton,
         analysis.solver(),
         step,

@@ -907,8 +907,9 @@ impl Checker<'_> {
             },
         };
 
-        let dsa =
-            super::dsa_case::check(self.path, f.design, f.dsa, thickness, &material, &monitors)?;
+        let dsa = super::dsa_case::check(
+            self.path, f.design, f.dsa, thickness, &material, &monitors, &surface,
+        )?;
 
         Ok(ShellCase {
             dsa,

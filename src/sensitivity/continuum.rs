@@ -34,7 +34,11 @@
 //! that group only ([`super::terms`]).
 
 use super::dual::{DualLoad, SensitivityError};
-use super::{validate_design, DesignError, DesignKind, DesignVariable, Monitor};
+use super::shape::ShapeVelocity;
+use super::{
+    validate_design, validate_design_on, DesignError, DesignKind, DesignVariable, Monitor,
+};
+use crate::geometry::Surface;
 use crate::kinematics::M3;
 use crate::material::{MaterialParams, MaterialState};
 use crate::shell::load::ExternalLoad;
@@ -122,16 +126,36 @@ pub fn zero_history() -> PointHistory<f64> {
 }
 
 impl SensitivityState {
-    /// The initial sensitivities of a non-shape variable of `problem` (at its unloaded state):
-    /// zero state, the variable's unit seed.
-    pub fn initial(problem: &ShellProblem, var: &DesignVariable) -> Result<Self, DesignError> {
+    /// The initial sensitivities of `var` for `problem` (at its unloaded state, built on
+    /// `surface`): the variable's unit seed; for a shape variable the design velocity of the
+    /// initial geometry (eqs 37–43, [`ShapeVelocity`]): `ẋ⁰,α, ṅ⁰, ṅ⁰,α` at the points, the
+    /// particles' initial directors and lamina vectors, the initial lamina frames.
+    pub fn initial(
+        problem: &ShellProblem,
+        var: &DesignVariable,
+        surface: Option<&Surface<f64>>,
+    ) -> Result<Self, DesignError> {
         let mut s = Self::zero(problem);
-        match var.kind {
+        match &var.kind {
             DesignKind::Thickness => s.thickness = 1.0,
             DesignKind::Material(p) => {
                 let mut a = [0.0; 6];
                 a[p.index()] = 1.0;
                 s.material = MaterialParams::from_array(a);
+            }
+            DesignKind::Shape { parameter, name } => {
+                let surface = surface
+                    .ok_or_else(|| DesignError::ShapeWithoutSurface { name: name.clone() })?;
+                let v = ShapeVelocity::new(&problem.model, surface, *parameter).map_err(|e| {
+                    DesignError::InvalidPerturbation {
+                        variable: var.name.clone(),
+                        delta: 0.0,
+                        detail: format!("design velocity: {e}"),
+                    }
+                })?;
+                s.particles = v.particles;
+                s.history = v.history;
+                s.surface = Some(v.points);
             }
             #[allow(unreachable_patterns)]
             _ => {
@@ -222,16 +246,20 @@ fn fatal(e: impl std::fmt::Display) -> ProblemError {
 }
 
 impl ContinuumDsa {
-    /// The continuum DSA of `variables` for `problem` (at its initial state), with the
-    /// problem's loads as `loads` (checked at every step) and `monitors` recorded at every
-    /// converged step.
+    /// The continuum DSA of `variables` for `problem` (at its initial state, built on
+    /// `surface`: needed by shape variables), with the problem's loads as `loads` (checked at
+    /// every step) and `monitors` recorded at every converged step.
     pub fn new(
         problem: &ShellProblem,
+        surface: Option<&Surface<f64>>,
         variables: Vec<DesignVariable>,
         loads: Vec<DualLoad>,
         monitors: Vec<Monitor>,
     ) -> Result<Self, SensitivityError> {
-        validate_design(&variables, &problem.model, 0.0)?;
+        match surface {
+            Some(s) => validate_design_on(&variables, &problem.model, s, 0.0)?,
+            None => validate_design(&variables, &problem.model, 0.0)?,
+        }
         if let Some((index, &value)) = problem.state().iter().enumerate().find(|(_, v)| **v != 0.0)
         {
             return Err(SensitivityError::NotInitial { index, value });
@@ -245,7 +273,7 @@ impl ContinuumDsa {
         }
         let states = variables
             .iter()
-            .map(|v| SensitivityState::initial(problem, v))
+            .map(|v| SensitivityState::initial(problem, v, surface))
             .collect::<Result<Vec<_>, _>>()?;
         Ok(ContinuumDsa {
             variables,
@@ -449,11 +477,29 @@ pub fn fictitious_loads(
         .map(|s| s.seeds(group, &zero_dofs, zero))
         .collect();
     let history_terms = group.is_none_or(|g| g == TermGroup::History);
+    let load_terms = group.is_none_or(|g| g == TermGroup::Load);
     let dots = model.internal_force_dots(&du[..n_q], &seeds)?;
     let mut out = Vec::with_capacity(states.len());
     for (s, (f_int, _)) in states.iter().zip(dots) {
         let mut r = f_int;
         r.resize(n, 0.0);
+        if let (true, Some(v)) = (load_terms, &s.surface) {
+            // The loads' explicit shape dependence (eq 37's l'_V): a pressure on the current
+            // tangents x̄⁰,α + ū,α, gravity per unit initial area.
+            let mut f = vec![0.0; n_q];
+            for l in loads {
+                match l {
+                    DualLoad::Pressure(p) => {
+                        p.add_design_derivative(model, v, &du[..n_q], load, &mut f)?
+                    }
+                    DualLoad::Gravity(g) => g.add_design_derivative(model, v, load, &mut f)?,
+                    DualLoad::PointForce(_) => {}
+                }
+            }
+            for (ri, fi) in r.iter_mut().zip(&f) {
+                *ri -= fi;
+            }
+        }
         if history_terms {
             // A follower pressure depends on ⁿū + Δū only: its history term is its load
             // stiffness at Δu applied to ⁿū̇ (eq 37's l'_V for non-shape variables).
@@ -550,9 +596,11 @@ impl ContinuumRun {
     }
 }
 
-/// Run the analysis of `problem` with the continuum DSA of `variables` at every converged step.
+/// Run the analysis of `problem` (built on `surface`, needed by shape variables) with the
+/// continuum DSA of `variables` at every converged step.
 pub fn run_continuum(
     problem: ShellProblem,
+    surface: Option<&Surface<f64>>,
     variables: Vec<DesignVariable>,
     loads: Vec<DualLoad>,
     monitors: Vec<Monitor>,
@@ -562,7 +610,7 @@ pub fn run_continuum(
     let t0 = Instant::now();
     let pattern = problem.pattern().clone();
     let mut linear = LinearSolver::new(&pattern, crate::solver::Method::auto(&pattern), solver)?;
-    let dsa = ContinuumDsa::new(&problem, variables, loads, monitors)?;
+    let dsa = ContinuumDsa::new(&problem, surface, variables, loads, monitors)?;
     let mut obs = Observed::new(problem, dsa);
     let u0 = obs.problem.state().to_vec();
     let report = newton

@@ -39,16 +39,30 @@
 //! ([`ShellProblem::external_force`]), so a missing or different load is an error, not a wrong
 //! derivative. Edge moments (which act through the director) and contact are not supported yet.
 //!
+//! **Shape design variables** ([`DesignKind::Shape`], [`DualShellProblem::new_on`],
+//! [`run_dual_on`]): the surface parameter is seeded and the initial geometry of the group is
+//! built in `D` as `ShellModel::new` builds it in `f64` ([`super::shape::dual_geometry`]):
+//! the quadrature points' `x̄⁰,α, n⁰, n⁰,α` ([`DualState::surfaces`], passed to
+//! `ShellModel::internal_force_with_surfaces`), the particles' `d = d⁰ = n(ξ_I)` and lamina
+//! vectors, the initial frames. The follower pressure (`x̄⁰,α`) and gravity (the initial area
+//! element) are evaluated on the dual surfaces (`Pressure::force_with_surfaces`,
+//! `Gravity::force_with_surfaces`); point forces, monitors, essential conditions, shape
+//! functions and quadrature weights live on the parameter domain and do not move.
+//!
 //! **Constraint scales.** The rows' scales `k_c` (`E t`, `E t³/12`) are a numerical balance
 //! set when the problem is built; they are held fixed here. The generalised DOFs do not depend
 //! on them, and the physical reactions `−k_c μ_c` differentiate correctly with `k_c` fixed
 //! (a re-run with another `E` changes `k_c` and `μ_c` with the same product).
 
-use super::{validate_design, Design, DesignError, DesignKind, DesignVariable, Monitor};
+use super::shape::dual_geometry;
+use super::{
+    validate_design, validate_design_on, Design, DesignError, DesignKind, DesignVariable, Monitor,
+};
+use crate::geometry::Surface;
 use crate::material::MaterialParams;
 use crate::scalar::Real;
-use crate::shell::load::{ExternalLoad, GenericLoad, Gravity, PointForce, Pressure};
-use crate::shell::point::{ParticleState, PointHistory, DOFS_PER_PARTICLE};
+use crate::shell::load::{ExternalLoad, Gravity, PointForce, Pressure};
+use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
 use crate::shell::problem::ShellProblem;
 use crate::shell::rotation::rotate_director;
 use crate::shell::ShellError;
@@ -145,6 +159,9 @@ pub struct DualState<D> {
     pub thickness: D,
     /// Committed unknowns `[q, μ]` and their sensitivities.
     pub unknowns: Vec<D>,
+    /// Initial geometry per quadrature point (as `ShellModel::points`), seeded with the
+    /// group's shape design variables (constants without any).
+    pub surfaces: Vec<SurfacePoint<D>>,
 }
 
 /// The sensitivities recorded at one converged step.
@@ -261,7 +278,25 @@ impl<D: DesignDual> DualShellProblem<D> {
         loads: Vec<DualLoad>,
         monitors: Vec<Monitor>,
     ) -> Result<Self, SensitivityError> {
-        validate_design(&variables, &problem.model, 0.0)?;
+        Self::new_on(problem, None, variables, loads, monitors)
+    }
+
+    /// [`DualShellProblem::new`] for a problem whose model was built on `surface` (`None`:
+    /// no shape design variables allowed). A shape design variable seeds its surface
+    /// parameter: the group's initial geometry (quadrature-point surfaces, particle directors
+    /// and lamina vectors, initial frames) is built in `D` from the seeded surface
+    /// ([`dual_geometry`]), exactly as `ShellModel::new` builds it in `f64`.
+    pub fn new_on(
+        problem: ShellProblem,
+        surface: Option<&Surface<f64>>,
+        variables: Vec<DesignVariable>,
+        loads: Vec<DualLoad>,
+        monitors: Vec<Monitor>,
+    ) -> Result<Self, SensitivityError> {
+        match surface {
+            Some(s) => validate_design_on(&variables, &problem.model, s, 0.0)?,
+            None => validate_design(&variables, &problem.model, 0.0)?,
+        }
         if let Some((index, &value)) = problem.state().iter().enumerate().find(|(_, v)| **v != 0.0)
         {
             return Err(SensitivityError::NotInitial { index, value });
@@ -282,26 +317,50 @@ impl<D: DesignDual> DualShellProblem<D> {
                 let count = nd.min(variables.len() - first);
                 let mut t_parts = vec![0.0; nd];
                 let mut m_parts = vec![vec![0.0; nd]; 6];
+                let n_shape = surface.map_or(0, |s| s.n_design_parameters());
+                let mut s_parts = vec![vec![0.0; nd]; n_shape];
+                let mut shape = false;
                 for (k, v) in variables[first..first + count].iter().enumerate() {
                     match v.kind {
                         DesignKind::Thickness => t_parts[k] = 1.0,
                         DesignKind::Material(p) => m_parts[p.index()][k] = 1.0,
+                        DesignKind::Shape { parameter, .. } => {
+                            // validate_design_on checked the index against the surface.
+                            s_parts[parameter][k] = 1.0;
+                            shape = true;
+                        }
                     }
                 }
                 let m = design.material.to_array();
-                DualState {
+                let (particles, history, surfaces) = match surface {
+                    Some(s) if shape => {
+                        let g = dual_geometry::<D>(model, s, &s_parts).map_err(|e| {
+                            SensitivityError::Shell(ShellError::InvalidInput(format!(
+                                "dual geometry of the shape design variables: {e}"
+                            )))
+                        })?;
+                        (g.particles, g.history, g.points)
+                    }
+                    _ => (
+                        model.particles.iter().map(|p| p.lift()).collect(),
+                        model.history.iter().map(|h| h.lift()).collect(),
+                        model.points.iter().map(|p| p.surface.lift()).collect(),
+                    ),
+                };
+                Ok(DualState {
                     first,
                     count,
-                    particles: model.particles.iter().map(|p| p.lift()).collect(),
-                    history: model.history.iter().map(|h| h.lift()).collect(),
+                    particles,
+                    history,
                     material: MaterialParams::from_array(std::array::from_fn(|i| {
                         D::from_parts(m[i], &m_parts[i])
                     })),
                     thickness: D::from_parts(design.thickness, &t_parts),
                     unknowns: problem.state().iter().map(|&v| D::cst(v)).collect(),
-                }
+                    surfaces,
+                })
             })
-            .collect();
+            .collect::<Result<Vec<_>, SensitivityError>>()?;
         Ok(DualShellProblem {
             problem,
             variables,
@@ -349,22 +408,17 @@ impl<D: DesignDual> DualShellProblem<D> {
         Some(g.unknowns.iter().map(|x| x.part(v - g.first)).collect())
     }
 
-    /// The dual residual `R(Δu; ⁿs, τ)` of group `g` (all unknowns' rows) at the converged
-    /// unknowns `u` and load `load`.
-    pub(crate) fn dual_residual(
+    /// The dual external force of group `g` (generalised rows) at the increment `dq` and load
+    /// `load`: the pressure with the increment's derivative part set to `ⁿū̇` (module docs),
+    /// gravity on the group's initial geometry, dead point forces.
+    pub(crate) fn dual_external(
         &self,
         g: &DualState<D>,
         dq: &[D],
-        u: &[f64],
         load: f64,
     ) -> Result<Vec<D>, ShellError> {
         let model = &self.problem.model;
         let n_q = self.problem.n_generalised();
-        let (f_int, _) =
-            model.internal_force_with(&g.particles, &g.history, &g.material, g.thickness, dq)?;
-        let mut r = f_int;
-        r.resize(u.len(), D::zero());
-        // Loads: the pressure with the increment's derivative part set to ⁿū̇ (module docs).
         let q_shift: Vec<D> = dq
             .iter()
             .enumerate()
@@ -379,10 +433,43 @@ impl<D: DesignDual> DualShellProblem<D> {
             .collect();
         let mut f_ext = vec![D::zero(); n_q];
         for l in &self.loads {
-            if let DualLoad::Pressure(p) = l {
-                p.force_generic(model, &q_shift, load, &mut f_ext)?;
+            match l {
+                DualLoad::Pressure(p) => {
+                    p.force_with_surfaces(model, &g.surfaces, &q_shift, load, &mut f_ext)?
+                }
+                // A dead load per unit initial area: its derivative is the area element's
+                // (zero unless a shape variable moves the geometry).
+                DualLoad::Gravity(w) => {
+                    w.force_with_surfaces(model, &g.surfaces, load, &mut f_ext)?
+                }
+                DualLoad::PointForce(_) => {}
             }
         }
+        Ok(f_ext)
+    }
+
+    /// The dual residual `R(Δu; ⁿs, τ)` of group `g` (all unknowns' rows) at the converged
+    /// unknowns `u` and load `load`.
+    pub(crate) fn dual_residual(
+        &self,
+        g: &DualState<D>,
+        dq: &[D],
+        u: &[f64],
+        load: f64,
+    ) -> Result<Vec<D>, ShellError> {
+        let model = &self.problem.model;
+        let n_q = self.problem.n_generalised();
+        let (f_int, _) = model.internal_force_with_surfaces(
+            &g.particles,
+            &g.history,
+            &g.material,
+            g.thickness,
+            dq,
+            Some(&g.surfaces),
+        )?;
+        let mut r = f_int;
+        r.resize(u.len(), D::zero());
+        let f_ext = self.dual_external(g, dq, load)?;
         for (ri, fi) in r.iter_mut().zip(&f_ext) {
             *ri -= *fi;
         }
@@ -456,12 +543,13 @@ impl<D: DesignDual> DualShellProblem<D> {
                 .collect();
             let model = &self.problem.model;
             let (_, history) = model
-                .internal_force_with(
+                .internal_force_with_surfaces(
                     &g.particles,
                     &g.history,
                     &g.material,
                     g.thickness,
                     &inc[..n_q],
+                    Some(&g.surfaces),
                 )
                 .map_err(fatal)?;
             let particles = g
@@ -479,6 +567,7 @@ impl<D: DesignDual> DualShellProblem<D> {
                 material: g.material,
                 thickness: g.thickness,
                 unknowns,
+                surfaces: g.surfaces.clone(),
             });
         }
         self.pending = Some(next);
@@ -708,6 +797,7 @@ impl DualRun {
 
 fn drive<D: DesignDual>(
     problem: ShellProblem,
+    surface: Option<&Surface<f64>>,
     variables: Vec<DesignVariable>,
     loads: Vec<DualLoad>,
     monitors: Vec<Monitor>,
@@ -717,7 +807,7 @@ fn drive<D: DesignDual>(
     let t0 = Instant::now();
     let pattern = problem.pattern().clone();
     let mut linear = LinearSolver::new(&pattern, crate::solver::Method::auto(&pattern), solver)?;
-    let mut p = DualShellProblem::<D>::new(problem, variables, loads, monitors)?;
+    let mut p = DualShellProblem::<D>::new_on(problem, surface, variables, loads, monitors)?;
     let u0 = p.problem().state().to_vec();
     let report = newton
         .run(&mut p, &pattern, &mut linear, &u0)
@@ -748,17 +838,37 @@ pub fn run_dual(
     solver: SolverOptions,
     mode: DualMode,
 ) -> Result<DualRun, SensitivityError> {
+    run_dual_on(
+        problem, None, variables, loads, monitors, newton, solver, mode,
+    )
+}
+
+/// [`run_dual`] for a problem whose model was built on `surface`, which admits shape design
+/// variables ([`DualShellProblem::new_on`]).
+#[allow(clippy::too_many_arguments)] // run_dual's arguments and the surface
+pub fn run_dual_on(
+    problem: ShellProblem,
+    surface: Option<&Surface<f64>>,
+    variables: Vec<DesignVariable>,
+    loads: Vec<DualLoad>,
+    monitors: Vec<Monitor>,
+    newton: &NewtonSolver,
+    solver: SolverOptions,
+    mode: DualMode,
+) -> Result<DualRun, SensitivityError> {
     macro_rules! vector {
         ($($n:literal),*) => {
             match variables.len() {
-                $($n => drive::<DualSVec64<$n>>(problem, variables, loads, monitors, newton, solver),)*
+                $($n => drive::<DualSVec64<$n>>(
+                    problem, surface, variables, loads, monitors, newton, solver,
+                ),)*
                 count => Err(SensitivityError::TooManyVariables { count, max: 8 }),
             }
         };
     }
     match mode {
         DualMode::PerVariable => {
-            drive::<Dual64>(problem, variables, loads, monitors, newton, solver)
+            drive::<Dual64>(problem, surface, variables, loads, monitors, newton, solver)
         }
         DualMode::Vector => vector!(1, 2, 3, 4, 5, 6, 7, 8),
     }

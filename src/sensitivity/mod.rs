@@ -6,16 +6,21 @@
 //! residual (eq 32) only through the point kernel's `PointInput::thickness` and
 //! `PointInput::material`; the design velocity of eqs 37–43 is zero for them (the geometry does
 //! not move), so the structural fictitious load `a'_V` of eq (64) reduces to the material and
-//! history terms of eq (49). Shape design variables (NURBS control points, a surface parameter)
-//! and tool placements (`b'_N`, eq 83) are the next kinds of [`DesignKind`].
+//! history terms of eq (49). Shape design variables ([`DesignKind::Shape`]: a parameter of the
+//! mid-surface, `Surface::design_parameters`) move the initial geometry at fixed parameter
+//! coordinates; their design velocity field (eqs 37–43) is hand-derived in [`shape`], and the
+//! dual reference seeds the surface parameter ([`shape::dual_geometry`]). Tool placements
+//! (`b'_N`, eq 83) are the next kind.
 //!
 //! Layout: `docs/sensitivity.md`.
 
 pub mod continuum;
 pub mod dual;
 pub mod fd;
+pub mod shape;
 pub mod terms;
 
+use crate::geometry::Surface;
 use crate::material::{MaterialError, MaterialParams, PARAM_NAMES};
 use crate::shell::model::ShellModel;
 use crate::shell::ShellError;
@@ -74,13 +79,23 @@ impl MaterialParameter {
 
 /// What a design variable changes. Non-exhaustive: shape (surface parameters, control-point
 /// moves with their design velocity field) and rigid-tool placements come next.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
 #[non_exhaustive]
 pub enum DesignKind {
     /// The shell thickness `t` (uniform).
     Thickness,
     /// A material parameter.
     Material(MaterialParameter),
+    /// A design parameter of the shell's mid-surface (`Surface::design_parameters`: the
+    /// radius, a centre coordinate, a NURBS control-point coordinate or weight): a shape
+    /// design variable, whose design velocity field (eqs 37–43) is the surface's
+    /// `Surface::design_velocity` on the fixed parametric discretisation.
+    Shape {
+        /// Index in `Surface::design_parameters`.
+        parameter: usize,
+        /// Its name there (`radius`, `cp[2][3].z`, …).
+        name: String,
+    },
 }
 
 impl DesignKind {
@@ -92,8 +107,38 @@ impl DesignKind {
         }
         match key.strip_prefix("material.") {
             Some(name) => Ok(DesignKind::Material(MaterialParameter::from_name(name)?)),
-            None => Err(DesignError::UnknownKind {
-                key: key.to_string(),
+            None => match key.strip_prefix("shape.") {
+                Some(name) => Err(DesignError::ShapeWithoutSurface {
+                    name: name.to_string(),
+                }),
+                None => Err(DesignError::UnknownKind {
+                    key: key.to_string(),
+                }),
+            },
+        }
+    }
+
+    /// As [`DesignKind::parse`], with `shape.<parameter name>` resolved on `surface`
+    /// ([`DesignKind::shape`]).
+    pub fn parse_on(key: &str, surface: &Surface<f64>) -> Result<Self, DesignError> {
+        match key.strip_prefix("shape.") {
+            Some(name) => Self::shape(surface, name),
+            None => Self::parse(key),
+        }
+    }
+
+    /// The shape design variable of `surface`'s design parameter `name` (`radius`,
+    /// `centre.z`, `cp[2][3].z`, …); an unknown name is an error listing the valid ones.
+    pub fn shape(surface: &Surface<f64>, name: &str) -> Result<Self, DesignError> {
+        match surface.parameter_index(name) {
+            Some(parameter) => Ok(DesignKind::Shape {
+                parameter,
+                name: name.to_string(),
+            }),
+            None => Err(DesignError::UnknownShapeParameter {
+                name: name.to_string(),
+                kind: surface.kind(),
+                expected: surface.parameter_names().join(", "),
             }),
         }
     }
@@ -127,11 +172,23 @@ impl DesignVariable {
         Self::new(p.name(), DesignKind::Material(p))
     }
 
-    /// Its value at `design`.
+    /// A shape design variable: `surface`'s design parameter `name`, named after it.
+    pub fn shape(surface: &Surface<f64>, name: &str) -> Result<Self, DesignError> {
+        Ok(Self::new(name, DesignKind::shape(surface, name)?))
+    }
+
+    /// Its value at `design` (a shape variable of a design without a surface, or with an
+    /// index beyond its parameters, is NaN: [`DesignVariable::perturbed`] and
+    /// [`DesignVariable::validate_on`] report it as an error).
     pub fn value(&self, design: &Design) -> f64 {
         match self.kind {
             DesignKind::Thickness => design.thickness,
             DesignKind::Material(p) => design.material.to_array()[p.index()],
+            DesignKind::Shape { parameter, .. } => design
+                .surface
+                .as_ref()
+                .and_then(|s| s.parameter_values().get(parameter).copied())
+                .unwrap_or(f64::NAN),
         }
     }
 
@@ -145,7 +202,7 @@ impl DesignVariable {
                 detail: "expected a finite perturbation".into(),
             });
         }
-        let mut d = *design;
+        let mut d = design.clone();
         match self.kind {
             DesignKind::Thickness => {
                 d.thickness += delta;
@@ -172,19 +229,101 @@ impl DesignVariable {
                         detail: e.to_string(),
                     })?;
             }
+            DesignKind::Shape { parameter, .. } => {
+                let err = |detail: String| DesignError::InvalidPerturbation {
+                    variable: self.name.clone(),
+                    delta,
+                    detail,
+                };
+                let surface = design.surface.as_ref().ok_or_else(|| {
+                    err(
+                        "a shape design variable needs the design's surface (Design::surface \
+                         is None)"
+                            .into(),
+                    )
+                })?;
+                let mut p = surface.parameter_values();
+                let count = p.len();
+                let slot = p.get_mut(parameter).ok_or_else(|| {
+                    err(format!(
+                        "surface parameter index {parameter}: expected an index below {count} \
+                         (the {} surface's parameters)",
+                        surface.kind()
+                    ))
+                })?;
+                *slot += delta;
+                let moved = surface
+                    .with_design_parameters::<f64>(&p)
+                    .map_err(|e| err(format!("the perturbed surface is invalid: {e}")))?;
+                d.surface = Some(moved);
+            }
         }
         Ok(d)
+    }
+
+    /// Check the variable against `model` built on `surface`: the perturbations `±max_delta`
+    /// must give an admissible design; for a shape variable the perturbed surface must be
+    /// valid and have a regular normal at every particle and quadrature point of the model
+    /// (it is checked before any analysis, so a re-run cannot fail on a degenerate geometry).
+    pub fn validate_on(
+        &self,
+        model: &ShellModel,
+        surface: &Surface<f64>,
+        max_delta: f64,
+    ) -> Result<(), DesignError> {
+        let d = Design::of_shell(model, surface);
+        for delta in [0.0, max_delta, -max_delta] {
+            let p = self.perturbed(&d, delta)?;
+            if let (DesignKind::Shape { .. }, Some(s)) = (&self.kind, &p.surface) {
+                check_normals(s, model).map_err(|detail| DesignError::InvalidPerturbation {
+                    variable: self.name.clone(),
+                    delta,
+                    detail,
+                })?;
+            }
+        }
+        Ok(())
     }
 
     /// Check the variable against `model`: the perturbations `±max_delta` (the largest finite
     /// difference step that will be used, 0 for the dual reference alone) must give an
     /// admissible design.
     pub fn validate(&self, model: &ShellModel, max_delta: f64) -> Result<(), DesignError> {
+        if let DesignKind::Shape { name, .. } = &self.kind {
+            return Err(DesignError::ShapeWithoutSurface { name: name.clone() });
+        }
         let d = Design::of(model);
         self.perturbed(&d, max_delta)?;
         self.perturbed(&d, -max_delta)?;
         Ok(())
     }
+}
+
+/// A regular normal of `surface` at every particle and quadrature point of `model`.
+fn check_normals(surface: &Surface<f64>, model: &ShellModel) -> Result<(), String> {
+    let uvs = model
+        .particle_uv
+        .iter()
+        .chain(model.points.iter().map(|p| &p.uv));
+    for uv in uvs {
+        surface
+            .eval(uv[0], uv[1])
+            .normal()
+            .map_err(|e| format!("the perturbed surface at (u, v) = {uv:?}: {e}"))?;
+    }
+    Ok(())
+}
+
+/// [`validate_design`] for a model built on `surface` (needed by shape variables, which
+/// [`validate_design`] rejects): shape variables are checked with
+/// [`DesignVariable::validate_on`].
+pub fn validate_design_on(
+    variables: &[DesignVariable],
+    model: &ShellModel,
+    surface: &Surface<f64>,
+    max_delta: f64,
+) -> Result<(), DesignError> {
+    validate_list(variables, model, Some(surface), max_delta)
 }
 
 /// Check a list of design variables against `model`: names unique and not empty, every
@@ -193,6 +332,15 @@ impl DesignVariable {
 pub fn validate_design(
     variables: &[DesignVariable],
     model: &ShellModel,
+    max_delta: f64,
+) -> Result<(), DesignError> {
+    validate_list(variables, model, None, max_delta)
+}
+
+fn validate_list(
+    variables: &[DesignVariable],
+    model: &ShellModel,
+    surface: Option<&Surface<f64>>,
     max_delta: f64,
 ) -> Result<(), DesignError> {
     if variables.is_empty() {
@@ -211,27 +359,51 @@ pub fn validate_design(
                 second: v.name.clone(),
             });
         }
-        v.validate(model, max_delta)?;
+        match surface {
+            Some(s) => v.validate_on(model, s, max_delta)?,
+            None => v.validate(model, max_delta)?,
+        }
     }
     Ok(())
 }
 
-/// The non-shape design of a shell: thickness and material.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// The design of a shell: thickness, material and (for shape variables) the mid-surface,
+/// whose design parameters are `Surface::design_parameters`.
+#[derive(Clone, Debug, PartialEq)]
 pub struct Design {
     /// Thickness `t`.
     pub thickness: f64,
     /// Material parameters.
     pub material: MaterialParams<f64>,
+    /// The mid-surface with its design parameter values (`None`: not a design variable; shape
+    /// variables need it).
+    pub surface: Option<Surface<f64>>,
 }
 
 impl Design {
-    /// The design of `model`.
+    /// The non-shape design of `model` (no surface: the model does not keep it).
     pub fn of(model: &ShellModel) -> Self {
         Design {
             thickness: model.thickness,
             material: model.material,
+            surface: None,
         }
+    }
+
+    /// The design of `model` built on `surface`.
+    pub fn of_shell(model: &ShellModel, surface: &Surface<f64>) -> Self {
+        Design {
+            surface: Some(surface.clone()),
+            ..Self::of(model)
+        }
+    }
+
+    /// The surface's design parameter values (empty without a surface).
+    pub fn surface_parameters(&self) -> Vec<f64> {
+        self.surface
+            .as_ref()
+            .map(|s| s.parameter_values())
+            .unwrap_or_default()
     }
 }
 
@@ -300,10 +472,29 @@ pub enum DesignError {
         second: String,
     },
     /// A key that is no design-variable kind.
-    #[error("design variable kind `{key}`: expected `thickness` or `material.<parameter>`")]
+    #[error(
+        "design variable kind `{key}`: expected `thickness`, `material.<parameter>` or \
+         `shape.<surface parameter>`"
+    )]
     UnknownKind {
         /// The key given.
         key: String,
+    },
+    /// A shape design variable of a surface that does not have the parameter.
+    #[error("shape design variable `shape.{name}`: the {kind} surface has no parameter `{name}`, expected one of {expected}")]
+    UnknownShapeParameter {
+        /// The name given.
+        name: String,
+        /// Surface kind.
+        kind: &'static str,
+        /// The admissible names.
+        expected: String,
+    },
+    /// A shape design variable checked without the surface it belongs to.
+    #[error("shape design variable `shape.{name}`: needs the shell's surface (use DesignKind::parse_on, validate_design_on, Design::of_shell)")]
+    ShapeWithoutSurface {
+        /// The parameter name.
+        name: String,
     },
     /// An unknown material parameter.
     #[error("material parameter `{name}`: unknown, expected one of {expected}")]

@@ -18,9 +18,10 @@
 
 use super::continuum::{fictitious_loads, SensitivityState, StepState, TermGroup};
 use super::dual::{DualLoad, DualShellProblem, DualState, SensitivityError};
-use super::{DesignVariable, Monitor};
+use super::DesignVariable;
+use crate::geometry::Surface;
 use crate::material::MaterialParams;
-use crate::shell::point::{ParticleState, PointHistory, DOFS_PER_PARTICLE};
+use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
 use crate::shell::point_sensitivity::{commit_particle_dot, ModelSeeds};
 use crate::shell::problem::ShellProblem;
 use crate::solver::observe::{Observed, StepObserver};
@@ -114,7 +115,23 @@ fn seeds_of(g: &DualState<Dual64>) -> SensitivityState {
             .collect(),
         history: g.history.iter().map(history_parts).collect(),
         unknowns: g.unknowns.iter().map(|x| x.eps).collect(),
-        surface: None,
+        surface: g
+            .surfaces
+            .iter()
+            .any(|p| {
+                p.n.iter().any(|x| x.eps != 0.0)
+                    || p.x_a.iter().any(|v| v.iter().any(|x| x.eps != 0.0))
+            })
+            .then(|| {
+                g.surfaces
+                    .iter()
+                    .map(|p| SurfacePoint {
+                        x_a: p.x_a.map(|v| pv(&v)),
+                        n: pv(&p.n),
+                        n_a: p.n_a.map(|v| pv(&v)),
+                    })
+                    .collect()
+            }),
         thickness: g.thickness.eps,
         material: MaterialParams::from_array(g.material.to_array().map(|x| x.eps)),
     }
@@ -154,8 +171,13 @@ fn masked(g: &DualState<Dual64>, group: TermGroup) -> DualState<Dual64> {
             *u = c(u);
         }
     }
-    if group != TermGroup::Design {
+    if group != TermGroup::Design && group != TermGroup::Load {
         m.thickness = c(&m.thickness);
+        for p in &mut m.surfaces {
+            p.x_a = p.x_a.map(|v| v.map(|x| c(&x)));
+            p.n = p.n.map(|x| c(&x));
+            p.n_a = p.n_a.map(|v| v.map(|x| c(&x)));
+        }
     }
     if group != TermGroup::Material {
         m.material = MaterialParams::from_array(m.material.to_array().map(|x| c(&x)));
@@ -265,8 +287,32 @@ impl Breakdown {
                     Some(t) => masked(g, t),
                     None => g.clone(),
                 };
-                let r = dp.dual_residual(&gm, &dq, step.u, step.load)?;
-                let d: Vec<f64> = r.iter().map(|x| x.eps).collect();
+                // The geometry seeds (Design) act on the internal force and on the loads; the
+                // loads' share is the Load group: split R = f_int − f_ext.
+                let d: Vec<f64> = match group {
+                    Some(TermGroup::Design) | Some(TermGroup::Load) => {
+                        let r = dp.dual_residual(&gm, &dq, step.u, step.load)?;
+                        let f = dp.dual_external(&gm, &dq, step.load)?;
+                        let mut d: Vec<f64> = if group == Some(TermGroup::Load) {
+                            vec![0.0; r.len()]
+                        } else {
+                            r.iter().map(|x| x.eps).collect()
+                        };
+                        for (di, fi) in d.iter_mut().zip(&f) {
+                            if group == Some(TermGroup::Load) {
+                                *di = -fi.eps;
+                            } else {
+                                *di += fi.eps;
+                            }
+                        }
+                        d
+                    }
+                    _ => dp
+                        .dual_residual(&gm, &dq, step.u, step.load)?
+                        .iter()
+                        .map(|x| x.eps)
+                        .collect(),
+                };
                 per_var[v].push(compare_rows(group, &cont[v], &d, n_q));
             }
         }
@@ -409,14 +455,14 @@ impl StepObserver<DualShellProblem<Dual64>> for Breakdown {
     }
 }
 
-/// Run the analysis of `problem` with the dual reference (`Dual64`, one pass per variable) and
+/// Run the analysis of `problem` (built on `surface`, needed by shape variables) with the dual reference (`Dual64`, one pass per variable) and
 /// break the continuum fictitious load down by [`TermGroup`] at converged step `step`
 /// (1-based), one [`TermBreakdown`] per variable.
 pub fn breakdown(
     problem: ShellProblem,
+    surface: Option<&Surface<f64>>,
     variables: Vec<DesignVariable>,
     loads: Vec<DualLoad>,
-    monitors: Vec<Monitor>,
     newton: &NewtonSolver,
     solver: SolverOptions,
     step: usize,
@@ -430,7 +476,8 @@ pub fn breakdown(
     }
     let pattern = problem.pattern().clone();
     let mut linear = LinearSolver::new(&pattern, crate::solver::Method::auto(&pattern), solver)?;
-    let dp = DualShellProblem::<Dual64>::new(problem, variables, loads.clone(), monitors)?;
+    let dp =
+        DualShellProblem::<Dual64>::new_on(problem, surface, variables, loads.clone(), Vec::new())?;
     let obs = Breakdown {
         step: step - 1,
         loads,

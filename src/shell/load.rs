@@ -25,7 +25,7 @@
 //! hand-derived stiffness. Formulas, signs and derivations: `docs/loads.md`.
 
 use super::model::ShellModel;
-use super::point::{director_first_derivatives, ParticleState, DOFS_PER_PARTICLE};
+use super::point::{director_first_derivatives, ParticleState, SurfacePoint, DOFS_PER_PARTICLE};
 use super::rotation::{director_derivatives, rotate_director};
 use super::ShellError;
 use crate::geometry::Surface;
@@ -299,6 +299,89 @@ impl Gravity {
     pub fn load(&self) -> [f64; 3] {
         self.load
     }
+
+    /// [`GenericLoad::force_generic`] with the initial geometry of every quadrature point in
+    /// `T` (`surfaces`, as `model.points`): the area element `|x̄⁰,1 × x̄⁰,2|` then carries a
+    /// shape design derivative (the dual reference for shape design variables).
+    /// The shape design derivative of the force (hand-derived): with the design velocity
+    /// `V,α = ẋ⁰,α` at every quadrature point (`velocity`, as `model.points`), the area element
+    /// `|c|`, `c = x̄⁰,1 × x̄⁰,2`, changes by `n⁰ · (V,1 × x̄⁰,2 + x̄⁰,1 × V,2)`.
+    pub fn add_design_derivative(
+        &self,
+        model: &ShellModel,
+        velocity: &[SurfacePoint<f64>],
+        factor: f64,
+        f: &mut [f64],
+    ) -> Result<(), ShellError> {
+        check_sizes(model, f.len(), None)?;
+        check_surfaces(model, velocity)?;
+        for k in selected_points(model, &self.region, "gravity")? {
+            let p = &model.points[k];
+            let [x1, x2] = p.surface.x_a;
+            let [v1, v2] = velocity[k].x_a;
+            let c = x1.cross(&x2);
+            let da_dot = c.dot(&(v1.cross(&x2) + x1.cross(&v2))) / c.norm() * p.weight * factor;
+            let local: Vec<f64> = p
+                .shape
+                .iter()
+                .flat_map(|sh| {
+                    let w = da_dot * sh.psi;
+                    [
+                        w * self.load[0],
+                        w * self.load[1],
+                        w * self.load[2],
+                        0.0,
+                        0.0,
+                    ]
+                })
+                .collect();
+            model.scatter_local(k, &local, f);
+        }
+        Ok(())
+    }
+
+    pub fn force_with_surfaces<T: Real>(
+        &self,
+        model: &ShellModel,
+        surfaces: &[SurfacePoint<T>],
+        factor: f64,
+        f: &mut [T],
+    ) -> Result<(), ShellError> {
+        check_sizes(model, f.len(), None)?;
+        check_surfaces(model, surfaces)?;
+        for k in selected_points(model, &self.region, "gravity")? {
+            let p = &model.points[k];
+            let s = &surfaces[k];
+            let da = s.x_a[0].cross(&s.x_a[1]).norm() * p.weight * factor;
+            let local: Vec<T> = p
+                .shape
+                .iter()
+                .flat_map(|sh| {
+                    let w = da * sh.psi;
+                    [
+                        w * self.load[0],
+                        w * self.load[1],
+                        w * self.load[2],
+                        T::zero(),
+                        T::zero(),
+                    ]
+                })
+                .collect();
+            model.scatter_local(k, &local, f);
+        }
+        Ok(())
+    }
+}
+
+/// One surface point per quadrature point of `model`.
+fn check_surfaces<T>(model: &ShellModel, surfaces: &[SurfacePoint<T>]) -> Result<(), ShellError> {
+    if surfaces.len() != model.points.len() {
+        return Err(ShellError::Dimension {
+            expected: model.points.len(),
+            got: surfaces.len(),
+        });
+    }
+    Ok(())
 }
 
 impl GenericLoad for Gravity {
@@ -393,7 +476,19 @@ impl Pressure {
         x: &[T],
     ) -> [V3<T>; 2] {
         let p = &model.points[k];
-        let mut xa = p.surface.x_a.map(|v| v.map(T::cst));
+        Self::tangents_from(p.surface.x_a.map(|v| v.map(T::cst)), model, k, parts, x)
+    }
+
+    /// `x̄,α = x̄⁰,α + Σ_J Ψ_J,α (ū_J + Δū_J)` from the initial tangents `x0a` at point `k`.
+    fn tangents_from<T: Real>(
+        x0a: [V3<T>; 2],
+        model: &ShellModel,
+        k: usize,
+        parts: &[ParticleState<T>],
+        x: &[T],
+    ) -> [V3<T>; 2] {
+        let p = &model.points[k];
+        let mut xa = x0a;
         for (n, (s, st)) in p.shape.iter().zip(parts).enumerate() {
             let q = &x[DOFS_PER_PARTICLE * n..DOFS_PER_PARTICLE * n + 3];
             let u = st.u + V3::new(q[0], q[1], q[2]);
@@ -402,6 +497,72 @@ impl Pressure {
             }
         }
         xa
+    }
+}
+
+impl Pressure {
+    /// The shape design derivative of the force at fixed state (hand-derived, the load term
+    /// `l'_V` of eq 37 for a follower pressure): with the design velocity `V,α = ẋ⁰,α` of the
+    /// initial geometry at every quadrature point (`velocity`, as `model.points`),
+    /// `ḟ_I = p w λ (V,1 × x̄,2 + x̄,1 × V,2) Ψ_I` on the current tangents `x̄,α`.
+    pub fn add_design_derivative(
+        &self,
+        model: &ShellModel,
+        velocity: &[SurfacePoint<f64>],
+        q: &[f64],
+        factor: f64,
+        f: &mut [f64],
+    ) -> Result<(), ShellError> {
+        check_sizes(model, q.len(), Some(f.len()))?;
+        check_surfaces(model, velocity)?;
+        for k in selected_points(model, &self.region, "pressure")? {
+            let (parts, x) = model.gather_local(k, q);
+            let [x1, x2] = Self::tangents(model, k, &parts, &x);
+            let p = &model.points[k];
+            let [v1, v2] = velocity[k].x_a;
+            let c = (v1.cross(&x2) + x1.cross(&v2)) * (self.pressure * p.weight * factor);
+            let local: Vec<f64> = p
+                .shape
+                .iter()
+                .flat_map(|s| {
+                    let v = c * s.psi;
+                    [v[0], v[1], v[2], 0.0, 0.0]
+                })
+                .collect();
+            model.scatter_local(k, &local, f);
+        }
+        Ok(())
+    }
+
+    /// [`GenericLoad::force_generic`] with the initial geometry of every quadrature point in
+    /// `T` (`surfaces`, as `model.points`): `x̄⁰,α` then carries a shape design derivative
+    /// (the dual reference for shape design variables).
+    pub fn force_with_surfaces<T: Real>(
+        &self,
+        model: &ShellModel,
+        surfaces: &[SurfacePoint<T>],
+        q: &[T],
+        factor: f64,
+        f: &mut [T],
+    ) -> Result<(), ShellError> {
+        check_sizes(model, q.len(), Some(f.len()))?;
+        check_surfaces(model, surfaces)?;
+        for k in selected_points(model, &self.region, "pressure")? {
+            let (parts, x) = model.gather_local(k, q);
+            let [x1, x2] = Self::tangents_from(surfaces[k].x_a, model, k, &parts, &x);
+            let p = &model.points[k];
+            let c = x1.cross(&x2) * T::cst(self.pressure * p.weight * factor);
+            let local: Vec<T> = p
+                .shape
+                .iter()
+                .flat_map(|s| {
+                    let v = c * T::cst(s.psi);
+                    [v[0], v[1], v[2], T::zero(), T::zero()]
+                })
+                .collect();
+            model.scatter_local(k, &local, f);
+        }
+        Ok(())
     }
 }
 

@@ -841,11 +841,30 @@ impl ShellModel {
         thickness: T,
         dofs: &[T],
     ) -> Result<(Vec<T>, Vec<PointHistory<T>>), ShellError> {
+        self.internal_force_with_surfaces(particles, history, material, thickness, dofs, None)
+    }
+
+    /// [`ShellModel::internal_force_with`] with the initial geometry of every quadrature point
+    /// given in `T` (`surfaces`, as [`ShellModel::points`]; `None`: the model's, lifted): the
+    /// residual of the dual reference for shape design variables.
+    pub fn internal_force_with_surfaces<T: Real>(
+        &self,
+        particles: &[ParticleState<T>],
+        history: &[PointHistory<T>],
+        material: &MaterialParams<T>,
+        thickness: T,
+        dofs: &[T],
+        surfaces: Option<&[SurfacePoint<T>]>,
+    ) -> Result<(Vec<T>, Vec<PointHistory<T>>), ShellError> {
         let nl = self.thickness_rule.len();
         for (expected, got) in [
             (self.n_dofs(), dofs.len()),
             (self.particles.len(), particles.len()),
             (self.history.len(), history.len()),
+            (
+                self.points.len(),
+                surfaces.map_or(self.points.len(), |s| s.len()),
+            ),
         ] {
             if expected != got {
                 return Err(ShellError::Dimension { expected, got });
@@ -879,7 +898,7 @@ impl ShellModel {
                     })
                     .collect();
                 let inc = PointIncrement::new(&parts, &x)?;
-                let s = p.surface.lift::<T>();
+                let s = surfaces.map_or_else(|| p.surface.lift::<T>(), |s| s[k]);
                 let mut residual = vec![T::zero(); x.len()];
                 let mut trial = Vec::with_capacity(nl);
                 for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {

@@ -28,6 +28,7 @@ pub fn nominal_design() -> Design {
     Design {
         thickness: 0.05,
         material: MaterialParams::new(1000.0, 0.3, 1.0, 100.0, 0.5).unwrap(),
+        surface: None,
     }
 }
 
