@@ -67,6 +67,11 @@ impl Setup {
             a.solver(),
         )
         .unwrap();
+        let t = r.timing;
+        eprintln!(
+            "continuum stages: rhs {:.3} s, solve {:.3} s, update {:.3} s, record {:.3} s",
+            t.rhs, t.solve, t.update, t.record
+        );
         (r.dsa.as_secs_f64(), r.total.as_secs_f64())
     }
     fn dual(&self) -> (f64, f64) {

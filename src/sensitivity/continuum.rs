@@ -227,6 +227,19 @@ pub struct ContinuumStepRecord {
     pub derivatives: Vec<Vec<f64>>,
 }
 
+/// Where the continuum DSA spends its time (s, summed over the steps).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ContinuumTiming {
+    /// Fictitious loads (eq 65's right-hand sides).
+    pub rhs: f64,
+    /// The multi-RHS solve with the factorised tangent.
+    pub solve: f64,
+    /// History and particle updates (eqs 44–51).
+    pub update: f64,
+    /// Monitor derivatives after the commit.
+    pub record: f64,
+}
+
 /// The continuum DSA as an observer of the analysis' converged steps.
 #[derive(Debug)]
 pub struct ContinuumDsa {
@@ -238,6 +251,7 @@ pub struct ContinuumDsa {
     pending: Option<Vec<SensitivityState>>,
     records: Vec<ContinuumStepRecord>,
     time: Duration,
+    timing: ContinuumTiming,
     failure: Option<String>,
 }
 
@@ -284,6 +298,7 @@ impl ContinuumDsa {
             pending: None,
             records: Vec::new(),
             time: Duration::ZERO,
+            timing: ContinuumTiming::default(),
             failure: None,
         })
     }
@@ -303,6 +318,10 @@ impl ContinuumDsa {
     /// Wall time spent in the continuum DSA.
     pub fn time(&self) -> Duration {
         self.time
+    }
+    /// The same, by stage.
+    pub fn timing(&self) -> ContinuumTiming {
+        self.timing
     }
 
     /// The fictitious load (eq 65's right-hand side, the derivative of the residual at fixed
@@ -337,6 +356,7 @@ impl ContinuumDsa {
             .collect();
         super::dual::check_loads(problem, &self.loads, &du[..n_q], step.load)?;
         // 1. Fictitious loads of all variables (eq 65's right-hand side).
+        let t0 = Instant::now();
         let rhs = self
             .fictitious_loads(
                 problem,
@@ -358,6 +378,8 @@ impl ContinuumDsa {
             step.essential.zero_constrained(col);
         }
         // 2. One multi-RHS solve with the converged tangent (eq 65).
+        self.timing.rhs += t0.elapsed().as_secs_f64();
+        let t0 = Instant::now();
         step.solver
             .solve_columns_in_place(&mut b, nv)
             .map_err(fatal)?;
@@ -369,6 +391,8 @@ impl ContinuumDsa {
             .enumerate()
             .map(|(v, s)| s.seeds(None, &b[v * n..v * n + n_q], &self.zero))
             .collect();
+        self.timing.solve += t0.elapsed().as_secs_f64();
+        let t0 = Instant::now();
         let dots = model
             .internal_force_dots(&du[..n_q], &seeds)
             .map_err(fatal)?;
@@ -399,6 +423,7 @@ impl ContinuumDsa {
                 }
             })
             .collect();
+        self.timing.update += t0.elapsed().as_secs_f64();
         self.pending = Some(next);
         Ok(())
     }
@@ -559,6 +584,7 @@ impl StepObserver<ShellProblem> for ContinuumDsa {
             self.failure.get_or_insert(e);
         }
         self.time += t0.elapsed();
+        self.timing.record += t0.elapsed().as_secs_f64();
     }
     fn on_restore(&mut self) {
         self.pending = None;
@@ -585,6 +611,8 @@ pub struct ContinuumRun {
     pub total: Duration,
     /// Wall time of the continuum DSA alone.
     pub dsa: Duration,
+    /// The same, by stage.
+    pub timing: ContinuumTiming,
 }
 
 impl ContinuumRun {
@@ -629,6 +657,7 @@ pub fn run_continuum(
         report,
         total: t0.elapsed(),
         dsa: dsa.time,
+        timing: dsa.timing,
     })
 }
 
