@@ -40,6 +40,7 @@ fn nominal_design() -> Design {
     Design {
         thickness: 0.05,
         material: MaterialParams::new(1000.0, 0.3, 1.0, 100.0, 0.5).unwrap(),
+        tool_offsets: Default::default(),
     }
 }
 
@@ -333,6 +334,7 @@ fn elastic_cantilever_sensitivities_follow_beam_theory() {
     let design = Design {
         thickness: T,
         material: MaterialParams::new(E, 0.0, 1e30, 0.0, 1.0).unwrap(),
+        tool_offsets: Default::default(),
     };
     let grid = regular_grid(ParamBox::unit(), 25, 3);
     let cq = CellQuadrature::for_particle_grid(&grid, 2, 4).unwrap();

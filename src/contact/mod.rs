@@ -23,7 +23,8 @@ pub mod tool;
 pub use penalty::{penalty_force, penalty_tangent};
 pub use projection::{closest_point, nearest_tool, Bound, ContactPoint};
 pub use shell::{
-    ContactFaces, ContactReport, ShellContact, SlaveReport, ToolReport, DEFAULT_PENALTY_FACTOR,
+    ContactFaces, ContactInputs, ContactReport, ShellContact, SlaveReport, ToolReport,
+    DEFAULT_PENALTY_FACTOR,
 };
 pub use tool::{CoarseGrid, PathKey, RigidMotion, RigidTool, Side, ToolPath};
 

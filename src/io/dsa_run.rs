@@ -10,7 +10,10 @@
 //! of them). The Taylor remainder `|ψ(τ + h) − ψ(τ) − h ψ'_dual|` of every step size reuses the
 //! `τ + h` re-run.
 
-use super::dsa_case::{dual_loads, DesignEntry, DsaMethod, DsaSpec};
+use super::dsa_case::{
+    check_tool_names, dual_contact, dual_loads, DesignEntry, DsaMethod, DsaSpec,
+};
+use crate::contact::ShellContact;
 use super::shell_build;
 use super::shell_case::ShellCase;
 use super::CaseError;
@@ -21,6 +24,7 @@ use crate::shell::problem::ShellProblem;
 use crate::shell::ShellError;
 use crate::solver::NewtonSolver;
 use serde_json::{json, Value};
+use std::sync::Arc;
 use std::time::Instant;
 use thiserror::Error;
 
@@ -51,16 +55,42 @@ pub struct CaseAnalysis<'a> {
 
 impl Analysis for CaseAnalysis<'_> {
     fn build(&self, design: &Design) -> Result<(ShellProblem, NewtonSolver), SensitivityError> {
+        self.build_with_contact(design).map(|(p, n, _)| (p, n))
+    }
+
+    /// The case with the design's thickness, material and tool offsets (each tool's whole path
+    /// translated, [`crate::contact::ToolPath::translated`]), and its contact.
+    fn build_with_contact(
+        &self,
+        design: &Design,
+    ) -> Result<(ShellProblem, NewtonSolver, Option<Arc<ShellContact>>), SensitivityError> {
         let mut c = self.case.clone();
         c.thickness = design.thickness;
         c.material = design.material;
+        for (name, offset) in &design.tool_offsets {
+            let tool = c.tools.iter_mut().find(|t| &t.name == name).ok_or_else(|| {
+                SensitivityError::Design(crate::sensitivity::DesignError::UnknownTool {
+                    variable: name.clone(),
+                    tool: name.clone(),
+                    expected: format!(
+                        "{:?}",
+                        self.case.tools.iter().map(|t| &t.name).collect::<Vec<_>>()
+                    ),
+                })
+            })?;
+            tool.path = tool.path.translated(*offset).map_err(|e| {
+                SensitivityError::Shell(ShellError::InvalidInput(format!(
+                    "tool `{name}` moved by {offset:?}: {e}"
+                )))
+            })?;
+        }
         let b = shell_build::build(&c).map_err(|e| {
             SensitivityError::Shell(ShellError::InvalidInput(format!(
                 "{}: {e}",
                 self.case.path.display()
             )))
         })?;
-        Ok((b.problem, b.newton))
+        Ok((b.problem, b.newton, b.contact))
     }
 }
 
@@ -130,6 +160,7 @@ pub fn validate(case: &ShellCase, methods: &[DsaMethod]) -> Result<DsaSpec, DsaE
         .clone()
         .ok_or_else(|| DsaError::NoDesign(case.path.display().to_string()))?;
     spec.methods = methods.to_vec();
+    check_tool_names(&case.path, &case.tools, &spec)?;
     if methods.contains(&DsaMethod::Dual) {
         dual_loads(case)?;
     }
@@ -147,15 +178,16 @@ pub fn run(
     let base = Design {
         thickness: case.thickness,
         material: case.material,
+        tool_offsets: Default::default(),
     };
     let vars: Vec<DesignVariable> = spec.design.iter().map(|d| d.variable.clone()).collect();
     let monitors = &spec.monitors;
 
     // (1) The plain analysis.
     let t = Instant::now();
-    let (problem, newton) = analysis.build(&base)?;
+    let (problem, newton, contact) = analysis.build_with_contact(&base)?;
     validate_design(&vars, &problem.model, 0.0).map_err(SensitivityError::from)?;
-    let nominal = fd::response(problem, &newton, analysis.solver(), monitors)?;
+    let nominal = fd::response_with_contact(problem, contact, &newton, analysis.solver(), monitors)?;
     let time_analysis = t.elapsed().as_secs_f64();
     progress(&format!(
         "analysis: {} converged steps, {:.2} s",
@@ -168,8 +200,11 @@ pub fn run(
     let (mut time_dual, mut time_dual_run, mut dual_value_difference) = (None, None, None);
     let mut dual_state_mismatch = None;
     if spec.methods.contains(&DsaMethod::Dual) {
-        let loads = dual_loads(case)?;
-        let (problem, newton) = analysis.build(&base)?;
+        let mut loads = dual_loads(case)?;
+        let (problem, newton, contact) = analysis.build_with_contact(&base)?;
+        if let Some(c) = contact {
+            loads.push(dual_contact(case, c));
+        }
         let mode = if vars.len() <= 8 {
             DualMode::Vector
         } else {
@@ -247,11 +282,17 @@ pub fn run(
             for (&relative, h) in entry.fd_steps.iter().zip(entry.absolute_steps(&base)) {
                 let mut one = |delta: f64| -> Result<RunResponse, DsaError> {
                     let t = Instant::now();
-                    let (problem, newton) = analysis.build(
+                    let (problem, newton, contact) = analysis.build_with_contact(
                         &var.perturbed(&base, delta)
                             .map_err(SensitivityError::from)?,
                     )?;
-                    let r = fd::response(problem, &newton, analysis.solver(), monitors)?;
+                    let r = fd::response_with_contact(
+                        problem,
+                        contact,
+                        &newton,
+                        analysis.solver(),
+                        monitors,
+                    )?;
                     if r.loads != nominal.loads {
                         return Err(SensitivityError::StepSequence {
                             variable: var.name.clone(),
@@ -453,10 +494,13 @@ pub fn to_json(case: &ShellCase, r: &DsaResult) -> Value {
     })
 }
 
-/// `thickness` or `material.<name>`.
+/// `thickness`, `material.<name>` or `tool.<name>.<x|y|z>`.
 pub fn kind_name(v: &DesignVariable) -> String {
-    match v.kind {
+    match &v.kind {
         crate::sensitivity::DesignKind::Material(p) => format!("material.{}", p.name()),
+        crate::sensitivity::DesignKind::Tool { tool, axis } => {
+            format!("tool.{tool}.{}", crate::sensitivity::TOOL_AXES[*axis.min(&2)])
+        }
         _ => "thickness".into(),
     }
 }

@@ -37,7 +37,21 @@
 //! problem owns its loads as trait objects, so they are handed to the reference again as
 //! [`DualLoad`]s; at every step their force is checked against the problem's
 //! ([`ShellProblem::external_force`]), so a missing or different load is an error, not a wrong
-//! derivative. Edge moments (which act through the director) and contact are not supported yet.
+//! derivative. A load held constant ([`DualLoad::Constant`]) is its inner load at factor 1.
+//! Edge moments (which act through the director) are not supported yet.
+//!
+//! **Contact** ([`DualLoad::Contact`], eqs 68–70). The penalty force of the slave points
+//! against the rigid tools is evaluated in `D` by [`ShellContact::force_with`] with the
+//! group's committed dual particle states (`ū, d, e`: the slave point `x̄ + ζ t/2 d` and the
+//! rotated director depend on them, so the history dependence of the contact force is carried
+//! exactly, as for the pressure), the converged increment (constant), the dual thickness, the
+//! penalty (`c E/t` in `D` when the case gives `penalty_factor`) and, per tool, a translation
+//! offset of value 0 seeded with unit derivative along the axis of a tool variable
+//! ([`crate::sensitivity::DesignKind::Tool`]). The closest-point projection's final Newton
+//! correction in `D` carries the projection sensitivity (eq 80) into the gap and the normal, so
+//! the derivative part of the contact force is the fictitious load `b'_N` of eq (83) plus its
+//! history terms, computed rather than derived. The contact's tangent is in the tangent the
+//! driver holds, so the solve is unchanged.
 //!
 //! **Constraint scales.** The rows' scales `k_c` (`E t`, `E t³/12`) are a numerical balance
 //! set when the problem is built; they are held fixed here. The generalised DOFs do not depend
@@ -45,6 +59,7 @@
 //! (a re-run with another `E` changes `k_c` and `μ_c` with the same product).
 
 use super::{validate_design, Design, DesignError, DesignKind, DesignVariable, Monitor};
+use crate::contact::{ContactInputs, ShellContact};
 use crate::material::MaterialParams;
 use crate::scalar::Real;
 use crate::shell::load::{ExternalLoad, GenericLoad, Gravity, PointForce, Pressure};
@@ -58,6 +73,7 @@ use crate::solver::{
 };
 use nalgebra::Vector3;
 use num_dual::{Derivative, Dual64, DualSVec64};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 use thiserror::Error;
 
@@ -110,6 +126,31 @@ pub enum DualLoad {
     Gravity(Gravity),
     /// Follower pressure: depends on the committed displacement.
     Pressure(Pressure),
+    /// Penalty contact with rigid tools (a prescribed load: the tools move with the load
+    /// factor): depends on the committed particle states, the increment, the thickness and
+    /// the tool positions (eqs 68–70; [`ShellContact::force_with`]).
+    Contact(DualContact),
+    /// A load held at its full value at every load factor (`scaling = "constant"`): the inner
+    /// load evaluated at factor 1.
+    Constant(Box<DualLoad>),
+}
+
+/// The contact load of the problem as the reference evaluates it: the problem's own
+/// [`ShellContact`] (shared) and how its penalty was set.
+#[derive(Clone, Debug)]
+pub struct DualContact {
+    /// The contact (the same object the problem owns as a load).
+    pub contact: Arc<ShellContact>,
+    /// `Some(c)` when the penalty is `ω = c E / t` (`penalty_factor`): the reference then
+    /// differentiates `ω` with `E` and `t` as a re-run does; `None` for a given `ω`.
+    pub penalty_factor: Option<f64>,
+}
+
+impl PartialEq for DualContact {
+    /// The same contact object and penalty rule.
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.contact, &other.contact) && self.penalty_factor == other.penalty_factor
+    }
 }
 
 impl DualLoad {
@@ -124,6 +165,18 @@ impl DualLoad {
             DualLoad::PointForce(l) => l.add_force(model, q, factor, f),
             DualLoad::Gravity(l) => l.add_force(model, q, factor, f),
             DualLoad::Pressure(l) => l.add_force(model, q, factor, f),
+            // Untracked (the problem's own evaluation tracks the gaps).
+            DualLoad::Contact(c) => c.contact.force_generic(model, q, factor, f),
+            DualLoad::Constant(inner) => inner.add_force_f64(model, q, 1.0, f),
+        }
+    }
+
+    /// The contact of this load (also inside [`DualLoad::Constant`]).
+    fn contact(&self) -> Option<&DualContact> {
+        match self {
+            DualLoad::Contact(c) => Some(c),
+            DualLoad::Constant(inner) => inner.contact(),
+            _ => None,
         }
     }
 }
@@ -145,6 +198,9 @@ pub struct DualState<D> {
     pub thickness: D,
     /// Committed unknowns `[q, μ]` and their sensitivities.
     pub unknowns: Vec<D>,
+    /// Per tool of the contact load (empty without one): the translation added to its path,
+    /// value 0 (the problem's tools are at the design's position), seeded for tool variables.
+    pub tool_offsets: Vec<Vector3<D>>,
 }
 
 /// The sensitivities recorded at one converged step.
@@ -273,6 +329,32 @@ impl<D: DesignDual> DualShellProblem<D> {
                     detail: e.to_string(),
                 })?;
         }
+        let contacts: Vec<&DualContact> = loads.iter().filter_map(|l| l.contact()).collect();
+        if contacts.len() > 1 {
+            return Err(SensitivityError::Shell(ShellError::InvalidInput(format!(
+                "dual sensitivity reference: {} contact loads given, expected at most one",
+                contacts.len()
+            ))));
+        }
+        let tool_names: Vec<&str> = contacts
+            .first()
+            .map(|c| c.contact.tools().iter().map(|t| t.name.as_str()).collect())
+            .unwrap_or_default();
+        super::check_tools(&variables, &tool_names)?;
+        if let Some(c) = contacts.first() {
+            if let Some(factor) = c.penalty_factor {
+                let model = &problem.model;
+                let omega = factor * model.material.young / model.thickness;
+                // The same product in f64: equal to round-off when the rule is the one used.
+                if (omega - c.contact.penalty()).abs() > 1e-12 * omega.abs() {
+                    return Err(SensitivityError::Shell(ShellError::InvalidInput(format!(
+                        "dual sensitivity reference: penalty_factor {factor} gives ω = {omega:e}, \
+                         the contact's penalty is {:e}: expected the same rule",
+                        c.contact.penalty()
+                    ))));
+                }
+            }
+        }
         let model = &problem.model;
         let design = Design::of(model);
         let nd = D::DIRECTIONS;
@@ -282,10 +364,17 @@ impl<D: DesignDual> DualShellProblem<D> {
                 let count = nd.min(variables.len() - first);
                 let mut t_parts = vec![0.0; nd];
                 let mut m_parts = vec![vec![0.0; nd]; 6];
+                let mut tool_parts = vec![[vec![0.0; nd], vec![0.0; nd], vec![0.0; nd]]; tool_names.len()];
                 for (k, v) in variables[first..first + count].iter().enumerate() {
-                    match v.kind {
+                    match &v.kind {
                         DesignKind::Thickness => t_parts[k] = 1.0,
                         DesignKind::Material(p) => m_parts[p.index()][k] = 1.0,
+                        DesignKind::Tool { tool, axis } => {
+                            // check_tools above: the tool exists.
+                            if let Some(i) = tool_names.iter().position(|n| n == tool) {
+                                tool_parts[i][*axis][k] = 1.0;
+                            }
+                        }
                     }
                 }
                 let m = design.material.to_array();
@@ -299,6 +388,10 @@ impl<D: DesignDual> DualShellProblem<D> {
                     })),
                     thickness: D::from_parts(design.thickness, &t_parts),
                     unknowns: problem.state().iter().map(|&v| D::cst(v)).collect(),
+                    tool_offsets: tool_parts
+                        .iter()
+                        .map(|p| Vector3::from_fn(|c, _| D::from_parts(0.0, &p[c])))
+                        .collect(),
                 }
             })
             .collect();
@@ -379,9 +472,7 @@ impl<D: DesignDual> DualShellProblem<D> {
             .collect();
         let mut f_ext = vec![D::zero(); n_q];
         for l in &self.loads {
-            if let DualLoad::Pressure(p) = l {
-                p.force_generic(model, &q_shift, load, &mut f_ext)?;
-            }
+            self.add_dual_load(l, g, dq, &q_shift, load, &mut f_ext)?;
         }
         for (ri, fi) in r.iter_mut().zip(&f_ext) {
             *ri -= *fi;
@@ -408,6 +499,40 @@ impl<D: DesignDual> DualShellProblem<D> {
             r[n_q + c] = gc * k;
         }
         Ok(r)
+    }
+
+    /// Add the force of load `l` in `D` at load factor `factor`: a pressure with the shifted
+    /// increment `q_shift` (its derivative part `ⁿū̇`), the contact with the group's committed
+    /// particle states, thickness, penalty and tool offsets and the increment `dq`; dead loads
+    /// carry no derivative and are left out.
+    fn add_dual_load(
+        &self,
+        l: &DualLoad,
+        g: &DualState<D>,
+        dq: &[D],
+        q_shift: &[D],
+        factor: f64,
+        f: &mut [D],
+    ) -> Result<(), ShellError> {
+        let model = &self.problem.model;
+        match l {
+            DualLoad::Pressure(p) => p.force_generic(model, q_shift, factor, f),
+            DualLoad::Contact(c) => {
+                let penalty = match c.penalty_factor {
+                    Some(k) => g.material.young * k / g.thickness,
+                    None => D::cst(c.contact.penalty()),
+                };
+                let inputs = ContactInputs {
+                    particles: &g.particles,
+                    thickness: g.thickness,
+                    penalty,
+                    offsets: &g.tool_offsets,
+                };
+                c.contact.force_with(model, &inputs, dq, factor, f)
+            }
+            DualLoad::Constant(inner) => self.add_dual_load(inner, g, dq, q_shift, 1.0, f),
+            DualLoad::PointForce(_) | DualLoad::Gravity(_) => Ok(()),
+        }
     }
 
     /// Check that the loads given to the reference are the problem's: equal forces at `dq`.
@@ -503,6 +628,7 @@ impl<D: DesignDual> DualShellProblem<D> {
                 material: g.material,
                 thickness: g.thickness,
                 unknowns,
+                tool_offsets: g.tool_offsets.clone(),
             });
         }
         self.pending = Some(next);

@@ -17,6 +17,7 @@ pub mod fd;
 use crate::material::{MaterialError, MaterialParams, PARAM_NAMES};
 use crate::shell::model::ShellModel;
 use crate::shell::ShellError;
+use std::collections::BTreeMap;
 use thiserror::Error;
 
 /// A material parameter as a design variable (the fields of [`MaterialParams`]).
@@ -71,22 +72,48 @@ impl MaterialParameter {
 }
 
 /// What a design variable changes. Non-exhaustive: shape (surface parameters, control-point
-/// moves with their design velocity field) and rigid-tool placements come next.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+/// moves with their design velocity field) comes next.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
 #[non_exhaustive]
 pub enum DesignKind {
     /// The shell thickness `t` (uniform).
     Thickness,
     /// A material parameter.
     Material(MaterialParameter),
+    /// The translation of the named rigid tool's whole path by `τ` along axis `axis` (0, 1, 2 =
+    /// x, y, z): the tool position of the paper's §4.2, whose design velocity on the tool is
+    /// the constant `V^c = e_axis` (eq 76) and whose fictitious load is `b'_N` (eq 83). The
+    /// variable's value is the offset from the case's path (0 at the nominal design).
+    Tool {
+        /// Tool name (`[[tool]] name`).
+        tool: String,
+        /// Axis 0, 1, 2.
+        axis: usize,
+    },
 }
 
+/// The axis names of [`DesignKind::Tool`] in case keys (`tool.<name>.x`).
+pub const TOOL_AXES: [&str; 3] = ["x", "y", "z"];
+
 impl DesignKind {
-    /// From a case-file key: `thickness`, or `material.<name>` with `<name>` one of
-    /// [`PARAM_NAMES`].
+    /// From a case-file key: `thickness`, `material.<name>` with `<name>` one of
+    /// [`PARAM_NAMES`], or `tool.<name>.<x|y|z>` (the tool name is checked against the case's
+    /// tools by [`check_tools`]).
     pub fn parse(key: &str) -> Result<Self, DesignError> {
         if key == "thickness" {
             return Ok(DesignKind::Thickness);
+        }
+        if let Some(rest) = key.strip_prefix("tool.") {
+            let parsed = rest.rsplit_once('.').and_then(|(name, ax)| {
+                let axis = TOOL_AXES.iter().position(|a| *a == ax)?;
+                (!name.trim().is_empty()).then(|| DesignKind::Tool {
+                    tool: name.to_string(),
+                    axis,
+                })
+            });
+            return parsed.ok_or_else(|| DesignError::UnknownKind {
+                key: key.to_string(),
+            });
         }
         match key.strip_prefix("material.") {
             Some(name) => Ok(DesignKind::Material(MaterialParameter::from_name(name)?)),
@@ -125,11 +152,19 @@ impl DesignVariable {
         Self::new(p.name(), DesignKind::Material(p))
     }
 
+    /// A tool translation along `axis` (0, 1, 2), named `<tool>.<x|y|z>`.
+    pub fn tool(tool: impl Into<String>, axis: usize) -> Self {
+        let tool = tool.into();
+        let name = format!("{tool}.{}", TOOL_AXES[axis.min(2)]);
+        Self::new(name, DesignKind::Tool { tool, axis })
+    }
+
     /// Its value at `design`.
     pub fn value(&self, design: &Design) -> f64 {
-        match self.kind {
+        match &self.kind {
             DesignKind::Thickness => design.thickness,
             DesignKind::Material(p) => design.material.to_array()[p.index()],
+            DesignKind::Tool { tool, axis } => design.tool_offset(tool)[*axis],
         }
     }
 
@@ -143,8 +178,8 @@ impl DesignVariable {
                 detail: "expected a finite perturbation".into(),
             });
         }
-        let mut d = *design;
-        match self.kind {
+        let mut d = design.clone();
+        match &self.kind {
             DesignKind::Thickness => {
                 d.thickness += delta;
                 if !(d.thickness > 0.0 && d.thickness.is_finite()) {
@@ -169,6 +204,16 @@ impl DesignVariable {
                         delta,
                         detail: e.to_string(),
                     })?;
+            }
+            DesignKind::Tool { tool, axis } => {
+                if *axis > 2 {
+                    return Err(DesignError::InvalidPerturbation {
+                        variable: self.name.clone(),
+                        delta,
+                        detail: format!("tool axis {axis}: expected 0, 1 or 2 (x, y, z)"),
+                    });
+                }
+                d.tool_offsets.entry(tool.clone()).or_insert([0.0; 3])[*axis] += delta;
             }
         }
         Ok(d)
@@ -214,23 +259,48 @@ pub fn validate_design(
     Ok(())
 }
 
-/// The non-shape design of a shell: thickness and material.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// The non-shape design of a shell: thickness, material and the tool offsets.
+#[derive(Clone, Debug, PartialEq)]
 pub struct Design {
     /// Thickness `t`.
     pub thickness: f64,
     /// Material parameters.
     pub material: MaterialParams<f64>,
+    /// Translation of each named tool's whole path from the case's (absent: zero).
+    pub tool_offsets: BTreeMap<String, [f64; 3]>,
 }
 
 impl Design {
-    /// The design of `model`.
+    /// The design of `model` (no tool offsets: the model does not know the tools).
     pub fn of(model: &ShellModel) -> Self {
         Design {
             thickness: model.thickness,
             material: model.material,
+            tool_offsets: BTreeMap::new(),
         }
     }
+
+    /// The offset of tool `name` (zero when not set).
+    pub fn tool_offset(&self, name: &str) -> [f64; 3] {
+        self.tool_offsets.get(name).copied().unwrap_or([0.0; 3])
+    }
+}
+
+/// Check that every tool variable names one of `tools` (the case's `[[tool]]` names):
+/// [`DesignError::UnknownTool`] listing them otherwise.
+pub fn check_tools(variables: &[DesignVariable], tools: &[&str]) -> Result<(), DesignError> {
+    for v in variables {
+        if let DesignKind::Tool { tool, .. } = &v.kind {
+            if !tools.contains(&tool.as_str()) {
+                return Err(DesignError::UnknownTool {
+                    variable: v.name.clone(),
+                    tool: tool.clone(),
+                    expected: format!("{tools:?}"),
+                });
+            }
+        }
+    }
+    Ok(())
 }
 
 /// A monitored response: a component of the RK-interpolated mid-surface displacement
@@ -298,10 +368,23 @@ pub enum DesignError {
         second: String,
     },
     /// A key that is no design-variable kind.
-    #[error("design variable kind `{key}`: expected `thickness` or `material.<parameter>`")]
+    #[error(
+        "design variable kind `{key}`: expected `thickness`, `material.<parameter>` or \
+         `tool.<name>.<x|y|z>`"
+    )]
     UnknownKind {
         /// The key given.
         key: String,
+    },
+    /// A tool variable naming no tool of the case.
+    #[error("design variable `{variable}`: tool `{tool}` is unknown, expected one of {expected}")]
+    UnknownTool {
+        /// Variable name.
+        variable: String,
+        /// The tool name given.
+        tool: String,
+        /// The case's tool names.
+        expected: String,
     },
     /// An unknown material parameter.
     #[error("material parameter `{name}`: unknown, expected one of {expected}")]
