@@ -79,10 +79,11 @@ impl ContactFaces {
 
 /// Slave points of one in-plane quadrature point.
 #[derive(Clone, Debug, PartialEq)]
-struct Site {
-    point: usize,
+pub(super) struct Site {
+    pub(super) point: usize,
     x0: V3<f64>,
-    n0: V3<f64>,
+    /// Initial mid-surface normal `n⁰`.
+    pub(super) n0: V3<f64>,
     /// `(ζ, initial face area weight)`.
     faces: Vec<(f64, f64)>,
 }
@@ -190,28 +191,28 @@ pub(crate) fn neighbour_state<T: Real>(
 }
 
 /// The evaluated kinematics of one site (generic).
-struct SiteEval<T> {
+pub(super) struct SiteEval<T> {
     /// Local DOF increments (5 per neighbour) and states, from `gather_local`.
-    parts: Vec<ParticleState<T>>,
-    local: Vec<T>,
+    pub(super) parts: Vec<ParticleState<T>>,
+    pub(super) local: Vec<T>,
     /// Per face: slave position and per-tool interior projections.
-    faces: Vec<FaceEval<T>>,
+    pub(super) faces: Vec<FaceEval<T>>,
     /// Penalty `ω`.
-    penalty: T,
+    pub(super) penalty: T,
 }
 
-struct FaceEval<T> {
-    zeta: f64,
+pub(super) struct FaceEval<T> {
+    pub(super) zeta: f64,
     /// `ζ t/2`.
-    zh: T,
+    pub(super) zh: T,
     /// Initial face area weight `w`.
-    area: T,
-    contacts: Vec<Option<ContactPoint<T>>>,
+    pub(super) area: T,
+    pub(super) contacts: Vec<Option<ContactPoint<T>>>,
 }
 
 impl<T: Real> FaceEval<T> {
     /// The nearest tool: the interior projection with the smallest gap.
-    fn nearest(&self) -> Option<(usize, &ContactPoint<T>)> {
+    pub(super) fn nearest(&self) -> Option<(usize, &ContactPoint<T>)> {
         self.contacts
             .iter()
             .enumerate()
@@ -305,7 +306,12 @@ impl ShellContact {
         self.penalty
     }
 
-    fn check_model(
+    /// The slave sites (one per in-plane quadrature point), in evaluation order.
+    pub(super) fn sites(&self) -> &[Site] {
+        &self.sites
+    }
+
+    pub(super) fn check_model(
         &self,
         model: &ShellModel,
         q: usize,
@@ -333,7 +339,7 @@ impl ShellContact {
 
     /// Slave positions and projections of every site at `(q, t)`, generic, with the model's
     /// committed state, thickness and penalty and the tools on their paths.
-    fn evaluate<T: Real>(
+    pub(super) fn evaluate<T: Real>(
         &self,
         model: &ShellModel,
         q: &[T],

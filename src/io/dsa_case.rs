@@ -23,8 +23,8 @@
 //! ranges). [`dual_loads`] checks that the dual-number reference can carry the case's loads.
 
 use super::shell_case::{Load, LoadScalingSpec, Monitor as CaseMonitor, PenaltySpec, ShellCase};
-use crate::contact::{RigidTool, ShellContact};
 use super::CaseError;
+use crate::contact::{RigidTool, ShellContact};
 use crate::material::MaterialParams;
 use crate::sensitivity::dual::{DualContact, DualLoad};
 use crate::sensitivity::{check_tools, Design, DesignKind, DesignVariable, Monitor};
@@ -434,11 +434,7 @@ fn design_kind(path: &Path, key: &str, s: &str) -> Result<DesignKind, CaseError>
 
 /// Check that every `tool.<name>.<axis>` design variable of `spec` names one of the case's
 /// `tools`: a [`CaseError::Invalid`] at `design[k].kind` listing the tools otherwise.
-pub fn check_tool_names(
-    path: &Path,
-    tools: &[RigidTool],
-    spec: &DsaSpec,
-) -> Result<(), CaseError> {
+pub fn check_tool_names(path: &Path, tools: &[RigidTool], spec: &DsaSpec) -> Result<(), CaseError> {
     let names: Vec<&str> = tools.iter().map(|t| t.name.as_str()).collect();
     for (k, e) in spec.design.iter().enumerate() {
         check_tools(std::slice::from_ref(&e.variable), &names).map_err(|err| {

@@ -13,10 +13,10 @@
 use super::dsa_case::{
     check_tool_names, dual_contact, dual_loads, DesignEntry, DsaMethod, DsaSpec,
 };
-use crate::contact::ShellContact;
 use super::shell_build;
 use super::shell_case::ShellCase;
 use super::CaseError;
+use crate::contact::ShellContact;
 use crate::sensitivity::dual::{run_dual, DualMode, SensitivityError};
 use crate::sensitivity::fd::{self, fit_rate, Analysis, RunResponse, TaylorFit, TaylorRow};
 use crate::sensitivity::{validate_design, Design, DesignVariable};
@@ -68,16 +68,20 @@ impl Analysis for CaseAnalysis<'_> {
         c.thickness = design.thickness;
         c.material = design.material;
         for (name, offset) in &design.tool_offsets {
-            let tool = c.tools.iter_mut().find(|t| &t.name == name).ok_or_else(|| {
-                SensitivityError::Design(crate::sensitivity::DesignError::UnknownTool {
-                    variable: name.clone(),
-                    tool: name.clone(),
-                    expected: format!(
-                        "{:?}",
-                        self.case.tools.iter().map(|t| &t.name).collect::<Vec<_>>()
-                    ),
-                })
-            })?;
+            let tool = c
+                .tools
+                .iter_mut()
+                .find(|t| &t.name == name)
+                .ok_or_else(|| {
+                    SensitivityError::Design(crate::sensitivity::DesignError::UnknownTool {
+                        variable: name.clone(),
+                        tool: name.clone(),
+                        expected: format!(
+                            "{:?}",
+                            self.case.tools.iter().map(|t| &t.name).collect::<Vec<_>>()
+                        ),
+                    })
+                })?;
             tool.path = tool.path.translated(*offset).map_err(|e| {
                 SensitivityError::Shell(ShellError::InvalidInput(format!(
                     "tool `{name}` moved by {offset:?}: {e}"
@@ -187,7 +191,8 @@ pub fn run(
     let t = Instant::now();
     let (problem, newton, contact) = analysis.build_with_contact(&base)?;
     validate_design(&vars, &problem.model, 0.0).map_err(SensitivityError::from)?;
-    let nominal = fd::response_with_contact(problem, contact, &newton, analysis.solver(), monitors)?;
+    let nominal =
+        fd::response_with_contact(problem, contact, &newton, analysis.solver(), monitors)?;
     let time_analysis = t.elapsed().as_secs_f64();
     progress(&format!(
         "analysis: {} converged steps, {:.2} s",
@@ -499,7 +504,10 @@ pub fn kind_name(v: &DesignVariable) -> String {
     match &v.kind {
         crate::sensitivity::DesignKind::Material(p) => format!("material.{}", p.name()),
         crate::sensitivity::DesignKind::Tool { tool, axis } => {
-            format!("tool.{tool}.{}", crate::sensitivity::TOOL_AXES[*axis.min(&2)])
+            format!(
+                "tool.{tool}.{}",
+                crate::sensitivity::TOOL_AXES[*axis.min(&2)]
+            )
         }
         _ => "thickness".into(),
     }

@@ -364,7 +364,8 @@ impl<D: DesignDual> DualShellProblem<D> {
                 let count = nd.min(variables.len() - first);
                 let mut t_parts = vec![0.0; nd];
                 let mut m_parts = vec![vec![0.0; nd]; 6];
-                let mut tool_parts = vec![[vec![0.0; nd], vec![0.0; nd], vec![0.0; nd]]; tool_names.len()];
+                let mut tool_parts =
+                    vec![[vec![0.0; nd], vec![0.0; nd], vec![0.0; nd]]; tool_names.len()];
                 for (k, v) in variables[first..first + count].iter().enumerate() {
                     match &v.kind {
                         DesignKind::Thickness => t_parts[k] = 1.0,

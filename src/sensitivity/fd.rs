@@ -224,8 +224,7 @@ pub fn flags(runs: &[&RunResponse]) -> Vec<bool> {
     (0..n)
         .map(|s| {
             flagged |= runs.windows(2).any(|w| {
-                w[0].yielding[s] != w[1].yielding[s]
-                    || w[0].contact.get(s) != w[1].contact.get(s)
+                w[0].yielding[s] != w[1].yielding[s] || w[0].contact.get(s) != w[1].contact.get(s)
             });
             flagged
         })
