@@ -200,6 +200,24 @@ pub fn run(
         time_analysis
     ));
 
+    // With contact, the later runs replay the plain run's load levels: every converged level
+    // becomes a `stops` entry and the step size starts at `max_step` (≥ every gap), so each
+    // step is clipped to the next level and keeps its size (a clipped step neither grows nor
+    // shrinks): the runs land on the same levels whatever their iteration counts (the hooked
+    // run needs the converged tangent, and near a change of the contact set an iteration more
+    // or less changes the adaptive growth; the discrete response depends on the levels). A
+    // re-run that has to cut a step still differs and is reported (`StepSequence`).
+    let replay_case;
+    let analysis = if case.tools.is_empty() {
+        analysis
+    } else {
+        let mut c = case.clone();
+        c.steps.stops = nominal.loads.clone();
+        c.steps.initial_step = c.steps.max_step;
+        replay_case = c;
+        CaseAnalysis { case: &replay_case }
+    };
+
     // (2) The dual reference.
     let mut dual: Option<Vec<Vec<Vec<f64>>>> = None; // [variable][step][monitor]
     let (mut time_dual, mut time_dual_run, mut dual_value_difference) = (None, None, None);
