@@ -105,7 +105,7 @@ impl NonlinearProblem for Recording<'_> {
             Some(c) => c
                 .report(model, &vec![0.0; model.n_dofs()], load)
                 .map(|r| r.slaves.iter().map(|s| s.pressure > 0.0).collect())
-                .map_err(|e| crate::shell::ShellError::from(e)),
+                .map_err(crate::shell::ShellError::from),
         };
         match values.and_then(|v| contact.map(|c| (v, c))) {
             Ok((v, c)) => {
