@@ -470,3 +470,66 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
     let d = r.variables[0].dual.as_ref().unwrap();
     assert!(d.last().unwrap().iter().any(|x| x.abs() > 1e-3));
 }
+
+#[test]
+fn tool_design_variables_are_checked() {
+    use shelldsa::io::CaseError;
+    use shelldsa::sensitivity::{DesignKind, DesignVariable};
+    assert_eq!(
+        DesignKind::parse("tool.die.z").unwrap(),
+        DesignKind::Tool {
+            tool: "die".into(),
+            axis: 2
+        }
+    );
+    // A tool name may contain dots: the axis is the last component.
+    assert_eq!(
+        DesignKind::parse("tool.a.b.x").unwrap(),
+        DesignKind::Tool {
+            tool: "a.b".into(),
+            axis: 0
+        }
+    );
+    for bad in ["tool.die.w", "tool.die", "tool..x", "tool."] {
+        let e = DesignKind::parse(bad).unwrap_err().to_string();
+        assert!(e.contains(bad) && e.contains("tool.<name>.<x|y|z>"), "{e}");
+    }
+    assert!(DesignVariable::tool("die", 3).is_err());
+    assert_eq!(DesignVariable::tool("die", 1).unwrap().name, "die.y");
+    // An unknown tool in a case: a typed error at the key, listing the case's tools.
+    let text = CASE.replace("{final}", "0.5").replace(
+        "{design}",
+        "[[design]]\nname = \"h\"\nkind = \"tool.holder.x\"\nfd_steps = [1e-3]\n",
+    );
+    match parse_shell_case(&text, Path::new("x.toml")) {
+        Err(CaseError::Invalid {
+            key,
+            value,
+            expected,
+            ..
+        }) => {
+            assert_eq!(key, "design[0].kind");
+            assert!(value.contains("tool.holder.x"), "{value}");
+            assert!(
+                expected.contains("\"punch\"") && expected.contains("\"die\""),
+                "{expected}"
+            );
+        }
+        other => panic!("expected an Invalid error, got {other:?}"),
+    }
+    // Tool variables take absolute finite-difference steps (τ = 0 at the nominal design).
+    let c = case(
+        0.5,
+        "[[design]]\nname = \"x\"\nkind = \"tool.die.x\"\nfd_steps = [2e-3]\n",
+    );
+    let spec = c.dsa.unwrap();
+    let base = shelldsa::sensitivity::Design {
+        thickness: c.thickness,
+        material: c.material,
+        tool_offsets: Default::default(),
+    };
+    assert_eq!(spec.design[0].absolute_steps(&base), vec![2e-3]);
+    let moved = spec.design[0].variable.perturbed(&base, 2e-3).unwrap();
+    assert_eq!(moved.tool_offset("die"), [2e-3, 0.0, 0.0]);
+    assert_eq!(spec.design[0].variable.value(&moved), 2e-3);
+}

@@ -1,13 +1,15 @@
 //! Design sensitivity analysis (issue 5; the paper's §3, eqs 37–65): design variables, the
 //! dual-number reference ([`dual`]) and finite differences of complete re-runs ([`fd`]).
 //!
-//! This first part covers the **non-shape** design variables of the shell without contact:
-//! the thickness `t` and the material parameters `E, ν, k, σ0, H, β` (eqs 9–13). They enter the
+//! The **non-shape** design variables: the thickness `t` and the material parameters
+//! `E, ν, k, σ0, H, β` (eqs 9–13), and the **tool positions** ([`DesignKind::Tool`], the
+//! translation of a rigid tool's whole path, which enters through the contact force only:
+//! `b'_N` of eq 83, `crate::contact::sensitivity`). The first ones enter the
 //! residual (eq 32) only through the point kernel's `PointInput::thickness` and
 //! `PointInput::material`; the design velocity of eqs 37–43 is zero for them (the geometry does
 //! not move), so the structural fictitious load `a'_V` of eq (64) reduces to the material and
 //! history terms of eq (49). Shape design variables (NURBS control points, a surface parameter)
-//! and tool placements (`b'_N`, eq 83) are the next kinds of [`DesignKind`].
+//! are the next kind of [`DesignKind`].
 //!
 //! Layout: `docs/sensitivity.md`.
 
@@ -153,10 +155,15 @@ impl DesignVariable {
     }
 
     /// A tool translation along `axis` (0, 1, 2), named `<tool>.<x|y|z>`.
-    pub fn tool(tool: impl Into<String>, axis: usize) -> Self {
+    pub fn tool(tool: impl Into<String>, axis: usize) -> Result<Self, DesignError> {
         let tool = tool.into();
-        let name = format!("{tool}.{}", TOOL_AXES[axis.min(2)]);
-        Self::new(name, DesignKind::Tool { tool, axis })
+        let Some(a) = TOOL_AXES.get(axis) else {
+            return Err(DesignError::UnknownKind {
+                key: format!("tool.{tool}.<axis {axis}>"),
+            });
+        };
+        let name = format!("{tool}.{a}");
+        Ok(Self::new(name, DesignKind::Tool { tool, axis }))
     }
 
     /// Its value at `design`.
