@@ -405,10 +405,10 @@ fn check_variable(r: &dsa_run::DsaResult, v: usize) {
         "{name}: {unflagged} of {} steps unflagged",
         last.flagged.len()
     );
-    // At the smallest h the central difference's truncation (~h²) is below 1e-8 and the
-    // re-runs' noise (~1e-14 relative responses / h) near 1e-9; measured ≤ 1.1e-6 with the
-    // largest on small components (|ψ'| ~ 1e-5 max|ψ'|, whose relative noise is larger):
-    // 1e-5 leaves a factor ~10 and still fails a wrong derivative term.
+    // At the smallest h (5e-4) the central difference's truncation falls as h² (measured
+    // 1.6e-5, 4.1e-6, 1.0e-6, 2.6e-7 for die x at h = 4, 2, 1, 0.5 ·1e-3; die z ≤ 2.9e-7,
+    // t ≤ 5.5e-6) above the re-runs' noise (~1e-14 relative responses / h ≈ 1e-10): 1e-5 at
+    // the smallest h leaves a factor ~40 and still fails a wrong derivative term.
     let e = dsa_run::max_rel_diff(var, last).expect("comparable components");
     assert!(e < 1e-5, "{name}: dual vs FD {e:e}");
     // The Taylor remainder of the dual derivative falls as h² (the derivative of the discrete
@@ -532,4 +532,61 @@ fn tool_design_variables_are_checked() {
     let moved = spec.design[0].variable.perturbed(&base, 2e-3).unwrap();
     assert_eq!(moved.tool_offset("die"), [2e-3, 0.0, 0.0]);
     assert_eq!(spec.design[0].variable.value(&moved), 2e-3);
+}
+
+#[test]
+fn penalty_from_factor_is_differentiated_with_e_and_t() {
+    // ω = c E/t (`penalty_factor`): a re-run with another E or t has another penalty, and the
+    // reference differentiates it (c = 1000/70000 gives the ω = 1000 of the other tests).
+    let design = r#"
+[[design]]
+name = "t"
+kind = "thickness"
+fd_steps = [1e-3, 1e-4]
+[[design]]
+name = "E"
+kind = "material.young"
+fd_steps = [1e-3, 1e-4]
+[dsa]
+monitors = ["center.uz", "edge.ux", "edge.uz"]
+"#;
+    let text = CASE
+        .replace("{final}", "0.25")
+        .replace("{design}", design)
+        .replace("penalty = 1000.0", "penalty_factor = 0.014285714285714285");
+    let c = parse_shell_case(&text, Path::new("tests/dsa_contact.rs")).unwrap();
+    let spec = dsa_run::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
+    let r = dsa_run::run(&c, &spec, &mut |_| {}).unwrap();
+    for var in &r.variables {
+        let last = var.fd.last().unwrap();
+        let unflagged = last.flagged.iter().filter(|f| !**f).count();
+        let e = dsa_run::max_rel_diff(var, last).expect("comparable components");
+        let all: Vec<String> = var
+            .fd
+            .iter()
+            .map(|c| format!("{:.2e}", dsa_run::max_rel_diff(var, c).unwrap_or(f64::NAN)))
+            .collect();
+        println!(
+            "penalty_factor, `{}`: {unflagged} of {} steps unflagged, dual vs FD per h {all:?}, \
+             smallest {e:.2e}",
+            var.entry.variable.name,
+            last.flagged.len()
+        );
+        assert!(unflagged >= 5);
+        // The better of the two step sizes: the truncation falls as h² and the re-runs' noise
+        // grows as 1/h (measured for E: 2.0e-6 at h/τ = 1e-3, 1.9e-5 at 1e-4, where the
+        // response's small E-derivative meets the convergence noise; for t 4.4e-7, 4.5e-9). A
+        // penalty held fixed in the reference would be off by the penalty's share of the
+        // derivative, orders of magnitude above 1e-5.
+        let best = var
+            .fd
+            .iter()
+            .filter_map(|c| dsa_run::max_rel_diff(var, c))
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            best < 1e-5,
+            "`{}`: dual vs FD {best:e}",
+            var.entry.variable.name
+        );
+    }
 }
