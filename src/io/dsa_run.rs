@@ -564,10 +564,17 @@ pub fn table(r: &DsaResult, v: usize) -> String {
         var.entry.variable.name,
         kind_name(&var.entry.variable),
         var.value,
-        col.map_or(String::from(", no finite differences"), |c| format!(
-            ", Δτ = {:e} (h/|τ| = {:e})",
-            c.h, c.relative
-        ))
+        col.map_or(String::from(", no finite differences"), |c| {
+            if matches!(
+                var.entry.variable.kind,
+                crate::sensitivity::DesignKind::Tool { .. }
+            ) {
+                // τ is the tool's offset (0): fd_steps are absolute.
+                format!(", Δτ = {:e} (absolute: τ is the tool's offset)", c.h)
+            } else {
+                format!(", Δτ = {:e} (h/|τ| = {:e})", c.h, c.relative)
+            }
+        })
     );
     let (dual_head, cont_head) = if col.is_some() {
         ("ψ'Δτ dual", "ψ'Δτ cont.")
