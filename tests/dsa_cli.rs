@@ -97,9 +97,10 @@ fn design_errors_name_the_key() {
             "no parameter `height`",
         ),
         (
+            // A tool variable in a case without that tool.
             "[[design]]\nname = \"x\"\nkind = \"tool.die.x\"\n".into(),
             "design[0].kind",
-            "not supported yet",
+            "tool `die` is unknown",
         ),
         (
             "[[design]]\nname = \"x\"\nkind = \"material.yield\"\n".into(),

@@ -226,6 +226,7 @@ fn elastic_cantilever_sensitivities_follow_beam_theory() {
         thickness: T,
         material: MaterialParams::new(E, 0.0, 1e30, 0.0, 1.0).unwrap(),
         surface: None,
+        tool_offsets: Default::default(),
     };
     let grid = regular_grid(ParamBox::unit(), 25, 3);
     let cq = CellQuadrature::for_particle_grid(&grid, 2, 4).unwrap();

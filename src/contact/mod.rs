@@ -11,19 +11,27 @@
 //! - [`penalty`]: the penalty force of one slave point (eqs 69–70) and its hand-derived
 //!   consistent 3×3 tangent (eq 72, with the curvature term of the normal's rotation).
 //! - [`shell`]: [`ShellContact`], the coupling to the shell model as an external (follower) load:
-//!   slave points on the top and/or bottom faces at the in-plane quadrature points.
+//!   slave points on the top and/or bottom faces at the in-plane quadrature points; its
+//!   [`ShellContact::force_with`] evaluates the force with the design-dependent inputs (state,
+//!   thickness, penalty, tool offsets) in a dual scalar for the dual-number reference.
+//! - [`sensitivity`]: the hand-derived contact-force sensitivity [`ShellContact::force_dot`]
+//!   (eqs 78–83: the projection sensitivity of eq 80 and the fictitious load `b'_N` of eq 83,
+//!   with the history terms of the committed state).
 //!
 //! Formulas, conventions and the measured checks: `docs/contact.md`.
 
 pub mod penalty;
 pub mod projection;
+pub mod sensitivity;
 pub mod shell;
 pub mod tool;
 
 pub use penalty::{penalty_force, penalty_tangent};
 pub use projection::{closest_point, nearest_tool, Bound, ContactPoint};
+pub use sensitivity::ContactSeeds;
 pub use shell::{
-    ContactFaces, ContactReport, ShellContact, SlaveReport, ToolReport, DEFAULT_PENALTY_FACTOR,
+    ContactFaces, ContactInputs, ContactReport, ShellContact, SlaveReport, ToolReport,
+    DEFAULT_PENALTY_FACTOR,
 };
 pub use tool::{CoarseGrid, PathKey, RigidMotion, RigidTool, Side, ToolPath};
 

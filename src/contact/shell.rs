@@ -79,10 +79,11 @@ impl ContactFaces {
 
 /// Slave points of one in-plane quadrature point.
 #[derive(Clone, Debug, PartialEq)]
-struct Site {
-    point: usize,
+pub(super) struct Site {
+    pub(super) point: usize,
     x0: V3<f64>,
-    n0: V3<f64>,
+    /// Initial mid-surface normal `n⁰`.
+    pub(super) n0: V3<f64>,
     /// `(ζ, initial face area weight)`.
     faces: Vec<(f64, f64)>,
 }
@@ -152,24 +153,66 @@ pub struct ShellContact {
     tracker: Mutex<Tracker>,
 }
 
-/// The evaluated kinematics of one site (generic).
-struct SiteEval<T> {
-    /// Local DOF increments (5 per neighbour) and states, from `gather_local`.
-    parts: Vec<ParticleState<T>>,
-    local: Vec<T>,
-    /// Per face: slave position and per-tool interior projections.
-    faces: Vec<FaceEval<T>>,
+/// The design-dependent inputs of the contact force in scalar `T`
+/// ([`ShellContact::force_with`]).
+#[derive(Clone, Copy, Debug)]
+pub struct ContactInputs<'a, T> {
+    /// Committed states of the real particles (as `ShellModel::particles`; images follow their
+    /// sources).
+    pub particles: &'a [ParticleState<T>],
+    /// Shell thickness `t`.
+    pub thickness: T,
+    /// Penalty `ω`.
+    pub penalty: T,
+    /// Per tool, a translation added to its path (zero: the tools as built).
+    pub offsets: &'a [V3<T>],
 }
 
-struct FaceEval<T> {
-    zeta: f64,
-    area: f64,
-    contacts: Vec<Option<ContactPoint<T>>>,
+/// The committed state of shape-function particle `j` from the real particles' `particles`: an
+/// image is `Q` times its source's (as `ShellModel::particle_state`).
+pub(crate) fn neighbour_state<T: Real>(
+    model: &ShellModel,
+    j: usize,
+    particles: &[ParticleState<T>],
+) -> ParticleState<T> {
+    let n = model.particles.len();
+    if j < n {
+        return particles[j];
+    }
+    let im = &model.symmetry.images[j - n];
+    let q = im.map.map(T::cst);
+    let s = particles[im.source];
+    ParticleState {
+        u: q * s.u,
+        d: q * s.d,
+        d0: q * s.d0,
+        e: [q * s.e[0], q * s.e[1]],
+    }
+}
+
+/// The evaluated kinematics of one site (generic).
+pub(super) struct SiteEval<T> {
+    /// Local DOF increments (5 per neighbour) and states, from `gather_local`.
+    pub(super) parts: Vec<ParticleState<T>>,
+    pub(super) local: Vec<T>,
+    /// Per face: slave position and per-tool interior projections.
+    pub(super) faces: Vec<FaceEval<T>>,
+    /// Penalty `ω`.
+    pub(super) penalty: T,
+}
+
+pub(super) struct FaceEval<T> {
+    pub(super) zeta: f64,
+    /// `ζ t/2`.
+    pub(super) zh: T,
+    /// Initial face area weight `w`.
+    pub(super) area: T,
+    pub(super) contacts: Vec<Option<ContactPoint<T>>>,
 }
 
 impl<T: Real> FaceEval<T> {
     /// The nearest tool: the interior projection with the smallest gap.
-    fn nearest(&self) -> Option<(usize, &ContactPoint<T>)> {
+    pub(super) fn nearest(&self) -> Option<(usize, &ContactPoint<T>)> {
         self.contacts
             .iter()
             .enumerate()
@@ -263,7 +306,12 @@ impl ShellContact {
         self.penalty
     }
 
-    fn check_model(
+    /// The slave sites (one per in-plane quadrature point), in evaluation order.
+    pub(super) fn sites(&self) -> &[Site] {
+        &self.sites
+    }
+
+    pub(super) fn check_model(
         &self,
         model: &ShellModel,
         q: usize,
@@ -289,10 +337,32 @@ impl ShellContact {
         Ok(())
     }
 
-    /// Slave positions and projections of every site at `(q, t)`, generic.
-    fn evaluate<T: Real>(
+    /// Slave positions and projections of every site at `(q, t)`, generic, with the model's
+    /// committed state, thickness and penalty and the tools on their paths.
+    pub(super) fn evaluate<T: Real>(
         &self,
         model: &ShellModel,
+        q: &[T],
+        t: f64,
+        surfaces: &[Surface<T>],
+    ) -> Result<Vec<SiteEval<T>>, ContactError> {
+        let particles: Vec<ParticleState<T>> = model.particles.iter().map(|p| p.lift()).collect();
+        let offsets = vec![V3::zeros(); self.tools.len()];
+        let inputs = ContactInputs {
+            particles: &particles,
+            thickness: T::cst(model.thickness),
+            penalty: T::cst(self.penalty),
+            offsets: &offsets,
+        };
+        self.evaluate_with(model, &inputs, q, t, surfaces)
+    }
+
+    /// Slave positions and projections of every site at `(q, t)` from `inputs` (committed
+    /// particle states, thickness, tool offsets in scalar `T`), generic.
+    fn evaluate_with<T: Real>(
+        &self,
+        model: &ShellModel,
+        inputs: &ContactInputs<'_, T>,
         q: &[T],
         t: f64,
         surfaces: &[Surface<T>],
@@ -300,13 +370,22 @@ impl ShellContact {
         let motions: Vec<_> = self
             .tools
             .iter()
-            .map(|tl| tl.motion(t).lift::<T>())
+            .zip(inputs.offsets)
+            .map(|(tl, o)| {
+                let mut m = tl.motion(t).lift::<T>();
+                m.translation += o;
+                m
+            })
             .collect();
-        let h = model.thickness / 2.0;
         let mut out = Vec::with_capacity(self.sites.len());
         for site in &self.sites {
-            let (parts, local) = model.gather_local(site.point, q);
+            let (_, local) = model.gather_local(site.point, q);
             let p = &model.points[site.point];
+            let parts: Vec<ParticleState<T>> = p
+                .neighbours
+                .iter()
+                .map(|&j| neighbour_state(model, j, inputs.particles))
+                .collect();
             let mut xbar = site.x0.map(T::cst);
             let mut d = site.n0.map(T::cst);
             for (n, (s, st)) in p.shape.iter().zip(&parts).enumerate() {
@@ -315,9 +394,15 @@ impl ShellContact {
                 let dj = rotate_director(&st.d, &st.e[0], &st.e[1], [x[3], x[4]]);
                 d += (dj - st.d0) * T::cst(s.psi);
             }
+            let sf = &p.surface;
             let mut faces = Vec::with_capacity(site.faces.len());
-            for &(zeta, area) in &site.faces {
-                let xs = xbar + d * T::cst(zeta * h);
+            for &(zeta, _) in &site.faces {
+                // ζ t/2 and the initial face area w |x⁰,1 × x⁰,2| (module documentation).
+                let zh = inputs.thickness * (zeta * 0.5);
+                let a1 = sf.x_a[0].map(T::cst) + sf.n_a[0].map(T::cst) * zh;
+                let a2 = sf.x_a[1].map(T::cst) + sf.n_a[1].map(T::cst) * zh;
+                let area = a1.cross(&a2).norm() * p.weight;
+                let xs = xbar + d * zh;
                 let mut contacts = Vec::with_capacity(self.tools.len());
                 for ((tool, surf), motion) in self.tools.iter().zip(surfaces).zip(&motions) {
                     let cp = closest_point(surf, motion, tool.side, &tool.grid, &xs, &tool.name)?;
@@ -325,6 +410,7 @@ impl ShellContact {
                 }
                 faces.push(FaceEval {
                     zeta,
+                    zh,
                     area,
                     contacts,
                 });
@@ -333,6 +419,7 @@ impl ShellContact {
                 parts,
                 local,
                 faces,
+                penalty: inputs.penalty,
             });
         }
         Ok(out)
@@ -340,10 +427,9 @@ impl ShellContact {
 
     /// Add `f_c` from evaluated sites (generic).
     fn scatter_forces<T: Real>(&self, model: &ShellModel, evals: &[SiteEval<T>], f: &mut [T]) {
-        let h = model.thickness / 2.0;
         for (site, ev) in self.sites.iter().zip(evals) {
             let p = &model.points[site.point];
-            let mut total: Option<(V3<T>, V3<T>)> = None; // (Σ f, Σ ζ f)
+            let mut total: Option<(V3<T>, V3<T>)> = None; // (Σ f, Σ ζ t/2 f)
             for face in &ev.faces {
                 let Some((_, cp)) = face.nearest() else {
                     continue;
@@ -351,10 +437,11 @@ impl ShellContact {
                 if !cp.is_active() {
                     continue;
                 }
-                let fc = penalty_force(cp, self.penalty, face.area);
+                // f = −ω w g n (eq 70).
+                let fc = cp.normal * (cp.gap * -(ev.penalty * face.area));
                 let (a, b) = total.get_or_insert((V3::zeros(), V3::zeros()));
                 *a += fc;
-                *b += fc * T::cst(face.zeta * h);
+                *b += fc * face.zh;
             }
             let Some((fsum, msum)) = total else {
                 continue;
@@ -374,6 +461,40 @@ impl ShellContact {
             }
             model.scatter_local(site.point, &local, f);
         }
+    }
+
+    /// Adds `f_c(q; t)` in scalar `T` with the design-dependent inputs in `T` (the dual-number
+    /// reference, `crate::sensitivity::dual`): the committed particle states of `inputs` (so
+    /// that their sensitivities, the history dependence of the contact force, are carried),
+    /// the thickness (slave faces at `ζ t/2`, face areas), the penalty and each tool's
+    /// translation added to its path (tool-position design variables, eq 76 with a constant
+    /// `V^c`). Eqs 68–70 evaluated through [`closest_point`], whose final Newton correction in
+    /// `T` carries the projection sensitivity of eq (80). Not tracked.
+    pub fn force_with<T: Real>(
+        &self,
+        model: &ShellModel,
+        inputs: &ContactInputs<'_, T>,
+        q: &[T],
+        t: f64,
+        f: &mut [T],
+    ) -> Result<(), ShellError> {
+        self.check_model(model, q.len(), Some(f.len()))?;
+        if inputs.particles.len() != model.particles.len() {
+            return Err(ShellError::Dimension {
+                expected: model.particles.len(),
+                got: inputs.particles.len(),
+            });
+        }
+        if inputs.offsets.len() != self.tools.len() {
+            return Err(ShellError::Dimension {
+                expected: self.tools.len(),
+                got: inputs.offsets.len(),
+            });
+        }
+        let surfaces: Vec<Surface<T>> = self.tools.iter().map(|tl| tl.surface.lift()).collect();
+        let evals = self.evaluate_with(model, inputs, q, t, &surfaces)?;
+        self.scatter_forces(model, &evals, f);
+        Ok(())
     }
 
     /// Record the gaps of an f64 evaluation at `t` and check for a tool crossing the sheet.

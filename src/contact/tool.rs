@@ -161,6 +161,22 @@ impl ToolPath {
         )
     }
 
+    /// The same path translated by `offset` at every key (the pivot moves along, so a rotating
+    /// tool turns about its moved pivot): the whole motion shifted by `offset`, the tool-position
+    /// design variable of `crate::sensitivity::DesignKind::Tool`.
+    pub fn translated(&self, offset: [f64; 3]) -> Result<Self, ContactError> {
+        let keys = self
+            .keys
+            .iter()
+            .map(|k| PathKey {
+                t: k.t,
+                translation: std::array::from_fn(|c| k.translation[c] + offset[c]),
+                rotation: k.rotation,
+            })
+            .collect();
+        ToolPath::new(self.pivot, keys)
+    }
+
     /// The rigid motion at pseudo-time `t`.
     pub fn motion(&self, t: f64) -> RigidMotion<f64> {
         let (a, theta) = self.position(t);

@@ -7,7 +7,9 @@
 //! kind = "thickness"              # or "material.young" | "material.poisson" | "material.sigma0"
 //!                                 #    | "material.hardening" | "material.beta" | "material.shear_factor"
 //!                                 #    | "shape.<surface parameter>" ("shape.radius", "shape.cp[2][3].z")
+//!                                 #    | "tool.<name>.<x|y|z>" (translation of a tool's path)
 //! fd_steps = [1e-3, 1e-4]         # relative steps h/|τ| of the finite-difference study
+//!                                 # (absolute lengths for a tool variable, whose τ is 0)
 //!
 //! [dsa]
 //! methods = ["continuum", "dual", "fd"]   # default: all three
@@ -21,15 +23,17 @@
 //! admissible design ([`DesignVariable::perturbed`]: `t ± h > 0`, material parameters in their
 //! ranges). [`dual_loads`] checks that the dual-number reference can carry the case's loads.
 
-use super::shell_case::{Load, LoadScalingSpec, Monitor as CaseMonitor, ShellCase};
+use super::shell_case::{Load, LoadScalingSpec, Monitor as CaseMonitor, PenaltySpec, ShellCase};
 use super::CaseError;
+use crate::contact::{RigidTool, ShellContact};
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
-use crate::sensitivity::dual::DualLoad;
-use crate::sensitivity::{Design, DesignKind, DesignVariable, Monitor};
+use crate::sensitivity::dual::{DualContact, DualLoad};
+use crate::sensitivity::{check_tools, Design, DesignKind, DesignVariable, Monitor};
 use crate::shell::load::{Gravity, PointForce, Pressure};
 use serde::Deserialize;
 use std::path::Path;
+use std::sync::Arc;
 
 /// Default relative finite-difference steps `h/|τ|`: 1e-3 and 1e-4 (truncation error of the
 /// central difference ~1e-6 and ~1e-8 of the response's curvature scale, both far above the
@@ -106,8 +110,12 @@ pub struct DesignEntry {
 }
 
 impl DesignEntry {
-    /// The absolute steps `h = (h/|τ|)·|τ|` at `design`.
+    /// The absolute steps `h = (h/|τ|)·|τ|` at `design`; for a tool translation (whose value,
+    /// the offset, is 0 at the nominal design) `fd_steps` are absolute lengths.
     pub fn absolute_steps(&self, design: &Design) -> Vec<f64> {
+        if matches!(self.variable.kind, DesignKind::Tool { .. }) {
+            return self.fd_steps.clone();
+        }
         let tau = self.variable.value(design).abs();
         self.fd_steps.iter().map(|r| r * tau).collect()
     }
@@ -196,6 +204,7 @@ pub(crate) fn check(
         thickness,
         material: *material,
         surface: Some(surface.clone()),
+        tool_offsets: Default::default(),
     };
     let mut entries: Vec<DesignEntry> = Vec::with_capacity(design.len());
     for (k, d) in design.iter().enumerate() {
@@ -228,6 +237,7 @@ pub(crate) fn check(
                 ),
             ));
         }
+        let is_tool = matches!(kind, DesignKind::Tool { .. });
         let variable = DesignVariable::new(d.name.clone(), kind);
         let fd_steps = d
             .fd_steps
@@ -261,7 +271,7 @@ pub(crate) fn check(
             }
         }
         let tau = variable.value(&base);
-        if tau == 0.0 {
+        if tau == 0.0 && !is_tool {
             return Err(invalid(
                 path,
                 &steps_key,
@@ -274,7 +284,7 @@ pub(crate) fn check(
             ));
         }
         for (i, &r) in fd_steps.iter().enumerate() {
-            let h = r * tau.abs();
+            let h = if is_tool { r } else { r * tau.abs() };
             for delta in [h, -h] {
                 variable.perturbed(&base, delta).map_err(|e| {
                     invalid(
@@ -411,49 +421,43 @@ fn design_kind(
     surface: &Surface<f64>,
 ) -> Result<DesignKind, CaseError> {
     const EXPECTED: &str = "\"thickness\", \"material.<young|poisson|shear_factor|sigma0|\
-                            hardening|beta>\" or \"shape.<surface parameter>\"";
-    for (prefix, what) in [("tool", "tool design variables (die and punch placement)")] {
-        if s == prefix || s.starts_with(&format!("{prefix}.")) {
-            return Err(invalid(
-                path,
-                key,
-                format!("{s:?}"),
-                format!("{EXPECTED}: {what} are not supported yet"),
-            ));
-        }
-    }
+                            hardening|beta>\", \"shape.<surface parameter>\" or \
+                            \"tool.<name>.<x|y|z>\"";
     DesignKind::parse_on(s, surface)
         .map_err(|e| invalid(path, key, format!("{s:?}"), format!("{EXPECTED} ({e})")))
 }
 
-/// The case's loads as the dual-number reference evaluates them. Rejects, before any
-/// analysis, what the reference cannot carry yet: edge moments (they act through the
-/// director), loads held constant (`scaling = "constant"`), and contact with rigid tools.
+/// Check that every `tool.<name>.<axis>` design variable of `spec` names one of the case's
+/// `tools`: a [`CaseError::Invalid`] at `design[k].kind` listing the tools otherwise.
+pub fn check_tool_names(path: &Path, tools: &[RigidTool], spec: &DsaSpec) -> Result<(), CaseError> {
+    let names: Vec<&str> = tools.iter().map(|t| t.name.as_str()).collect();
+    for (k, e) in spec.design.iter().enumerate() {
+        check_tools(std::slice::from_ref(&e.variable), &names).map_err(|err| {
+            invalid(
+                path,
+                format!("design[{k}].kind"),
+                format!("{:?}", super::dsa_run::kind_name(&e.variable)),
+                format!("a tool of the case's [[tool]] tables {names:?} ({err})"),
+            )
+        })?;
+    }
+    Ok(())
+}
+
+/// The case's loads (not the contact) as the dual-number reference evaluates them; a load held
+/// constant (`scaling = "constant"`) is a [`DualLoad::Constant`]. The contact with the case's
+/// tools is added by the run with the built problem's [`crate::contact::ShellContact`]
+/// ([`dual_contact`]). Rejects, before any analysis, what the reference cannot carry yet: edge
+/// moments (they act through the director).
 pub fn dual_loads(case: &ShellCase) -> Result<Vec<DualLoad>, CaseError> {
     let path = case.path.as_path();
-    if !case.tools.is_empty() || case.contact.is_some() {
-        return Err(invalid(
-            path,
-            "tool",
-            format!("{} tool(s)", case.tools.len()),
-            "no [[tool]] and no [contact] for the dual-number reference: contact is not \
-             supported by it yet",
-        ));
-    }
     let mut out = Vec::with_capacity(case.loads.len());
     for (k, l) in case.loads.iter().enumerate() {
         let key = format!("load[{k}]");
-        if case.load_scaling.get(k).copied().unwrap_or_default() != LoadScalingSpec::Proportional {
-            return Err(invalid(
-                path,
-                format!("{key}.scaling"),
-                "\"constant\"",
-                "\"proportional\" for the dual-number reference (constant loads are not \
-                 supported by it yet)",
-            ));
-        }
+        let constant =
+            case.load_scaling.get(k).copied().unwrap_or_default() == LoadScalingSpec::Constant;
         let shell_err = |e: crate::shell::ShellError| invalid(path, &key, "(table)", e.to_string());
-        out.push(match l {
+        let load = match l {
             Load::PointForce { at, force } => DualLoad::PointForce(PointForce {
                 uv: *at,
                 force: *force,
@@ -474,7 +478,25 @@ pub fn dual_loads(case: &ShellCase) -> Result<Vec<DualLoad>, CaseError> {
                      by it yet)",
                 ))
             }
+        };
+        out.push(if constant {
+            DualLoad::Constant(Box::new(load))
+        } else {
+            load
         });
     }
     Ok(out)
+}
+
+/// The contact load of the reference for the built problem's contact `contact` (the case's
+/// `[contact]` penalty rule: `penalty_factor` makes `ω = c E/t` a function of the design).
+pub fn dual_contact(case: &ShellCase, contact: Arc<ShellContact>) -> DualLoad {
+    let penalty_factor = match case.contact.as_ref().map(|c| c.penalty) {
+        Some(PenaltySpec::Factor(c)) => Some(c),
+        _ => None,
+    };
+    DualLoad::Contact(DualContact {
+        contact,
+        penalty_factor,
+    })
 }

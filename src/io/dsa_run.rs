@@ -11,10 +11,13 @@
 //! relative step, the re-runs at `τ ± h` (`timing_s.fd`, all of them). The Taylor remainder
 //! `|ψ(τ + h) − ψ(τ) − h ψ'|` of every step size reuses the `τ + h` re-run.
 
-use super::dsa_case::{dual_loads, DesignEntry, DsaMethod, DsaSpec};
+use super::dsa_case::{
+    check_tool_names, dual_contact, dual_loads, DesignEntry, DsaMethod, DsaSpec,
+};
 use super::shell_build;
 use super::shell_case::ShellCase;
 use super::CaseError;
+use crate::contact::ShellContact;
 use crate::sensitivity::continuum::run_continuum;
 use crate::sensitivity::dual::{run_dual_on, DualMode, SensitivityError};
 use crate::sensitivity::fd::{self, fit_rate, Analysis, RunResponse, TaylorFit, TaylorRow};
@@ -24,6 +27,7 @@ use crate::shell::problem::ShellProblem;
 use crate::shell::ShellError;
 use crate::solver::NewtonSolver;
 use serde_json::{json, Value};
+use std::sync::Arc;
 use std::time::Instant;
 use thiserror::Error;
 
@@ -54,6 +58,15 @@ pub struct CaseAnalysis<'a> {
 
 impl Analysis for CaseAnalysis<'_> {
     fn build(&self, design: &Design) -> Result<(ShellProblem, NewtonSolver), SensitivityError> {
+        self.build_with_contact(design).map(|(p, n, _)| (p, n))
+    }
+
+    /// The case with the design's thickness, material and tool offsets (each tool's whole path
+    /// translated, [`crate::contact::ToolPath::translated`]), and its contact.
+    fn build_with_contact(
+        &self,
+        design: &Design,
+    ) -> Result<(ShellProblem, NewtonSolver, Option<Arc<ShellContact>>), SensitivityError> {
         let mut c = self.case.clone();
         c.thickness = design.thickness;
         c.material = design.material;
@@ -62,13 +75,34 @@ impl Analysis for CaseAnalysis<'_> {
             // boundaries, loads and monitors live on the parameter domain and stay).
             c.surface = surface.clone();
         }
+        for (name, offset) in &design.tool_offsets {
+            let tool = c
+                .tools
+                .iter_mut()
+                .find(|t| &t.name == name)
+                .ok_or_else(|| {
+                    SensitivityError::Design(crate::sensitivity::DesignError::UnknownTool {
+                        variable: name.clone(),
+                        tool: name.clone(),
+                        expected: format!(
+                            "{:?}",
+                            self.case.tools.iter().map(|t| &t.name).collect::<Vec<_>>()
+                        ),
+                    })
+                })?;
+            tool.path = tool.path.translated(*offset).map_err(|e| {
+                SensitivityError::Shell(ShellError::InvalidInput(format!(
+                    "tool `{name}` moved by {offset:?}: {e}"
+                )))
+            })?;
+        }
         let b = shell_build::build(&c).map_err(|e| {
             SensitivityError::Shell(ShellError::InvalidInput(format!(
                 "{}: {e}",
                 self.case.path.display()
             )))
         })?;
-        Ok((b.problem, b.newton))
+        Ok((b.problem, b.newton, b.contact))
     }
 }
 
@@ -78,6 +112,7 @@ pub fn base_design(case: &ShellCase) -> Design {
         thickness: case.thickness,
         material: case.material,
         surface: Some(case.surface.clone()),
+        tool_offsets: Default::default(),
     }
 }
 
@@ -156,8 +191,30 @@ pub fn validate(case: &ShellCase, methods: &[DsaMethod]) -> Result<DsaSpec, DsaE
         .clone()
         .ok_or_else(|| DsaError::NoDesign(case.path.display().to_string()))?;
     spec.methods = methods.to_vec();
+    check_tool_names(&case.path, &case.tools, &spec)?;
     if methods.contains(&DsaMethod::Dual) || methods.contains(&DsaMethod::Continuum) {
         dual_loads(case)?;
+        if !case.tools.is_empty() {
+            // The contact points sit on the initial geometry held as data: neither method
+            // carries a shape variable's design velocity into the contact.
+            if let Some((k, e)) = spec.design.iter().enumerate().find(|(_, e)| {
+                matches!(
+                    e.variable.kind,
+                    crate::sensitivity::DesignKind::Shape { .. }
+                )
+            }) {
+                return Err(DsaError::Case(CaseError::Invalid {
+                    path: case.path.clone(),
+                    key: format!("design[{k}].kind"),
+                    value: format!("{:?}", kind_name(&e.variable)),
+                    expected: "a thickness, material or tool variable in a case with [[tool]]s: \
+                               shape variables with contact are not supported by the continuum \
+                               and dual methods (finite differences alone, --methods fd, can \
+                               run them)"
+                        .into(),
+                }));
+            }
+        }
     }
     Ok(spec)
 }
@@ -176,7 +233,7 @@ pub fn run(
 
     // (1) The plain analysis.
     let t = Instant::now();
-    let (problem, newton) = analysis.build(&base)?;
+    let (problem, newton, contact) = analysis.build_with_contact(&base)?;
     validate_design_on(&vars, &problem.model, &case.surface, 0.0)
         .map_err(SensitivityError::from)?;
     // Every finite-difference design (shape: the perturbed surface with a regular normal at
@@ -190,7 +247,8 @@ pub fn run(
             }
         }
     }
-    let nominal = fd::response(problem, &newton, analysis.solver(), monitors)?;
+    let nominal =
+        fd::response_with_contact(problem, contact, &newton, analysis.solver(), monitors)?;
     let time_analysis = t.elapsed().as_secs_f64();
     progress(&format!(
         "analysis: {} converged steps, {:.2} s",
@@ -198,13 +256,34 @@ pub fn run(
         time_analysis
     ));
 
+    // With contact, the later runs replay the plain run's load levels: every converged level
+    // becomes a `stops` entry and the step size starts at `max_step` (≥ every gap), so each
+    // step is clipped to the next level and keeps its size (a clipped step neither grows nor
+    // shrinks): the runs land on the same levels whatever their iteration counts (the hooked
+    // run needs the converged tangent, and near a change of the contact set an iteration more
+    // or less changes the adaptive growth; the discrete response depends on the levels). A
+    // re-run that has to cut a step still differs and is reported (`StepSequence`).
+    let replay_case;
+    let analysis = if case.tools.is_empty() {
+        analysis
+    } else {
+        let mut c = case.clone();
+        c.steps.stops = nominal.loads.clone();
+        c.steps.initial_step = c.steps.max_step;
+        replay_case = c;
+        CaseAnalysis { case: &replay_case }
+    };
+
     // (2a) The continuum DSA.
     let mut continuum: Option<Vec<Vec<Vec<f64>>>> = None; // [variable][step][monitor]
     let (mut time_continuum, mut time_continuum_run) = (None, None);
     let mut continuum_value_difference = None;
     if spec.methods.contains(&DsaMethod::Continuum) {
-        let loads = dual_loads(case)?;
-        let (problem, newton) = analysis.build(&base)?;
+        let mut loads = dual_loads(case)?;
+        let (problem, newton, contact) = analysis.build_with_contact(&base)?;
+        if let Some(c) = contact {
+            loads.push(dual_contact(case, c));
+        }
         let r = run_continuum(
             problem,
             Some(&case.surface),
@@ -251,8 +330,11 @@ pub fn run(
     let (mut time_dual, mut time_dual_run, mut dual_value_difference) = (None, None, None);
     let mut dual_state_mismatch = None;
     if spec.methods.contains(&DsaMethod::Dual) {
-        let loads = dual_loads(case)?;
-        let (problem, newton) = analysis.build(&base)?;
+        let mut loads = dual_loads(case)?;
+        let (problem, newton, contact) = analysis.build_with_contact(&base)?;
+        if let Some(c) = contact {
+            loads.push(dual_contact(case, c));
+        }
         let mode = if vars.len() <= 8 {
             DualMode::Vector
         } else {
@@ -326,11 +408,17 @@ pub fn run(
             for (&relative, h) in entry.fd_steps.iter().zip(entry.absolute_steps(&base)) {
                 let mut one = |delta: f64| -> Result<RunResponse, DsaError> {
                     let t = Instant::now();
-                    let (problem, newton) = analysis.build(
+                    let (problem, newton, contact) = analysis.build_with_contact(
                         &var.perturbed(&base, delta)
                             .map_err(SensitivityError::from)?,
                     )?;
-                    let r = fd::response(problem, &newton, analysis.solver(), monitors)?;
+                    let r = fd::response_with_contact(
+                        problem,
+                        contact,
+                        &newton,
+                        analysis.solver(),
+                        monitors,
+                    )?;
                     if r.loads != nominal.loads {
                         return Err(SensitivityError::StepSequence {
                             variable: var.name.clone(),
@@ -557,11 +645,17 @@ pub fn to_json(case: &ShellCase, r: &DsaResult) -> Value {
     })
 }
 
-/// `thickness`, `material.<name>` or `shape.<surface parameter>`.
+/// `thickness`, `material.<name>`, `shape.<surface parameter>` or `tool.<name>.<x|y|z>`.
 pub fn kind_name(v: &DesignVariable) -> String {
     match &v.kind {
         crate::sensitivity::DesignKind::Material(p) => format!("material.{}", p.name()),
         crate::sensitivity::DesignKind::Shape { name, .. } => format!("shape.{name}"),
+        crate::sensitivity::DesignKind::Tool { tool, axis } => {
+            format!(
+                "tool.{tool}.{}",
+                crate::sensitivity::TOOL_AXES[*axis.min(&2)]
+            )
+        }
         _ => "thickness".into(),
     }
 }
@@ -612,10 +706,17 @@ pub fn table(r: &DsaResult, v: usize) -> String {
         var.entry.variable.name,
         kind_name(&var.entry.variable),
         var.value,
-        col.map_or(String::from(", no finite differences"), |c| format!(
-            ", Δτ = {:e} (h/|τ| = {:e})",
-            c.h, c.relative
-        ))
+        col.map_or(String::from(", no finite differences"), |c| {
+            if matches!(
+                var.entry.variable.kind,
+                crate::sensitivity::DesignKind::Tool { .. }
+            ) {
+                // τ is the tool's offset (0): fd_steps are absolute.
+                format!(", Δτ = {:e} (absolute: τ is the tool's offset)", c.h)
+            } else {
+                format!(", Δτ = {:e} (h/|τ| = {:e})", c.h, c.relative)
+            }
+        })
     );
     let (dual_head, cont_head) = if col.is_some() {
         ("ψ'Δτ dual", "ψ'Δτ cont.")
@@ -722,13 +823,17 @@ pub fn terms(
 ) -> Result<Vec<TermBreakdown>, DsaError> {
     let analysis = CaseAnalysis { case };
     let base = base_design(case);
-    let (problem, newton) = analysis.build(&base)?;
+    let (problem, newton, contact) = analysis.build_with_contact(&base)?;
     let vars: Vec<DesignVariable> = spec.design.iter().map(|d| d.variable.clone()).collect();
+    let mut loads = dual_loads(case)?;
+    if let Some(c) = contact {
+        loads.push(dual_contact(case, c));
+    }
     Ok(breakdown(
         problem,
         Some(&case.surface),
         vars,
-        dual_loads(case)?,
+        loads,
         &newton,
         analysis.solver(),
         step,

@@ -910,6 +910,9 @@ impl Checker<'_> {
         let dsa = super::dsa_case::check(
             self.path, f.design, f.dsa, thickness, &material, &monitors, &surface,
         )?;
+        if let Some(spec) = &dsa {
+            super::dsa_case::check_tool_names(self.path, &tools, spec)?;
+        }
 
         Ok(ShellCase {
             dsa,

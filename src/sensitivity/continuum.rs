@@ -38,6 +38,7 @@ use super::shape::ShapeVelocity;
 use super::{
     validate_design, validate_design_on, DesignError, DesignKind, DesignVariable, Monitor,
 };
+use crate::contact::ContactSeeds;
 use crate::geometry::Surface;
 use crate::kinematics::M3;
 use crate::material::{MaterialParams, MaterialState};
@@ -68,15 +69,18 @@ pub enum TermGroup {
     Material,
     /// The loads' explicit design dependence (eq 37's `l'_V` for a shape variable).
     Load,
+    /// The rigid tools' design velocity `V^c` in the contact force (`b'_N`, eqs 76–83).
+    Tool,
 }
 
 impl TermGroup {
     /// All groups, in output order.
-    pub const ALL: [TermGroup; 4] = [
+    pub const ALL: [TermGroup; 5] = [
         TermGroup::History,
         TermGroup::Design,
         TermGroup::Material,
         TermGroup::Load,
+        TermGroup::Tool,
     ];
     /// Name in tables and JSON.
     pub fn name(self) -> &'static str {
@@ -85,6 +89,7 @@ impl TermGroup {
             TermGroup::Design => "design",
             TermGroup::Material => "material",
             TermGroup::Load => "load",
+            TermGroup::Tool => "tool",
         }
     }
 }
@@ -104,6 +109,9 @@ pub struct SensitivityState {
     pub thickness: f64,
     /// `Ė, ν̇, k̇, σ̇0, Ḣ, β̇`.
     pub material: MaterialParams<f64>,
+    /// Per tool of the contact (its order; empty without contact): the translation's
+    /// derivative `V^c` (eq 76), a unit vector for a tool-position variable.
+    pub tools: Vec<[f64; 3]>,
 }
 
 /// A zero particle-state sensitivity.
@@ -132,10 +140,11 @@ impl SensitivityState {
     /// particles' initial directors and lamina vectors, the initial lamina frames.
     pub fn initial(
         problem: &ShellProblem,
+        loads: &[DualLoad],
         var: &DesignVariable,
         surface: Option<&Surface<f64>>,
     ) -> Result<Self, DesignError> {
-        let mut s = Self::zero(problem);
+        let mut s = Self::zero(problem, loads);
         match &var.kind {
             DesignKind::Thickness => s.thickness = 1.0,
             DesignKind::Material(p) => {
@@ -156,6 +165,25 @@ impl SensitivityState {
                 s.particles = v.particles;
                 s.history = v.history;
                 s.surface = Some(v.points);
+                if !s.tools.is_empty() {
+                    // The contact points sit on the initial geometry given as data: the
+                    // contact does not carry the design velocity.
+                    return Err(DesignError::Unsupported {
+                        name: var.name.clone(),
+                        method: "continuum method with contact (shape variable)",
+                    });
+                }
+            }
+            DesignKind::Tool { tool, axis } => {
+                let names = contact_tools(loads);
+                let i = names.iter().position(|n| n == tool).ok_or_else(|| {
+                    DesignError::UnknownTool {
+                        variable: var.name.clone(),
+                        tool: tool.clone(),
+                        expected: format!("{names:?}"),
+                    }
+                })?;
+                s.tools[i][*axis] = 1.0;
             }
             #[allow(unreachable_patterns)]
             _ => {
@@ -200,8 +228,8 @@ impl SensitivityState {
         }
     }
 
-    /// All sensitivities zero (the seeds of a group left out).
-    pub fn zero(problem: &ShellProblem) -> Self {
+    /// All sensitivities zero (the seeds of a group left out), for `problem` with `loads`.
+    pub fn zero(problem: &ShellProblem, loads: &[DualLoad]) -> Self {
         let model = &problem.model;
         SensitivityState {
             particles: vec![zero_particle(); model.particles.len()],
@@ -210,8 +238,22 @@ impl SensitivityState {
             surface: None,
             thickness: 0.0,
             material: MaterialParams::zero(),
+            tools: vec![[0.0; 3]; contact_tools(loads).len()],
         }
     }
+}
+
+/// The names of the contact's tools in `loads` (its order; empty without contact).
+pub fn contact_tools(loads: &[DualLoad]) -> Vec<String> {
+    loads
+        .iter()
+        .find_map(|l| match l {
+            DualLoad::Contact(c) => {
+                Some(c.contact.tools().iter().map(|t| t.name.clone()).collect())
+            }
+            _ => None,
+        })
+        .unwrap_or_default()
 }
 
 /// The sensitivities recorded at one converged step.
@@ -287,14 +329,15 @@ impl ContinuumDsa {
         }
         let states = variables
             .iter()
-            .map(|v| SensitivityState::initial(problem, v, surface))
+            .map(|v| SensitivityState::initial(problem, &loads, v, surface))
             .collect::<Result<Vec<_>, _>>()?;
+        let zero = SensitivityState::zero(problem, &loads);
         Ok(ContinuumDsa {
             variables,
             loads,
             monitors,
             states,
-            zero: SensitivityState::zero(problem),
+            zero,
             pending: None,
             records: Vec::new(),
             time: Duration::ZERO,
@@ -420,6 +463,7 @@ impl ContinuumDsa {
                     surface: s.surface.clone(),
                     thickness: s.thickness,
                     material: s.material,
+                    tools: s.tools.clone(),
                 }
             })
             .collect();
@@ -469,6 +513,99 @@ impl ContinuumDsa {
     }
 }
 
+/// Add the derivative of load `l` at the increment `dq` and factor `factor` for the seeds of
+/// `s` restricted to `group` (`None`: all) into `f`, hand-derived:
+/// - a follower pressure depends on `ⁿū + Δū` only: its history term is its load stiffness at
+///   `Δu` applied to `ⁿū̇` (eq 37's `l'_V`); for a shape variable its explicit dependence on the
+///   initial tangents `x̄⁰,α` (`Pressure::add_design_derivative`, group `load`);
+/// - gravity per unit initial area: the area element's shape derivative (group `load`);
+/// - a constant load: the inner load at factor 1;
+/// - the contact: `ShellContact::force_dot` (eqs 78–83, `b'_N`) with the committed particle
+///   dots (group `history`), the tool translations (group `tool`), the thickness (group
+///   `design`) and the penalty's `ω = c E/t` dependence (`Ė`: group `material`, `ṫ`: group
+///   `design`).
+fn add_load_dot(
+    model: &ShellModel,
+    l: &DualLoad,
+    s: &SensitivityState,
+    group: Option<TermGroup>,
+    dq: &[f64],
+    factor: f64,
+    f: &mut [f64],
+) -> Result<(), SensitivityError> {
+    let on = |g: TermGroup| group.is_none_or(|x| x == g);
+    match l {
+        DualLoad::Pressure(p) => {
+            if on(TermGroup::History) {
+                let mut trip = Vec::new();
+                p.add_stiffness(model, dq, factor, &mut trip)?;
+                for (i, j, k) in trip {
+                    let (pj, c) = (j / DOFS_PER_PARTICLE, j % DOFS_PER_PARTICLE);
+                    if c < 3 {
+                        f[i] += k * s.particles[pj].u[c];
+                    }
+                }
+            }
+            if let (true, Some(v)) = (on(TermGroup::Load), &s.surface) {
+                p.add_design_derivative(model, v, dq, factor, f)?;
+            }
+        }
+        DualLoad::Gravity(g) => {
+            if let (true, Some(v)) = (on(TermGroup::Load), &s.surface) {
+                g.add_design_derivative(model, v, factor, f)?;
+            }
+        }
+        DualLoad::PointForce(_) => {}
+        DualLoad::Constant(inner) => add_load_dot(model, inner, s, group, dq, 1.0, f)?,
+        DualLoad::Contact(c) => {
+            let zero_tools = vec![[0.0; 3]; s.tools.len()];
+            let (t_dot, e_dot) = (
+                if on(TermGroup::Design) {
+                    s.thickness
+                } else {
+                    0.0
+                },
+                if on(TermGroup::Material) {
+                    s.material.young
+                } else {
+                    0.0
+                },
+            );
+            let penalty = match c.penalty_factor {
+                Some(k) => {
+                    k * (e_dot * model.thickness - model.material.young * t_dot)
+                        / (model.thickness * model.thickness)
+                }
+                None => 0.0,
+            };
+            let zero_particles;
+            let particles = if on(TermGroup::History) {
+                &s.particles
+            } else {
+                zero_particles = vec![zero_particle(); s.particles.len()];
+                &zero_particles
+            };
+            let increment = vec![0.0; dq.len()];
+            let seeds = ContactSeeds {
+                tools: if on(TermGroup::Tool) {
+                    &s.tools
+                } else {
+                    &zero_tools
+                },
+                thickness: t_dot,
+                penalty,
+                particles,
+                increment: &increment,
+            };
+            let d = c.contact.force_dot(model, dq, factor, &seeds)?;
+            for (fi, di) in f.iter_mut().zip(&d) {
+                *fi += di;
+            }
+        }
+    }
+    Ok(())
+}
+
 /// A converged step as the sensitivity methods see it.
 #[derive(Clone, Copy, Debug)]
 pub struct StepState<'a> {
@@ -502,47 +639,20 @@ pub fn fictitious_loads(
         .map(|s| s.seeds(group, &zero_dofs, zero))
         .collect();
     let history_terms = group.is_none_or(|g| g == TermGroup::History);
-    let load_terms = group.is_none_or(|g| g == TermGroup::Load);
     let dots = model.internal_force_dots(&du[..n_q], &seeds)?;
     let mut out = Vec::with_capacity(states.len());
     for (s, (f_int, _)) in states.iter().zip(dots) {
         let mut r = f_int;
         r.resize(n, 0.0);
-        if let (true, Some(v)) = (load_terms, &s.surface) {
-            // The loads' explicit shape dependence (eq 37's l'_V): a pressure on the current
-            // tangents x̄⁰,α + ū,α, gravity per unit initial area.
-            let mut f = vec![0.0; n_q];
-            for l in loads {
-                match l {
-                    DualLoad::Pressure(p) => {
-                        p.add_design_derivative(model, v, &du[..n_q], load, &mut f)?
-                    }
-                    DualLoad::Gravity(g) => g.add_design_derivative(model, v, load, &mut f)?,
-                    DualLoad::PointForce(_) => {}
-                }
-            }
-            for (ri, fi) in r.iter_mut().zip(&f) {
-                *ri -= fi;
-            }
+        // The loads' derivative at fixed Δu (eqs 37, 83), subtracted: R = f_int − f_ext.
+        let mut f = vec![0.0; n_q];
+        for l in loads {
+            add_load_dot(model, l, s, group, &du[..n_q], load, &mut f)?;
+        }
+        for (ri, fi) in r.iter_mut().zip(&f) {
+            *ri -= fi;
         }
         if history_terms {
-            // A follower pressure depends on ⁿū + Δū only: its history term is its load
-            // stiffness at Δu applied to ⁿū̇ (eq 37's l'_V for non-shape variables).
-            let mut shift = vec![0.0; n_q];
-            for (i, p) in s.particles.iter().enumerate() {
-                for c in 0..3 {
-                    shift[DOFS_PER_PARTICLE * i + c] = p.u[c];
-                }
-            }
-            let mut trip = Vec::new();
-            for l in loads {
-                if let DualLoad::Pressure(p) = l {
-                    p.add_stiffness(model, &du[..n_q], load, &mut trip)?;
-                }
-            }
-            for (i, j, k) in trip {
-                r[i] -= k * shift[j];
-            }
             // Constraint rows: k_c a_c · ⁿq̇ and k_c μ̇_c (the committed unknowns' sensitivities).
             for (c, (row, &k)) in problem
                 .constraints()

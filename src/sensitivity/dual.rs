@@ -37,7 +37,21 @@
 //! problem owns its loads as trait objects, so they are handed to the reference again as
 //! [`DualLoad`]s; at every step their force is checked against the problem's
 //! ([`ShellProblem::external_force`]), so a missing or different load is an error, not a wrong
-//! derivative. Edge moments (which act through the director) and contact are not supported yet.
+//! derivative. A load held constant ([`DualLoad::Constant`]) is its inner load at factor 1.
+//! Edge moments (which act through the director) are not supported yet.
+//!
+//! **Contact** ([`DualLoad::Contact`], eqs 68–70). The penalty force of the slave points
+//! against the rigid tools is evaluated in `D` by [`ShellContact::force_with`] with the
+//! group's committed dual particle states (`ū, d, e`: the slave point `x̄ + ζ t/2 d` and the
+//! rotated director depend on them, so the history dependence of the contact force is carried
+//! exactly, as for the pressure), the converged increment (constant), the dual thickness, the
+//! penalty (`c E/t` in `D` when the case gives `penalty_factor`) and, per tool, a translation
+//! offset of value 0 seeded with unit derivative along the axis of a tool variable
+//! ([`crate::sensitivity::DesignKind::Tool`]). The closest-point projection's final Newton
+//! correction in `D` carries the projection sensitivity (eq 80) into the gap and the normal, so
+//! the derivative part of the contact force is the fictitious load `b'_N` of eq (83) plus its
+//! history terms, computed rather than derived. The contact's tangent is in the tangent the
+//! driver holds, so the solve is unchanged.
 //!
 //! **Shape design variables** ([`DesignKind::Shape`], [`DualShellProblem::new_on`],
 //! [`run_dual_on`]): the surface parameter is seeded and the initial geometry of the group is
@@ -58,10 +72,11 @@ use super::shape::dual_geometry;
 use super::{
     validate_design, validate_design_on, Design, DesignError, DesignKind, DesignVariable, Monitor,
 };
+use crate::contact::{ContactInputs, ShellContact};
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
 use crate::scalar::Real;
-use crate::shell::load::{ExternalLoad, Gravity, PointForce, Pressure};
+use crate::shell::load::{ExternalLoad, GenericLoad, Gravity, PointForce, Pressure};
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
 use crate::shell::problem::ShellProblem;
 use crate::shell::rotation::rotate_director;
@@ -72,6 +87,7 @@ use crate::solver::{
 };
 use nalgebra::Vector3;
 use num_dual::{Derivative, Dual64, DualSVec64};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 use thiserror::Error;
 
@@ -124,6 +140,31 @@ pub enum DualLoad {
     Gravity(Gravity),
     /// Follower pressure: depends on the committed displacement.
     Pressure(Pressure),
+    /// Penalty contact with rigid tools (a prescribed load: the tools move with the load
+    /// factor): depends on the committed particle states, the increment, the thickness and
+    /// the tool positions (eqs 68–70; [`ShellContact::force_with`]).
+    Contact(DualContact),
+    /// A load held at its full value at every load factor (`scaling = "constant"`): the inner
+    /// load evaluated at factor 1.
+    Constant(Box<DualLoad>),
+}
+
+/// The contact load of the problem as the reference evaluates it: the problem's own
+/// [`ShellContact`] (shared) and how its penalty was set.
+#[derive(Clone, Debug)]
+pub struct DualContact {
+    /// The contact (the same object the problem owns as a load).
+    pub contact: Arc<ShellContact>,
+    /// `Some(c)` when the penalty is `ω = c E / t` (`penalty_factor`): the reference then
+    /// differentiates `ω` with `E` and `t` as a re-run does; `None` for a given `ω`.
+    pub penalty_factor: Option<f64>,
+}
+
+impl PartialEq for DualContact {
+    /// The same contact object and penalty rule.
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.contact, &other.contact) && self.penalty_factor == other.penalty_factor
+    }
 }
 
 impl DualLoad {
@@ -138,6 +179,18 @@ impl DualLoad {
             DualLoad::PointForce(l) => l.add_force(model, q, factor, f),
             DualLoad::Gravity(l) => l.add_force(model, q, factor, f),
             DualLoad::Pressure(l) => l.add_force(model, q, factor, f),
+            // Untracked (the problem's own evaluation tracks the gaps).
+            DualLoad::Contact(c) => c.contact.force_generic(model, q, factor, f),
+            DualLoad::Constant(inner) => inner.add_force_f64(model, q, 1.0, f),
+        }
+    }
+
+    /// The contact of this load (also inside [`DualLoad::Constant`]).
+    fn contact(&self) -> Option<&DualContact> {
+        match self {
+            DualLoad::Contact(c) => Some(c),
+            DualLoad::Constant(inner) => inner.contact(),
+            _ => None,
         }
     }
 }
@@ -162,6 +215,9 @@ pub struct DualState<D> {
     /// Initial geometry per quadrature point (as `ShellModel::points`), seeded with the
     /// group's shape design variables (constants without any).
     pub surfaces: Vec<SurfacePoint<D>>,
+    /// Per tool of the contact load (empty without one): the translation added to its path,
+    /// value 0 (the problem's tools are at the design's position), seeded for tool variables.
+    pub tool_offsets: Vec<Vector3<D>>,
 }
 
 /// The sensitivities recorded at one converged step.
@@ -297,6 +353,20 @@ impl<D: DesignDual> DualShellProblem<D> {
             Some(s) => validate_design_on(&variables, &problem.model, s, 0.0)?,
             None => validate_design(&variables, &problem.model, 0.0)?,
         }
+        if loads.iter().any(|l| matches!(l, DualLoad::Contact(_))) {
+            // The contact points sit on the initial geometry held as data (f64): a shape
+            // variable's design velocity would be missed there.
+            if let Some(v) = variables
+                .iter()
+                .find(|v| matches!(v.kind, DesignKind::Shape { .. }))
+            {
+                return Err(DesignError::Unsupported {
+                    name: v.name.clone(),
+                    method: "dual-number reference with contact (shape variable)",
+                }
+                .into());
+            }
+        }
         if let Some((index, &value)) = problem.state().iter().enumerate().find(|(_, v)| **v != 0.0)
         {
             return Err(SensitivityError::NotInitial { index, value });
@@ -307,6 +377,32 @@ impl<D: DesignDual> DualShellProblem<D> {
                     label: m.label.clone(),
                     detail: e.to_string(),
                 })?;
+        }
+        let contacts: Vec<&DualContact> = loads.iter().filter_map(|l| l.contact()).collect();
+        if contacts.len() > 1 {
+            return Err(SensitivityError::Shell(ShellError::InvalidInput(format!(
+                "dual sensitivity reference: {} contact loads given, expected at most one",
+                contacts.len()
+            ))));
+        }
+        let tool_names: Vec<&str> = contacts
+            .first()
+            .map(|c| c.contact.tools().iter().map(|t| t.name.as_str()).collect())
+            .unwrap_or_default();
+        super::check_tools(&variables, &tool_names)?;
+        if let Some(c) = contacts.first() {
+            if let Some(factor) = c.penalty_factor {
+                let model = &problem.model;
+                let omega = factor * model.material.young / model.thickness;
+                // The same product in f64: equal to round-off when the rule is the one used.
+                if (omega - c.contact.penalty()).abs() > 1e-12 * omega.abs() {
+                    return Err(SensitivityError::Shell(ShellError::InvalidInput(format!(
+                        "dual sensitivity reference: penalty_factor {factor} gives ω = {omega:e}, \
+                         the contact's penalty is {:e}: expected the same rule",
+                        c.contact.penalty()
+                    ))));
+                }
+            }
         }
         let model = &problem.model;
         let design = Design::of(model);
@@ -320,14 +416,22 @@ impl<D: DesignDual> DualShellProblem<D> {
                 let n_shape = surface.map_or(0, |s| s.n_design_parameters());
                 let mut s_parts = vec![vec![0.0; nd]; n_shape];
                 let mut shape = false;
+                let mut tool_parts =
+                    vec![[vec![0.0; nd], vec![0.0; nd], vec![0.0; nd]]; tool_names.len()];
                 for (k, v) in variables[first..first + count].iter().enumerate() {
-                    match v.kind {
+                    match &v.kind {
                         DesignKind::Thickness => t_parts[k] = 1.0,
                         DesignKind::Material(p) => m_parts[p.index()][k] = 1.0,
                         DesignKind::Shape { parameter, .. } => {
                             // validate_design_on checked the index against the surface.
-                            s_parts[parameter][k] = 1.0;
+                            s_parts[*parameter][k] = 1.0;
                             shape = true;
+                        }
+                        DesignKind::Tool { tool, axis } => {
+                            // check_tools above: the tool exists.
+                            if let Some(i) = tool_names.iter().position(|n| n == tool) {
+                                tool_parts[i][*axis][k] = 1.0;
+                            }
                         }
                     }
                 }
@@ -358,6 +462,10 @@ impl<D: DesignDual> DualShellProblem<D> {
                     thickness: D::from_parts(design.thickness, &t_parts),
                     unknowns: problem.state().iter().map(|&v| D::cst(v)).collect(),
                     surfaces,
+                    tool_offsets: tool_parts
+                        .iter()
+                        .map(|p| Vector3::from_fn(|c, _| D::from_parts(0.0, &p[c])))
+                        .collect(),
                 })
             })
             .collect::<Result<Vec<_>, SensitivityError>>()?;
@@ -409,15 +517,13 @@ impl<D: DesignDual> DualShellProblem<D> {
     }
 
     /// The dual external force of group `g` (generalised rows) at the increment `dq` and load
-    /// `load`: the pressure with the increment's derivative part set to `ⁿū̇` (module docs),
-    /// gravity on the group's initial geometry, dead point forces.
+    /// `load` ([`Self::add_dual_load`] of every load).
     pub(crate) fn dual_external(
         &self,
         g: &DualState<D>,
         dq: &[D],
         load: f64,
     ) -> Result<Vec<D>, ShellError> {
-        let model = &self.problem.model;
         let n_q = self.problem.n_generalised();
         let q_shift: Vec<D> = dq
             .iter()
@@ -433,17 +539,7 @@ impl<D: DesignDual> DualShellProblem<D> {
             .collect();
         let mut f_ext = vec![D::zero(); n_q];
         for l in &self.loads {
-            match l {
-                DualLoad::Pressure(p) => {
-                    p.force_with_surfaces(model, &g.surfaces, &q_shift, load, &mut f_ext)?
-                }
-                // A dead load per unit initial area: its derivative is the area element's
-                // (zero unless a shape variable moves the geometry).
-                DualLoad::Gravity(w) => {
-                    w.force_with_surfaces(model, &g.surfaces, load, &mut f_ext)?
-                }
-                DualLoad::PointForce(_) => {}
-            }
+            self.add_dual_load(l, g, dq, &q_shift, load, &mut f_ext)?;
         }
         Ok(f_ext)
     }
@@ -495,6 +591,44 @@ impl<D: DesignDual> DualShellProblem<D> {
             r[n_q + c] = gc * k;
         }
         Ok(r)
+    }
+
+    /// Add the force of load `l` in `D` at load factor `factor`: a pressure with the shifted
+    /// increment `q_shift` (its derivative part `ⁿū̇`) and gravity on the group's initial
+    /// geometry, the contact with the group's committed
+    /// particle states, thickness, penalty and tool offsets and the increment `dq`; dead point forces
+    /// carry no derivative and are left out.
+    fn add_dual_load(
+        &self,
+        l: &DualLoad,
+        g: &DualState<D>,
+        dq: &[D],
+        q_shift: &[D],
+        factor: f64,
+        f: &mut [D],
+    ) -> Result<(), ShellError> {
+        let model = &self.problem.model;
+        match l {
+            DualLoad::Pressure(p) => p.force_with_surfaces(model, &g.surfaces, q_shift, factor, f),
+            // A dead load per unit initial area: its derivative is the area element's (zero
+            // unless a shape variable moves the geometry).
+            DualLoad::Gravity(w) => w.force_with_surfaces(model, &g.surfaces, factor, f),
+            DualLoad::Contact(c) => {
+                let penalty = match c.penalty_factor {
+                    Some(k) => g.material.young * k / g.thickness,
+                    None => D::cst(c.contact.penalty()),
+                };
+                let inputs = ContactInputs {
+                    particles: &g.particles,
+                    thickness: g.thickness,
+                    penalty,
+                    offsets: &g.tool_offsets,
+                };
+                c.contact.force_with(model, &inputs, dq, factor, f)
+            }
+            DualLoad::Constant(inner) => self.add_dual_load(inner, g, dq, q_shift, 1.0, f),
+            DualLoad::PointForce(_) => Ok(()),
+        }
     }
 
     fn hook(&mut self, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
@@ -568,6 +702,7 @@ impl<D: DesignDual> DualShellProblem<D> {
                 thickness: g.thickness,
                 unknowns,
                 surfaces: g.surfaces.clone(),
+                tool_offsets: g.tool_offsets.clone(),
             });
         }
         self.pending = Some(next);

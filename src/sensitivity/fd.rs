@@ -11,17 +11,21 @@
 //!
 //! **Active set.** The response is only piecewise smooth in the design: a layer point that
 //! yields at a step in one run and not in another (the yield status changes within `±h`) puts
-//! a kink between them. Such a step, and every later one (the history carries the kink), is
-//! *flagged*: its difference is reported but left out of comparisons and of the rate fit, never
+//! a kink between them; so does a contact slave point that penetrates a tool at a converged
+//! step in one run and not in another (the penalty force switches on at `g = 0`, eq 69;
+//! recorded when the analysis hands its contact over, [`Analysis::build_with_contact`]). Such a
+//! step, and every later one (the history carries the kink), is *flagged*: its difference is reported but left out of comparisons and of the rate fit, never
 //! silently ([`CentralDifference::flagged`], [`TaylorFit::excluded`]).
 
 use super::dual::SensitivityError;
 use super::{Design, DesignVariable, Monitor};
+use crate::contact::ShellContact;
 use crate::shell::problem::ShellProblem;
 use crate::solver::{
     ConvergedStep, ConvergedTangent, LinearSolver, Method, NewtonSolver, NonlinearProblem,
     ProblemError, SolverOptions,
 };
+use std::sync::Arc;
 
 /// The monitored responses of one complete run.
 #[derive(Clone, Debug, PartialEq)]
@@ -32,11 +36,15 @@ pub struct RunResponse {
     pub values: Vec<Vec<f64>>,
     /// `yielding[step][layer point]`: whether the point's `ē^p` grew in the step.
     pub yielding: Vec<Vec<bool>>,
+    /// `contact[step][slave point]`: whether the slave point penetrates a tool at the
+    /// converged state (empty without contact): the contact part of the active set.
+    pub contact: Vec<Vec<bool>>,
 }
 
 /// The problem with a recorder after every commit.
 struct Recording<'a> {
     problem: ShellProblem,
+    contact: Option<Arc<ShellContact>>,
     monitors: &'a [Monitor],
     out: RunResponse,
     failure: Option<String>,
@@ -92,11 +100,19 @@ impl NonlinearProblem for Recording<'_> {
             .map(|(a, h)| h.material.eps_p > *a)
             .collect();
         let values: Result<Vec<f64>, _> = self.monitors.iter().map(|m| m.value(model)).collect();
-        match values {
-            Ok(v) => {
+        let contact = match &self.contact {
+            None => Ok(Vec::new()),
+            Some(c) => c
+                .report(model, &vec![0.0; model.n_dofs()], load)
+                .map(|r| r.slaves.iter().map(|s| s.pressure > 0.0).collect())
+                .map_err(crate::shell::ShellError::from),
+        };
+        match values.and_then(|v| contact.map(|c| (v, c))) {
+            Ok((v, c)) => {
                 self.out.loads.push(load);
                 self.out.values.push(v);
                 self.out.yielding.push(yielding);
+                self.out.contact.push(c);
             }
             Err(e) => {
                 self.failure.get_or_insert(e.to_string());
@@ -115,16 +131,30 @@ pub fn response(
     solver: SolverOptions,
     monitors: &[Monitor],
 ) -> Result<RunResponse, SensitivityError> {
+    response_with_contact(problem, None, newton, solver, monitors)
+}
+
+/// As [`response`], also recording the contact status of every slave point of `contact` (the
+/// problem's own contact load) at every converged step.
+pub fn response_with_contact(
+    problem: ShellProblem,
+    contact: Option<Arc<ShellContact>>,
+    newton: &NewtonSolver,
+    solver: SolverOptions,
+    monitors: &[Monitor],
+) -> Result<RunResponse, SensitivityError> {
     let pattern = problem.pattern().clone();
     let mut linear = LinearSolver::new(&pattern, Method::auto(&pattern), solver)?;
     let u0 = problem.state().to_vec();
     let mut rec = Recording {
         problem,
+        contact,
         monitors,
         out: RunResponse {
             loads: Vec::new(),
             values: Vec::new(),
             yielding: Vec::new(),
+            contact: Vec::new(),
         },
         failure: None,
     };
@@ -147,6 +177,15 @@ pub trait Analysis {
     fn solver(&self) -> SolverOptions {
         SolverOptions::default()
     }
+    /// As [`Analysis::build`], with a handle on the problem's contact load (when there is one)
+    /// so that the runs record the contact status. Default: no contact.
+    #[allow(clippy::type_complexity)]
+    fn build_with_contact(
+        &self,
+        design: &Design,
+    ) -> Result<(ShellProblem, NewtonSolver, Option<Arc<ShellContact>>), SensitivityError> {
+        self.build(design).map(|(p, n)| (p, n, None))
+    }
 }
 
 fn run_at(
@@ -154,8 +193,8 @@ fn run_at(
     design: &Design,
     monitors: &[Monitor],
 ) -> Result<RunResponse, SensitivityError> {
-    let (problem, newton) = analysis.build(design)?;
-    response(problem, &newton, analysis.solver(), monitors)
+    let (problem, newton, contact) = analysis.build_with_contact(design)?;
+    response_with_contact(problem, contact, &newton, analysis.solver(), monitors)
 }
 
 fn same_steps(
@@ -177,16 +216,16 @@ fn same_steps(
     Ok(())
 }
 
-/// Per step, whether the yield status of any layer point differs between the runs at this or
-/// an earlier step.
+/// Per step, whether the yield status of any layer point, or the contact status of any slave
+/// point, differs between the runs at this or an earlier step.
 pub fn flags(runs: &[&RunResponse]) -> Vec<bool> {
     let n = runs[0].yielding.len();
     let mut flagged = false;
     (0..n)
         .map(|s| {
-            flagged |= runs
-                .windows(2)
-                .any(|w| w[0].yielding[s] != w[1].yielding[s]);
+            flagged |= runs.windows(2).any(|w| {
+                w[0].yielding[s] != w[1].yielding[s] || w[0].contact.get(s) != w[1].contact.get(s)
+            });
             flagged
         })
         .collect()

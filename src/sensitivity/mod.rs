@@ -1,8 +1,10 @@
 //! Design sensitivity analysis (issue 5; the paper's §3, eqs 37–65): design variables, the
 //! dual-number reference ([`dual`]) and finite differences of complete re-runs ([`fd`]).
 //!
-//! This first part covers the **non-shape** design variables of the shell without contact:
-//! the thickness `t` and the material parameters `E, ν, k, σ0, H, β` (eqs 9–13). They enter the
+//! The **non-shape** design variables: the thickness `t` and the material parameters
+//! `E, ν, k, σ0, H, β` (eqs 9–13), and the **tool positions** ([`DesignKind::Tool`], the
+//! translation of a rigid tool's whole path, which enters through the contact force only:
+//! `b'_N` of eq 83, `crate::contact::sensitivity`). The first ones enter the
 //! residual (eq 32) only through the point kernel's `PointInput::thickness` and
 //! `PointInput::material`; the design velocity of eqs 37–43 is zero for them (the geometry does
 //! not move), so the structural fictitious load `a'_V` of eq (64) reduces to the material and
@@ -10,7 +12,7 @@
 //! mid-surface, `Surface::design_parameters`) move the initial geometry at fixed parameter
 //! coordinates; their design velocity field (eqs 37–43) is hand-derived in [`shape`], and the
 //! dual reference seeds the surface parameter ([`shape::dual_geometry`]). Tool placements
-//! (`b'_N`, eq 83) are the next kind.
+//! ([`DesignKind::Tool`]) translate a rigid tool's path (`b'_N`, eq 83).
 //!
 //! Layout: `docs/sensitivity.md`.
 
@@ -24,6 +26,7 @@ use crate::geometry::Surface;
 use crate::material::{MaterialError, MaterialParams, PARAM_NAMES};
 use crate::shell::model::ShellModel;
 use crate::shell::ShellError;
+use std::collections::BTreeMap;
 use thiserror::Error;
 
 /// A material parameter as a design variable (the fields of [`MaterialParams`]).
@@ -78,7 +81,8 @@ impl MaterialParameter {
 }
 
 /// What a design variable changes. Non-exhaustive: shape (surface parameters, control-point
-/// moves with their design velocity field) and rigid-tool placements come next.
+/// What a design variable changes: thickness, a material parameter, a surface parameter
+/// (shape) or the position of a rigid tool.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
 #[non_exhaustive]
 pub enum DesignKind {
@@ -96,14 +100,40 @@ pub enum DesignKind {
         /// Its name there (`radius`, `cp[2][3].z`, …).
         name: String,
     },
+    /// The translation of the named rigid tool's whole path by `τ` along axis `axis` (0, 1, 2 =
+    /// x, y, z): the tool position of the paper's §4.2, whose design velocity on the tool is
+    /// the constant `V^c = e_axis` (eq 76) and whose fictitious load is `b'_N` (eq 83). The
+    /// variable's value is the offset from the case's path (0 at the nominal design).
+    Tool {
+        /// Tool name (`[[tool]] name`).
+        tool: String,
+        /// Axis 0, 1, 2.
+        axis: usize,
+    },
 }
 
+/// The axis names of [`DesignKind::Tool`] in case keys (`tool.<name>.x`).
+pub const TOOL_AXES: [&str; 3] = ["x", "y", "z"];
+
 impl DesignKind {
-    /// From a case-file key: `thickness`, or `material.<name>` with `<name>` one of
-    /// [`PARAM_NAMES`].
+    /// From a case-file key: `thickness`, `material.<name>` with `<name>` one of
+    /// [`PARAM_NAMES`], or `tool.<name>.<x|y|z>` (the tool name is checked against the case's
+    /// tools by [`check_tools`]).
     pub fn parse(key: &str) -> Result<Self, DesignError> {
         if key == "thickness" {
             return Ok(DesignKind::Thickness);
+        }
+        if let Some(rest) = key.strip_prefix("tool.") {
+            let parsed = rest.rsplit_once('.').and_then(|(name, ax)| {
+                let axis = TOOL_AXES.iter().position(|a| *a == ax)?;
+                (!name.trim().is_empty()).then(|| DesignKind::Tool {
+                    tool: name.to_string(),
+                    axis,
+                })
+            });
+            return parsed.ok_or_else(|| DesignError::UnknownKind {
+                key: key.to_string(),
+            });
         }
         match key.strip_prefix("material.") {
             Some(name) => Ok(DesignKind::Material(MaterialParameter::from_name(name)?)),
@@ -177,18 +207,31 @@ impl DesignVariable {
         Ok(Self::new(name, DesignKind::shape(surface, name)?))
     }
 
+    /// A tool translation along `axis` (0, 1, 2), named `<tool>.<x|y|z>`.
+    pub fn tool(tool: impl Into<String>, axis: usize) -> Result<Self, DesignError> {
+        let tool = tool.into();
+        let Some(a) = TOOL_AXES.get(axis) else {
+            return Err(DesignError::UnknownKind {
+                key: format!("tool.{tool}.<axis {axis}>"),
+            });
+        };
+        let name = format!("{tool}.{a}");
+        Ok(Self::new(name, DesignKind::Tool { tool, axis }))
+    }
+
     /// Its value at `design` (a shape variable of a design without a surface, or with an
     /// index beyond its parameters, is NaN: [`DesignVariable::perturbed`] and
     /// [`DesignVariable::validate_on`] report it as an error).
     pub fn value(&self, design: &Design) -> f64 {
-        match self.kind {
+        match &self.kind {
             DesignKind::Thickness => design.thickness,
             DesignKind::Material(p) => design.material.to_array()[p.index()],
             DesignKind::Shape { parameter, .. } => design
                 .surface
                 .as_ref()
-                .and_then(|s| s.parameter_values().get(parameter).copied())
+                .and_then(|s| s.parameter_values().get(*parameter).copied())
                 .unwrap_or(f64::NAN),
+            DesignKind::Tool { tool, axis } => design.tool_offset(tool)[*axis],
         }
     }
 
@@ -203,7 +246,7 @@ impl DesignVariable {
             });
         }
         let mut d = design.clone();
-        match self.kind {
+        match &self.kind {
             DesignKind::Thickness => {
                 d.thickness += delta;
                 if !(d.thickness > 0.0 && d.thickness.is_finite()) {
@@ -244,7 +287,7 @@ impl DesignVariable {
                 })?;
                 let mut p = surface.parameter_values();
                 let count = p.len();
-                let slot = p.get_mut(parameter).ok_or_else(|| {
+                let slot = p.get_mut(*parameter).ok_or_else(|| {
                     err(format!(
                         "surface parameter index {parameter}: expected an index below {count} \
                          (the {} surface's parameters)",
@@ -256,6 +299,16 @@ impl DesignVariable {
                     .with_design_parameters::<f64>(&p)
                     .map_err(|e| err(format!("the perturbed surface is invalid: {e}")))?;
                 d.surface = Some(moved);
+            }
+            DesignKind::Tool { tool, axis } => {
+                if *axis > 2 {
+                    return Err(DesignError::InvalidPerturbation {
+                        variable: self.name.clone(),
+                        delta,
+                        detail: format!("tool axis {axis}: expected 0, 1 or 2 (x, y, z)"),
+                    });
+                }
+                d.tool_offsets.entry(tool.clone()).or_insert([0.0; 3])[*axis] += delta;
             }
         }
         Ok(d)
@@ -367,8 +420,8 @@ fn validate_list(
     Ok(())
 }
 
-/// The design of a shell: thickness, material and (for shape variables) the mid-surface,
-/// whose design parameters are `Surface::design_parameters`.
+/// The design of a shell: thickness, material, (for shape variables) the mid-surface,
+/// whose design parameters are `Surface::design_parameters`, and the rigid tools' offsets.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Design {
     /// Thickness `t`.
@@ -378,15 +431,18 @@ pub struct Design {
     /// The mid-surface with its design parameter values (`None`: not a design variable; shape
     /// variables need it).
     pub surface: Option<Surface<f64>>,
+    /// Translation of each named tool's whole path from the case's (absent: zero).
+    pub tool_offsets: BTreeMap<String, [f64; 3]>,
 }
 
 impl Design {
-    /// The non-shape design of `model` (no surface: the model does not keep it).
+    /// The design of `model` (no surface, no tool offsets: the model keeps neither).
     pub fn of(model: &ShellModel) -> Self {
         Design {
             thickness: model.thickness,
             material: model.material,
             surface: None,
+            tool_offsets: BTreeMap::new(),
         }
     }
 
@@ -405,6 +461,28 @@ impl Design {
             .map(|s| s.parameter_values())
             .unwrap_or_default()
     }
+
+    /// The offset of tool `name` (zero when not set).
+    pub fn tool_offset(&self, name: &str) -> [f64; 3] {
+        self.tool_offsets.get(name).copied().unwrap_or([0.0; 3])
+    }
+}
+
+/// Check that every tool variable names one of `tools` (the case's `[[tool]]` names):
+/// [`DesignError::UnknownTool`] listing them otherwise.
+pub fn check_tools(variables: &[DesignVariable], tools: &[&str]) -> Result<(), DesignError> {
+    for v in variables {
+        if let DesignKind::Tool { tool, .. } = &v.kind {
+            if !tools.contains(&tool.as_str()) {
+                return Err(DesignError::UnknownTool {
+                    variable: v.name.clone(),
+                    tool: tool.clone(),
+                    expected: format!("{tools:?}"),
+                });
+            }
+        }
+    }
+    Ok(())
 }
 
 /// A monitored response: a component of the RK-interpolated mid-surface displacement
@@ -474,7 +552,7 @@ pub enum DesignError {
     /// A key that is no design-variable kind.
     #[error(
         "design variable kind `{key}`: expected `thickness`, `material.<parameter>` or \
-         `shape.<surface parameter>`"
+         `shape.<surface parameter>` or `tool.<name>.<x|y|z>`"
     )]
     UnknownKind {
         /// The key given.
@@ -495,6 +573,16 @@ pub enum DesignError {
     ShapeWithoutSurface {
         /// The parameter name.
         name: String,
+    },
+    /// A tool variable naming no tool of the case.
+    #[error("design variable `{variable}`: tool `{tool}` is unknown, expected one of {expected}")]
+    UnknownTool {
+        /// Variable name.
+        variable: String,
+        /// The tool name given.
+        tool: String,
+        /// The case's tool names.
+        expected: String,
     },
     /// An unknown material parameter.
     #[error("material parameter `{name}`: unknown, expected one of {expected}")]

@@ -134,6 +134,11 @@ fn seeds_of(g: &DualState<Dual64>) -> SensitivityState {
             }),
         thickness: g.thickness.eps,
         material: MaterialParams::from_array(g.material.to_array().map(|x| x.eps)),
+        tools: g
+            .tool_offsets
+            .iter()
+            .map(|v| [v[0].eps, v[1].eps, v[2].eps])
+            .collect(),
     }
 }
 
@@ -177,6 +182,11 @@ fn masked(g: &DualState<Dual64>, group: TermGroup) -> DualState<Dual64> {
             p.x_a = p.x_a.map(|v| v.map(|x| c(&x)));
             p.n = p.n.map(|x| c(&x));
             p.n_a = p.n_a.map(|v| v.map(|x| c(&x)));
+        }
+    }
+    if group != TermGroup::Tool {
+        for v in &mut m.tool_offsets {
+            *v = v.map(|x| c(&x));
         }
     }
     if group != TermGroup::Material {
@@ -273,7 +283,7 @@ impl Breakdown {
             load: step.load,
         };
         let states: Vec<SensitivityState> = dp.groups().iter().map(seeds_of).collect();
-        let zero = SensitivityState::zero(problem);
+        let zero = SensitivityState::zero(problem, &self.loads);
         let mut per_var: Vec<Vec<GroupComparison>> = vec![Vec::new(); states.len()];
         let groups: Vec<Option<TermGroup>> = TermGroup::ALL
             .iter()
@@ -363,6 +373,7 @@ impl Breakdown {
                     surface: s.surface.clone(),
                     thickness: s.thickness,
                     material: s.material,
+                    tools: s.tools.clone(),
                 }
             })
             .collect();

@@ -29,6 +29,7 @@ pub fn nominal_design() -> Design {
         thickness: 0.05,
         material: MaterialParams::new(1000.0, 0.3, 1.0, 100.0, 0.5).unwrap(),
         surface: None,
+        tool_offsets: Default::default(),
     }
 }
 

@@ -1,0 +1,227 @@
+//! Hand-derived design sensitivity of the penalty contact force (the paper's §4.2, eqs 73–83),
+//! for the continuum (direct differentiation) path: the derivative `ḟ_c = d f_c/dτ` of the
+//! generalised contact force of [`ShellContact`] at a state `(q; t)` for given derivatives of
+//! its inputs ([`ContactSeeds`]):
+//!
+//! - the **tool translations** `ȧ_i` (a tool-position design variable moves the whole tool:
+//!   the design velocity on the tool is the constant `V^c = ȧ`, eq 76; its tangents
+//!   `x^c,α` and curvatures do not change);
+//! - the **thickness** `ṫ` (slave faces at `ζ t/2`, initial face areas) and the **penalty**
+//!   `ω̇` (`ω = c E/t` makes it design-dependent);
+//! - the **shell state**: the committed particle states' dots `ū̇, ḋ, ė` (the history
+//!   dependence) and the increment's `Δq̇`.
+//!
+//! **Slave point.** `x = x̄ + ζ t/2 d`, `x̄ = x̄⁰ + Σ Ψ_J (ū_J + Δū_J)`,
+//! `d = n⁰ + Σ Ψ_J (d_J(α_J) − d⁰_J)` (`docs/contact.md` §4), so
+//! `ẋ = Σ Ψ_J (ū̇_J + Δū̇_J) + ζ ṫ/2 d + ζ t/2 Σ Ψ_J (ḋ_J(α_J) − ḋ⁰_J)` with `ḋ_J(α)` the
+//! directional derivative of Rodrigues' rotation `d(α) = dⁿ + f1 c + f2 θ×c`
+//! (`θ = α1 e1 + α2 e2`, `c = θ×dⁿ`, `x = θ·θ`) in all of `dⁿ, e1, e2, α`:
+//! `ḋ = ḋⁿ + f1' ẋ c + f1 ċ + f2' ẋ θ×c + f2 (θ̇×c + θ×ċ)`, `θ̇ = α̇_β e_β + α_β ė_β`,
+//! `ẋ = 2 θ·θ̇`, `ċ = θ̇×dⁿ + θ×ḋⁿ`.
+//!
+//! **Projection sensitivity (eq 80).** Differentiating eq (67),
+//! `(x − x^c(ξ))·x^c,α = 0`, with the tool point moving by `V^c = ȧ`:
+//! `A ξ̇ = [x^c,α·(ẋ − ȧ)]`, `A = m − g b` (eq 79). **Gap and normal:** `ġ = n·(ẋ − ȧ)`
+//! (`x − x^c = g n`, `n ⟂ x^c,α`, `n·ṅ = 0`), and Weingarten's `n,β = −(b m⁻¹)_βγ x^c,γ`
+//! gives `ṅ = n,β ξ̇_β`. **Force (eq 83's `b'_N` with the state terms):** `f = −ω w g n`
+//! (eq 70), so `ḟ = −(ω̇ w g + ω ẇ g + ω w ġ) n − ω w g ṅ`, with `ẇ` the derivative of
+//! the initial face area `w |x⁰,1 × x⁰,2|`, `x⁰,α = x̄⁰,α + ζ t/2 n⁰,α`, in `t`.
+//!
+//! **Generalised force.** `f_J = Ψ_J Σ f`, `m_Jβ = Ψ_J (∂d_J/∂α_β)·Σ ζ t/2 f`, so
+//! `ṁ_Jβ = Ψ_J [(∂d_J/∂α_β)˙·Σ ζ t/2 f + (∂d_J/∂α_β)·Σ (ζ ṫ/2 f + ζ t/2 ḟ)]`, where the
+//! derivative of `∂d/∂α_β = f1' x_β c + f1 c_β + f2' x_β θ×c + f2 w_β`
+//! (`x_β = 2 θ·e_β`, `c_β = e_β×dⁿ`, `w_β = e_β×c + θ×c_β`) is taken by the product rule
+//! with `f1'', f2''` ([`rodrigues_coefficient_derivatives`]).
+//!
+//! A point whose projection lies on a tool's boundary carries no force (the tool is not
+//! extended beyond its patch, `docs/contact.md` §2), so its derivative is zero; at the switch
+//! (`g = 0` or the projection reaching the boundary) the force is not differentiable.
+//! Verified against the dual-number evaluation [`ShellContact::force_with`] and central
+//! differences (`tests/dsa_contact.rs`).
+
+use super::shell::{neighbour_state, ShellContact};
+use crate::shell::model::ShellModel;
+use crate::shell::point::{director_first_derivatives, ParticleState, DOFS_PER_PARTICLE};
+use crate::shell::rotation::rodrigues_coefficient_derivatives;
+use crate::shell::rotation::rotate_director;
+use crate::shell::ShellError;
+use nalgebra::{Vector2, Vector3};
+
+type V3 = Vector3<f64>;
+
+/// Derivatives of the contact force's inputs with respect to one design variable
+/// ([`ShellContact::force_dot`]).
+#[derive(Clone, Copy, Debug)]
+pub struct ContactSeeds<'a> {
+    /// Per tool (in the contact's order), the derivative `ȧ` of its translation (`V^c`,
+    /// eq 76): a unit vector along the axis of a tool-position variable, zero otherwise.
+    pub tools: &'a [[f64; 3]],
+    /// `ṫ` (1 for the thickness variable).
+    pub thickness: f64,
+    /// `ω̇` (non-zero when the penalty is `c E/t` and the variable is `E` or `t`).
+    pub penalty: f64,
+    /// Per real particle, the derivatives of its committed state (`ū̇, ḋ, ḋ⁰, ė`).
+    pub particles: &'a [ParticleState<f64>],
+    /// The derivative of the increment `Δq̇` (generalised DOFs).
+    pub increment: &'a [f64],
+}
+
+/// Rodrigues' rotated director `d(α)` of [`crate::shell::rotation::rotate_director`]: its
+/// directional derivative for the state dots `sd` and `α̇`, and the directional derivatives of
+/// its first derivatives `∂d/∂α_β` (module documentation).
+fn director_dots(
+    st: &ParticleState<f64>,
+    sd: &ParticleState<f64>,
+    alpha: [f64; 2],
+    adot: [f64; 2],
+) -> (V3, [V3; 2]) {
+    let (dn, e) = (st.d, st.e);
+    let (dnd, ed) = (sd.d, sd.e);
+    let theta = e[0] * alpha[0] + e[1] * alpha[1];
+    let thd = e[0] * adot[0] + e[1] * adot[1] + ed[0] * alpha[0] + ed[1] * alpha[1];
+    let x = theta.dot(&theta);
+    let xd = 2.0 * theta.dot(&thd);
+    let ([f1, f1p, f1pp], [f2, f2p, f2pp]) = rodrigues_coefficient_derivatives(x);
+    let c = theta.cross(&dn);
+    let cd = thd.cross(&dn) + theta.cross(&dnd);
+    let tc = theta.cross(&c);
+    let tcd = thd.cross(&c) + theta.cross(&cd);
+    let d_dot = dnd + c * (f1p * xd) + cd * f1 + tc * (f2p * xd) + tcd * f2;
+    let da_dot = std::array::from_fn(|b| {
+        let xb = 2.0 * theta.dot(&e[b]);
+        let xbd = 2.0 * (thd.dot(&e[b]) + theta.dot(&ed[b]));
+        let cb = e[b].cross(&dn);
+        let cbd = ed[b].cross(&dn) + e[b].cross(&dnd);
+        let wb = e[b].cross(&c) + theta.cross(&cb);
+        let wbd = ed[b].cross(&c) + e[b].cross(&cd) + thd.cross(&cb) + theta.cross(&cbd);
+        c * (f1pp * xd * xb + f1p * xbd)
+            + cd * (f1p * xb)
+            + cb * (f1p * xd)
+            + cbd * f1
+            + tc * (f2pp * xd * xb + f2p * xbd)
+            + tcd * (f2p * xb)
+            + wb * (f2p * xd)
+            + wbd * f2
+    });
+    (d_dot, da_dot)
+}
+
+impl ShellContact {
+    /// The hand-derived derivative `ḟ_c = d f_c/dτ` (generalised DOFs, length
+    /// `model.n_dofs()`) of the contact force at the increment `q` from `model`'s committed
+    /// state and pseudo-time `load`, for the input derivatives `seeds` (module documentation;
+    /// eqs 78–83). Not tracked.
+    pub fn force_dot(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        load: f64,
+        seeds: &ContactSeeds<'_>,
+    ) -> Result<Vec<f64>, ShellError> {
+        self.check_model(model, q.len(), Some(seeds.increment.len()))?;
+        for (expected, got) in [
+            (model.particles.len(), seeds.particles.len()),
+            (self.tools().len(), seeds.tools.len()),
+        ] {
+            if expected != got {
+                return Err(ShellError::Dimension { expected, got });
+            }
+        }
+        let surfaces: Vec<_> = self.tools().iter().map(|tl| tl.surface.clone()).collect();
+        let evals = self.evaluate(model, q, load, &surfaces)?;
+        let omega = self.penalty();
+        let mut out = vec![0.0; model.n_dofs()];
+        for (site, ev) in self.sites().iter().zip(&evals) {
+            let active: Vec<_> = ev
+                .faces
+                .iter()
+                .filter_map(|fe| fe.nearest().map(|(i, cp)| (fe, i, cp)))
+                .filter(|(_, _, cp)| cp.is_active())
+                .collect();
+            if active.is_empty() {
+                continue;
+            }
+            let p = &model.points[site.point];
+            let (_, local_dot) = model.gather_local(site.point, seeds.increment);
+            // Per neighbour: the state dots, ḋ_J(α) and (∂d_J/∂α_β)˙.
+            let mut xbar_dot = V3::zeros();
+            let mut d = V3::zeros();
+            let mut d_dot = V3::zeros();
+            let mut da = Vec::with_capacity(p.shape.len());
+            let mut da_dot = Vec::with_capacity(p.shape.len());
+            for (n, ((s, st), &j)) in p.shape.iter().zip(&ev.parts).zip(&p.neighbours).enumerate() {
+                let x = &ev.local[DOFS_PER_PARTICLE * n..DOFS_PER_PARTICLE * (n + 1)];
+                let xd = &local_dot[DOFS_PER_PARTICLE * n..DOFS_PER_PARTICLE * (n + 1)];
+                let sd = neighbour_state(model, j, seeds.particles);
+                xbar_dot += (sd.u + V3::new(xd[0], xd[1], xd[2])) * s.psi;
+                let dj = rotate_director(&st.d, &st.e[0], &st.e[1], [x[3], x[4]]);
+                d += (dj - st.d0) * s.psi;
+                let (djd, dad) = director_dots(st, &sd, [x[3], x[4]], [xd[3], xd[4]]);
+                d_dot += (djd - sd.d0) * s.psi;
+                da.push(director_first_derivatives(st, [x[3], x[4]]));
+                da_dot.push(dad);
+            }
+            // d = n⁰ + Σ Ψ (d_J − d⁰_J); n⁰ is design-free for these variables.
+            let d = site.n0 + d;
+            let mut msum = V3::zeros();
+            let (mut fsum_dot, mut msum_dot) = (V3::zeros(), V3::zeros());
+            for (fe, tool, cp) in active {
+                let zh = fe.zh;
+                let zh_dot = fe.zeta * 0.5 * seeds.thickness;
+                // Face area w |a1 × a2|, a_α = x̄⁰,α + ζ t/2 n⁰,α.
+                let sf = &p.surface;
+                let a1 = sf.x_a[0] + sf.n_a[0] * zh;
+                let a2 = sf.x_a[1] + sf.n_a[1] * zh;
+                let cr = a1.cross(&a2);
+                let cr_dot = (sf.n_a[0] * zh_dot).cross(&a2) + a1.cross(&(sf.n_a[1] * zh_dot));
+                let w_dot = cr.dot(&cr_dot) / cr.norm() * p.weight;
+                let w = fe.area;
+                // Relative velocity of the slave point to the tool (V^c = ȧ).
+                let x_dot = xbar_dot + d * zh_dot + d_dot * zh;
+                let rel = x_dot - V3::from(seeds.tools[tool]);
+                let t = [cp.surface.xu, cp.surface.xv];
+                let a_inv = cp.a_matrix().try_inverse();
+                let m_inv = cp.metric().try_inverse();
+                let (Some(a_inv), Some(m_inv)) = (a_inv, m_inv) else {
+                    return Err(ShellError::InvalidInput(format!(
+                        "contact sensitivity: singular projection matrix at quadrature point {} \
+                         (ζ = {}): expected a regular tool point off its centres of curvature",
+                        site.point, fe.zeta
+                    )));
+                };
+                // Eq 80: A ξ̇ = [x^c,α·(ẋ − V^c)].
+                let xi_dot = a_inv * Vector2::new(t[0].dot(&rel), t[1].dot(&rel));
+                let g_dot = cp.normal.dot(&rel);
+                // Weingarten: n,β = −(b m⁻¹)_βγ x^c,γ.
+                let bm = cp.curvature() * m_inv;
+                let mut n_dot = V3::zeros();
+                for b in 0..2 {
+                    for gm in 0..2 {
+                        n_dot -= t[gm] * (bm[(b, gm)] * xi_dot[b]);
+                    }
+                }
+                let g = cp.gap;
+                let f = cp.normal * (-omega * w * g);
+                let f_dot = cp.normal
+                    * -(seeds.penalty * w * g + omega * w_dot * g + omega * w * g_dot)
+                    - n_dot * (omega * w * g);
+                fsum_dot += f_dot;
+                msum += f * zh;
+                msum_dot += f * zh_dot + f_dot * zh;
+            }
+            let mut local = Vec::with_capacity(DOFS_PER_PARTICLE * p.shape.len());
+            for (n, s) in p.shape.iter().enumerate() {
+                let fp = fsum_dot * s.psi;
+                local.extend_from_slice(&[
+                    fp[0],
+                    fp[1],
+                    fp[2],
+                    (da_dot[n][0].dot(&msum) + da[n][0].dot(&msum_dot)) * s.psi,
+                    (da_dot[n][1].dot(&msum) + da[n][1].dot(&msum_dot)) * s.psi,
+                ]);
+            }
+            model.scatter_local(site.point, &local, &mut out);
+        }
+        Ok(out)
+    }
+}

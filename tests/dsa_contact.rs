@@ -1,0 +1,607 @@
+//! Design sensitivity with contact (issue 5, tool-position variables; the paper's §4.2,
+//! eqs 73–83) on a small punch-bending case: a quarter sheet 30 × 5 × 1 mm (13 × 3 particles,
+//! elastoplastic aluminium as in `verification/cylindrical-bending/`), a cylinder punch
+//! (R = 10) pushed down at x = 0, a cylinder die (R = 10) at x = 22, a constant self-weight.
+//!
+//! 1. The hand-derived contact-force sensitivity `ShellContact::force_dot` (eqs 78–83) against
+//!    the dual-number evaluation `ShellContact::force_with` and against central differences,
+//!    seed by seed (die x, die z, punch z, thickness with penalty, committed state and
+//!    increment), at a deformed, plastically bent state with both tools active.
+//! 2. The dual reference (`sensitivity::dual`, `DualLoad::Contact`) for the die's horizontal
+//!    and vertical position and the thickness against central differences of complete re-runs
+//!    (`shelldsa dsa`'s run), and the Taylor remainder's rate.
+//!
+//! Run: `cargo test --release --test dsa_contact -- --nocapture`.
+
+use nalgebra::Vector3;
+use num_dual::Dual64;
+use shelldsa::contact::{ContactInputs, ContactSeeds, ShellContact};
+use shelldsa::io::dsa_run;
+use shelldsa::io::shell_build;
+use shelldsa::io::shell_case::{parse_shell_case, ShellCase};
+use shelldsa::shell::model::ShellModel;
+use shelldsa::shell::point::ParticleState;
+use shelldsa::solver::{LinearSolver, Method, SolverOptions};
+use std::path::Path;
+use std::sync::Arc;
+
+/// The small bending case; `{final}` is the last load factor (1 = 6 mm of stroke), `{design}`
+/// the `[[design]]`/`[dsa]` part.
+const CASE: &str = r#"
+thickness = 1.0
+[problem]
+kind = "shell"
+title = "small punch bending (tests/dsa_contact.rs)"
+[surface]
+type = "rectangle"
+origin = [0.0, 0.0, 0.0]
+edge_u = [30.0, 0.0, 0.0]
+edge_v = [0.0, 5.0, 0.0]
+[particles]
+grid = [13, 3]
+[kernel]
+basis = "quadratic"
+support = 3.0
+[integration]
+cells = "per-particle-spacing"
+subdivide = 1
+gauss = 2
+thickness_points = 5
+thickness_rule = "lobatto"
+vci = "second"
+[material]
+young = 70000.0
+poisson = 0.34
+sigma0 = 184.3
+hardening = 70.0
+beta = 1.0
+[[boundary]]
+kind = "symmetry"
+edge = "u-min"
+normal = [1.0, 0.0, 0.0]
+point = [0.0, 0.0, 0.0]
+[[boundary]]
+kind = "symmetry"
+edge = "v-min"
+normal = [0.0, 1.0, 0.0]
+point = [0.0, 0.0, 0.0]
+[[load]]
+kind = "gravity"
+per_area = [0.0, 0.0, -2.6487e-5]
+scaling = "constant"
+[contact]
+faces = "both"
+penalty = 1000.0
+[[tool]]
+name = "punch"
+side = "positive"
+[tool.surface]
+type = "cylinder-sector"
+origin = [0.0, -5.0, 10.51]
+axis = [0.0, 1.0, 0.0]
+reference = [1.0, 0.0, 0.0]
+radius = 10.0
+angle_deg = [0.0, 135.0]
+length = [0.0, 15.0]
+[tool.path]
+keys = [
+    { t = 0.0, translation = [0.0, 0.0, 0.0] },
+    { t = 1.0, translation = [0.0, 0.0, -6.0] },
+]
+[[tool]]
+name = "die"
+side = "positive"
+[tool.surface]
+type = "cylinder-sector"
+origin = [22.0, -5.0, -10.49]
+axis = [0.0, 1.0, 0.0]
+reference = [-1.0, 0.0, 0.0]
+radius = 10.0
+angle_deg = [-30.0, 150.0]
+length = [0.0, 15.0]
+[tool.path]
+keys = [{ t = 0.0, translation = [0.0, 0.0, 0.0] }]
+[steps]
+initial_step = 0.01
+min_step = 1e-5
+max_step = 0.02
+final_load = {final}
+stops = [0.25]
+max_iterations = 8
+residual_rtol = 1e-10
+[[monitor]]
+name = "center"
+at = [0.0, 0.0]
+[[monitor]]
+name = "edge"
+at = [1.0, 0.0]
+[output]
+vtu = false
+plot = false
+{design}
+"#;
+
+fn case(final_load: f64, design: &str) -> ShellCase {
+    let text = CASE
+        .replace("{final}", &format!("{final_load:?}"))
+        .replace("{design}", design);
+    parse_shell_case(&text, Path::new("tests/dsa_contact.rs")).unwrap()
+}
+
+/// A deterministic pseudo-random sequence in [−1, 1) (an LCG; no dependency).
+struct Lcg(u64);
+
+impl Lcg {
+    fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    }
+    fn v3(&mut self, s: f64) -> Vector3<f64> {
+        Vector3::new(self.next() * s, self.next() * s, self.next() * s)
+    }
+}
+
+/// The model bent to 3 mm of stroke (t = 0.5) and its contact.
+fn bent_state() -> (ShellModel, Arc<ShellContact>) {
+    let c = case(0.5, "");
+    let mut b = shell_build::build(&c).unwrap();
+    let pattern = b.problem.pattern().clone();
+    let mut linear =
+        LinearSolver::new(&pattern, Method::auto(&pattern), SolverOptions::default()).unwrap();
+    let u0 = b.problem.state().to_vec();
+    b.newton
+        .run(&mut b.problem, &pattern, &mut linear, &u0)
+        .unwrap();
+    (b.problem.model.clone(), b.contact.unwrap())
+}
+
+/// Input derivatives of one test seed.
+struct Seed {
+    name: &'static str,
+    tools: Vec<[f64; 3]>,
+    thickness: f64,
+    penalty: f64,
+    particles: Vec<ParticleState<f64>>,
+    increment: Vec<f64>,
+}
+
+fn zero_state() -> ParticleState<f64> {
+    ParticleState {
+        u: Vector3::zeros(),
+        d: Vector3::zeros(),
+        d0: Vector3::zeros(),
+        e: [Vector3::zeros(); 2],
+    }
+}
+
+/// `x + s ẋ` for every input.
+fn shifted(model: &ShellModel, seed: &Seed, s: f64) -> Vec<ParticleState<f64>> {
+    model
+        .particles
+        .iter()
+        .zip(&seed.particles)
+        .map(|(p, d)| ParticleState {
+            u: p.u + d.u * s,
+            d: p.d + d.d * s,
+            d0: p.d0 + d.d0 * s,
+            e: [p.e[0] + d.e[0] * s, p.e[1] + d.e[1] * s],
+        })
+        .collect()
+}
+
+fn force_f64(
+    model: &ShellModel,
+    contact: &ShellContact,
+    q: &[f64],
+    t: f64,
+    seed: &Seed,
+    s: f64,
+) -> Vec<f64> {
+    let particles = shifted(model, seed, s);
+    let offsets: Vec<Vector3<f64>> = seed.tools.iter().map(|a| Vector3::from(*a) * s).collect();
+    let inputs = ContactInputs {
+        particles: &particles,
+        thickness: model.thickness + s * seed.thickness,
+        penalty: contact.penalty() + s * seed.penalty,
+        offsets: &offsets,
+    };
+    let qs: Vec<f64> = q
+        .iter()
+        .zip(&seed.increment)
+        .map(|(a, b)| a + s * b)
+        .collect();
+    let mut f = vec![0.0; q.len()];
+    contact.force_with(model, &inputs, &qs, t, &mut f).unwrap();
+    f
+}
+
+fn force_dual(
+    model: &ShellModel,
+    contact: &ShellContact,
+    q: &[f64],
+    t: f64,
+    seed: &Seed,
+) -> Vec<f64> {
+    let dv = |a: &Vector3<f64>, b: &Vector3<f64>| a.zip_map(b, Dual64::new);
+    let particles: Vec<ParticleState<Dual64>> = model
+        .particles
+        .iter()
+        .zip(&seed.particles)
+        .map(|(p, d)| ParticleState {
+            u: dv(&p.u, &d.u),
+            d: dv(&p.d, &d.d),
+            d0: dv(&p.d0, &d.d0),
+            e: [dv(&p.e[0], &d.e[0]), dv(&p.e[1], &d.e[1])],
+        })
+        .collect();
+    let offsets: Vec<Vector3<Dual64>> = seed
+        .tools
+        .iter()
+        .map(|a| Vector3::from(*a).map(|v| Dual64::new(0.0, v)))
+        .collect();
+    let inputs = ContactInputs {
+        particles: &particles,
+        thickness: Dual64::new(model.thickness, seed.thickness),
+        penalty: Dual64::new(contact.penalty(), seed.penalty),
+        offsets: &offsets,
+    };
+    let qd: Vec<Dual64> = q
+        .iter()
+        .zip(&seed.increment)
+        .map(|(a, b)| Dual64::new(*a, *b))
+        .collect();
+    let mut f = vec![Dual64::from(0.0); q.len()];
+    contact.force_with(model, &inputs, &qd, t, &mut f).unwrap();
+    f.iter().map(|v| v.eps).collect()
+}
+
+fn max_abs(v: &[f64]) -> f64 {
+    v.iter().fold(0.0, |m, x| m.max(x.abs()))
+}
+
+fn max_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).fold(0.0, |m, (x, y)| m.max((x - y).abs()))
+}
+
+#[test]
+fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences() {
+    let (model, contact) = bent_state();
+    let n = model.n_dofs();
+    let np = model.particles.len();
+    let mut rng = Lcg(0x5eed_c0de);
+    // A random increment from the committed state (translations ≤ 0.02 mm, rotations
+    // ≤ 0.02 rad) at t = 0.505 (the punch 0.03 mm further down).
+    let q: Vec<f64> = (0..n).map(|_| rng.next() * 0.02).collect();
+    let t = 0.505;
+    let report = contact.report(&model, &q, t).unwrap();
+    let active: Vec<usize> = report.tools.iter().map(|r| r.active_points).collect();
+    let off_tool = report.slaves.iter().filter(|s| s.tool.is_none()).count();
+    println!(
+        "active points per tool {active:?}, slave points without an interior projection \
+         {off_tool} of {}",
+        report.slaves.len()
+    );
+    // Both tools carry force. (Both cylinders span every slave point's projection here, so no
+    // point projects onto a tool boundary: that branch carries no force in either method.)
+    assert!(active.iter().all(|&a| a > 0), "active points {active:?}");
+
+    let zeros = vec![zero_state(); np];
+    let state_dots: Vec<ParticleState<f64>> = (0..np)
+        .map(|_| ParticleState {
+            u: rng.v3(0.1),
+            d: rng.v3(0.01),
+            d0: rng.v3(0.01),
+            e: [rng.v3(0.01), rng.v3(0.01)],
+        })
+        .collect();
+    let inc_dot: Vec<f64> = (0..n).map(|_| rng.next() * 0.05).collect();
+    let seeds = vec![
+        Seed {
+            name: "die x",
+            tools: vec![[0.0; 3], [1.0, 0.0, 0.0]],
+            thickness: 0.0,
+            penalty: 0.0,
+            particles: zeros.clone(),
+            increment: vec![0.0; n],
+        },
+        Seed {
+            name: "die z",
+            tools: vec![[0.0; 3], [0.0, 0.0, 1.0]],
+            thickness: 0.0,
+            penalty: 0.0,
+            particles: zeros.clone(),
+            increment: vec![0.0; n],
+        },
+        Seed {
+            name: "punch z",
+            tools: vec![[0.0, 0.0, 1.0], [0.0; 3]],
+            thickness: 0.0,
+            penalty: 0.0,
+            particles: zeros.clone(),
+            increment: vec![0.0; n],
+        },
+        Seed {
+            name: "thickness, penalty",
+            tools: vec![[0.0; 3]; 2],
+            thickness: 1.0,
+            penalty: -1000.0, // ω = c E/t: ω̇ = −ω/t
+            particles: zeros.clone(),
+            increment: vec![0.0; n],
+        },
+        Seed {
+            name: "state, increment",
+            tools: vec![[0.0; 3]; 2],
+            thickness: 0.0,
+            penalty: 0.0,
+            particles: state_dots,
+            increment: inc_dot,
+        },
+    ];
+    for seed in &seeds {
+        let cs = ContactSeeds {
+            tools: &seed.tools,
+            thickness: seed.thickness,
+            penalty: seed.penalty,
+            particles: &seed.particles,
+            increment: &seed.increment,
+        };
+        let hand = contact.force_dot(&model, &q, t, &cs).unwrap();
+        let dual = force_dual(&model, &contact, &q, t, seed);
+        let h = 1e-6;
+        let fp = force_f64(&model, &contact, &q, t, seed, h);
+        let fm = force_f64(&model, &contact, &q, t, seed, -h);
+        let cd: Vec<f64> = fp
+            .iter()
+            .zip(&fm)
+            .map(|(a, b)| (a - b) / (2.0 * h))
+            .collect();
+        let scale = max_abs(&dual);
+        let e_dual = max_diff(&hand, &dual) / scale;
+        let e_cd = max_diff(&hand, &cd) / scale;
+        println!(
+            "{:<20} max|ḟ| {scale:.4e}  |hand − dual| {e_dual:.2e}  |hand − central| {e_cd:.2e}",
+            seed.name
+        );
+        assert!(scale > 0.0, "{}: the seed must move the force", seed.name);
+        // Same formulas evaluated two ways (dual numbers through the projection's Newton
+        // correction, and the hand-derived chain): round-off of sums of terms of size
+        // ~max|ḟ| (the penalty ω = 1000 amplifies gaps of ~1e-3 mm), so 1e-10 relative.
+        assert!(e_dual < 1e-10, "{}: hand vs dual {e_dual:e}", seed.name);
+        // Central differences with h = 1e-6 (inputs of size 1…30 mm): truncation ~h²·|f'''|
+        // ≲ 1e-11 and round-off ~ε|f|/h ≈ 1e-10 of the force; 1e-7 leaves room for the
+        // curvature of the cylinder (R = 10) along a slave point's path.
+        assert!(
+            e_cd < 1e-7,
+            "{}: hand vs central differences {e_cd:e}",
+            seed.name
+        );
+    }
+}
+
+/// One variable's results of the `shelldsa dsa` run: dual against central differences at the
+/// smallest step, and the Taylor rates.
+/// The continuum (hand-derived, with `ShellContact::force_dot` for `b'_N`) derivative equals the
+/// dual one: issue 5 asks 1e-8 relative on every component with |ψ'| ≥ 1e-6 max|ψ'| (both solve
+/// eq 65 with the same tangent; their right-hand sides differ by round-off).
+fn continuum_matches_dual(var: &dsa_run::VariableResult) {
+    let name = &var.entry.variable.name;
+    let (c, d) = (var.continuum.as_ref().unwrap(), var.dual.as_ref().unwrap());
+    let big = d.iter().flatten().fold(0.0f64, |a, x| a.max(x.abs()));
+    let mut worst = 0.0f64;
+    for (x, y) in c.iter().flatten().zip(d.iter().flatten()) {
+        if y.abs() >= 1e-6 * big {
+            worst = worst.max((x / y - 1.0).abs());
+        }
+    }
+    println!("`{name}`: continuum vs dual {worst:.2e}");
+    assert!(worst <= 1e-8, "`{name}`: continuum vs dual {worst:e}");
+}
+
+fn check_variable(r: &dsa_run::DsaResult, v: usize) {
+    let var = &r.variables[v];
+    let name = &var.entry.variable.name;
+    continuum_matches_dual(var);
+    println!(
+        "{}",
+        dsa_run::table(r, v)
+            .lines()
+            .filter(|l| !l.starts_with(' '))
+            .collect::<Vec<_>>()
+            .join("\n")
+    );
+    let last = var.fd.last().unwrap();
+    let unflagged = last.flagged.iter().filter(|f| !**f).count();
+    // The first steps keep their active set (contact and yield status) within the smallest
+    // ±h. Measured: the first flagged step is 9 or 10 of 27 for every h from 4e-3 down to 5e-4
+    // (a status at the nominal design that flips on one side); flagged steps are reported and
+    // left out, the comparison below covers the others.
+    assert!(
+        unflagged >= 5,
+        "{name}: {unflagged} of {} steps unflagged",
+        last.flagged.len()
+    );
+    // At the smallest h (5e-4) the central difference's truncation falls as h² (measured
+    // 1.6e-5, 4.1e-6, 1.0e-6, 2.6e-7 for die x at h = 4, 2, 1, 0.5 ·1e-3; die z ≤ 2.9e-7,
+    // t ≤ 5.5e-6) above the re-runs' noise (~1e-14 relative responses / h ≈ 1e-10): 1e-5 at
+    // the smallest h leaves a factor ~40 and still fails a wrong derivative term.
+    let e = dsa_run::max_rel_diff(var, last).expect("comparable components");
+    assert!(e < 1e-5, "{name}: dual vs FD {e:e}");
+    // The Taylor remainder of the dual derivative falls as h² (the derivative of the discrete
+    // response) at every step with at least three unflagged step sizes.
+    let mut fitted = 0;
+    for f in &var.taylor {
+        if f.used.len() >= 3 {
+            let rate = f.rate.unwrap();
+            assert!(
+                (rate - 2.0).abs() < 0.1,
+                "{name}: step {} rate {rate}",
+                f.step + 1
+            );
+            fitted += 1;
+        }
+    }
+    assert!(fitted >= 5, "{name}: {fitted} steps fitted");
+}
+
+#[test]
+fn dual_tool_position_and_thickness_derivatives_match_re_runs() {
+    let design = r#"
+[[design]]
+name = "die.x"
+kind = "tool.die.x"
+fd_steps = [4e-3, 2e-3, 1e-3, 5e-4]
+[[design]]
+name = "die.z"
+kind = "tool.die.z"
+fd_steps = [4e-3, 2e-3, 1e-3, 5e-4]
+[[design]]
+name = "t"
+kind = "thickness"
+fd_steps = [4e-3, 2e-3, 1e-3, 5e-4]
+[dsa]
+monitors = ["center.uz", "edge.ux", "edge.uz"]
+"#;
+    let c = case(0.5, design);
+    let spec = dsa_run::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
+    let t0 = std::time::Instant::now();
+    let r = dsa_run::run(&c, &spec, &mut |_| {}).unwrap();
+    println!(
+        "{} steps; analysis {:.2} s, dual reference {:.2} s, fd {:.2} s (total {:.1} s); \
+         dual state mismatch {:.1e}, dual value difference {:.1e}",
+        r.nominal.loads.len(),
+        r.time_analysis,
+        r.time_dual.unwrap(),
+        r.time_fd.unwrap(),
+        t0.elapsed().as_secs_f64(),
+        r.dual_state_mismatch.unwrap(),
+        r.dual_value_difference.unwrap()
+    );
+    // The dual state's value parts follow the analysis to round-off.
+    assert!(r.dual_state_mismatch.unwrap() < 1e-10);
+    for v in 0..r.variables.len() {
+        check_variable(&r, v);
+    }
+    // The die's horizontal position moves the sheet: non-zero derivatives.
+    let d = r.variables[0].dual.as_ref().unwrap();
+    assert!(d.last().unwrap().iter().any(|x| x.abs() > 1e-3));
+}
+
+#[test]
+fn tool_design_variables_are_checked() {
+    use shelldsa::io::CaseError;
+    use shelldsa::sensitivity::{DesignKind, DesignVariable};
+    assert_eq!(
+        DesignKind::parse("tool.die.z").unwrap(),
+        DesignKind::Tool {
+            tool: "die".into(),
+            axis: 2
+        }
+    );
+    // A tool name may contain dots: the axis is the last component.
+    assert_eq!(
+        DesignKind::parse("tool.a.b.x").unwrap(),
+        DesignKind::Tool {
+            tool: "a.b".into(),
+            axis: 0
+        }
+    );
+    for bad in ["tool.die.w", "tool.die", "tool..x", "tool."] {
+        let e = DesignKind::parse(bad).unwrap_err().to_string();
+        assert!(e.contains(bad) && e.contains("tool.<name>.<x|y|z>"), "{e}");
+    }
+    assert!(DesignVariable::tool("die", 3).is_err());
+    assert_eq!(DesignVariable::tool("die", 1).unwrap().name, "die.y");
+    // An unknown tool in a case: a typed error at the key, listing the case's tools.
+    let text = CASE.replace("{final}", "0.5").replace(
+        "{design}",
+        "[[design]]\nname = \"h\"\nkind = \"tool.holder.x\"\nfd_steps = [1e-3]\n",
+    );
+    match parse_shell_case(&text, Path::new("x.toml")) {
+        Err(CaseError::Invalid {
+            key,
+            value,
+            expected,
+            ..
+        }) => {
+            assert_eq!(key, "design[0].kind");
+            assert!(value.contains("tool.holder.x"), "{value}");
+            assert!(
+                expected.contains("\"punch\"") && expected.contains("\"die\""),
+                "{expected}"
+            );
+        }
+        other => panic!("expected an Invalid error, got {other:?}"),
+    }
+    // Tool variables take absolute finite-difference steps (τ = 0 at the nominal design).
+    let c = case(
+        0.5,
+        "[[design]]\nname = \"x\"\nkind = \"tool.die.x\"\nfd_steps = [2e-3]\n",
+    );
+    let base = dsa_run::base_design(&c);
+    let spec = c.dsa.unwrap();
+    assert_eq!(spec.design[0].absolute_steps(&base), vec![2e-3]);
+    let moved = spec.design[0].variable.perturbed(&base, 2e-3).unwrap();
+    assert_eq!(moved.tool_offset("die"), [2e-3, 0.0, 0.0]);
+    assert_eq!(spec.design[0].variable.value(&moved), 2e-3);
+}
+
+#[test]
+fn penalty_from_factor_is_differentiated_with_e_and_t() {
+    // ω = c E/t (`penalty_factor`): a re-run with another E or t has another penalty, and the
+    // reference differentiates it (c = 1000/70000 gives the ω = 1000 of the other tests).
+    let design = r#"
+[[design]]
+name = "t"
+kind = "thickness"
+fd_steps = [1e-3, 1e-4]
+[[design]]
+name = "E"
+kind = "material.young"
+fd_steps = [1e-3, 1e-4]
+[dsa]
+monitors = ["center.uz", "edge.ux", "edge.uz"]
+"#;
+    let text = CASE
+        .replace("{final}", "0.25")
+        .replace("{design}", design)
+        .replace("penalty = 1000.0", "penalty_factor = 0.014285714285714285");
+    let c = parse_shell_case(&text, Path::new("tests/dsa_contact.rs")).unwrap();
+    let spec = dsa_run::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
+    let r = dsa_run::run(&c, &spec, &mut |_| {}).unwrap();
+    for var in &r.variables {
+        continuum_matches_dual(var);
+        let last = var.fd.last().unwrap();
+        let unflagged = last.flagged.iter().filter(|f| !**f).count();
+        let e = dsa_run::max_rel_diff(var, last).expect("comparable components");
+        let all: Vec<String> = var
+            .fd
+            .iter()
+            .map(|c| format!("{:.2e}", dsa_run::max_rel_diff(var, c).unwrap_or(f64::NAN)))
+            .collect();
+        println!(
+            "penalty_factor, `{}`: {unflagged} of {} steps unflagged, dual vs FD per h {all:?}, \
+             smallest {e:.2e}",
+            var.entry.variable.name,
+            last.flagged.len()
+        );
+        assert!(unflagged >= 5);
+        // The better of the two step sizes: the truncation falls as h² and the re-runs' noise
+        // grows as 1/h (measured for E: 2.0e-6 at h/τ = 1e-3, 1.9e-5 at 1e-4, where the
+        // response's small E-derivative meets the convergence noise; for t 4.4e-7, 4.5e-9). A
+        // penalty held fixed in the reference would be off by the penalty's share of the
+        // derivative, orders of magnitude above 1e-5.
+        let best = var
+            .fd
+            .iter()
+            .filter_map(|c| dsa_run::max_rel_diff(var, c))
+            .fold(f64::INFINITY, f64::min);
+        assert!(
+            best < 1e-5,
+            "`{}`: dual vs FD {best:e}",
+            var.entry.variable.name
+        );
+    }
+}
