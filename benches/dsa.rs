@@ -6,21 +6,28 @@
 //! printed once per case as a fraction of the plain analysis per design variable: the
 //! paper's measure (its Table 1–2 discussion: 3.1 % hemisphere, 14 % bending).
 //!
-//! `cargo bench --bench dsa` (≈ 3 min on 2 cores); one case:
-//! `cargo bench --bench dsa -- hemisphere-plastic-dsa`.
+//! `cargo bench --bench dsa` (≈ 10 min on 2 cores); one case:
+//! `cargo bench --bench dsa -- hemisphere-plastic-dsa` (or `cylindrical-bending-dsa`). The
+//! percentages alone (no criterion samples): `cargo bench --bench dsa -- nomatch`.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use shelldsa::io::dsa_case::dual_loads;
+use shelldsa::io::dsa_case::{dual_contact, dual_loads};
 use shelldsa::io::dsa_run::CaseAnalysis;
 use shelldsa::io::shell_case::{read_shell_case, ShellCase};
 use shelldsa::sensitivity::continuum::run_continuum;
+use shelldsa::sensitivity::dual::DualLoad;
 use shelldsa::sensitivity::dual::{run_dual_on, DualMode};
 use shelldsa::sensitivity::fd::{self, Analysis};
 use shelldsa::sensitivity::{Design, DesignVariable};
+use shelldsa::shell::problem::ShellProblem;
+use shelldsa::solver::NewtonSolver;
 use std::hint::black_box;
 use std::time::Instant;
 
-const CASES: [&str; 1] = ["verification/hemisphere-plastic-dsa/case.toml"];
+const CASES: [&str; 2] = [
+    "verification/hemisphere-plastic-dsa/case.toml",
+    "verification/cylindrical-bending-dsa/case.toml",
+];
 
 struct Setup {
     case: ShellCase,
@@ -53,15 +60,26 @@ impl Setup {
             .loads
             .len() as f64
     }
+    /// The problem, its driver and the loads as the sensitivity methods see them (with the
+    /// contact when the case has tools).
+    fn problem(&self) -> (ShellProblem, NewtonSolver, Vec<DualLoad>) {
+        let a = CaseAnalysis { case: &self.case };
+        let (p, n, contact) = a.build_with_contact(&self.base()).unwrap();
+        let mut loads = dual_loads(&self.case).unwrap();
+        if let Some(c) = contact {
+            loads.push(dual_contact(&self.case, c));
+        }
+        (p, n, loads)
+    }
     /// (method time, whole run time) in seconds.
     fn continuum(&self) -> (f64, f64) {
         let a = CaseAnalysis { case: &self.case };
-        let (p, n) = a.build(&self.base()).unwrap();
+        let (p, n, loads) = self.problem();
         let r = run_continuum(
             p,
             Some(&self.case.surface),
             self.vars.clone(),
-            dual_loads(&self.case).unwrap(),
+            loads,
             self.case.dsa.as_ref().unwrap().monitors.clone(),
             &n,
             a.solver(),
@@ -76,12 +94,12 @@ impl Setup {
     }
     fn dual(&self) -> (f64, f64) {
         let a = CaseAnalysis { case: &self.case };
-        let (p, n) = a.build(&self.base()).unwrap();
+        let (p, n, loads) = self.problem();
         let r = run_dual_on(
             p,
             Some(&self.case.surface),
             self.vars.clone(),
-            dual_loads(&self.case).unwrap(),
+            loads,
             self.case.dsa.as_ref().unwrap().monitors.clone(),
             &n,
             a.solver(),
