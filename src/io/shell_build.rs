@@ -33,10 +33,11 @@ use crate::shell::point::DOFS_PER_PARTICLE;
 use crate::shell::problem::ShellProblem;
 use crate::shell::symmetry::SymmetryPlane;
 use crate::shell::ShellError;
+use crate::solver::observe::{Observed, StepObserver};
 use crate::solver::{
-    ConvergedStep, ConvergedTangent, LinearSolver, LinearUpdates, LoadStepping, Method,
-    NewtonOptions, NewtonSolver, NonlinearProblem, Parallelism, Predictor, ProblemError,
-    SolverError, SolverOptions, SparsityPattern, StepRecord,
+    ConvergedStep, LinearSolver, LinearUpdates, LoadStepping, Method, NewtonOptions, NewtonSolver,
+    NonlinearProblem, Parallelism, Predictor, ProblemError, SolverError, SolverOptions,
+    SparsityPattern, StepRecord,
 };
 use nalgebra::Vector3;
 use serde_json::json;
@@ -497,82 +498,42 @@ pub struct RunSummary {
     pub warnings: Vec<String>,
 }
 
-/// The problem as the driver sees it, plus a hook after every commit: `on_commit` sees the
-/// committed problem and the step's record (from [`NonlinearProblem::on_converged`]). An error
-/// of the hook stops the run at the next evaluation (as a fatal problem error).
-struct Observed<'a, P, F, E> {
-    inner: &'a mut P,
+/// The commit hook of a run: `on_commit` sees the committed problem and the step's record
+/// (kept from the converged step). An error of the hook stops the run at the next evaluation
+/// (as a fatal problem error).
+struct CommitHook<F, E> {
     record: Option<StepRecord>,
     error: Option<E>,
     on_commit: F,
 }
 
-impl<P, F, E: std::fmt::Display> Observed<'_, P, F, E> {
-    fn check(&self) -> Result<(), ProblemError> {
-        match &self.error {
-            Some(e) => Err(ProblemError::Fatal(format!("writing results: {e}"))),
-            None => Ok(()),
-        }
-    }
-}
-
-impl<P, F, E> NonlinearProblem for Observed<'_, P, F, E>
+impl<F, E> StepObserver<&mut ShellProblem> for CommitHook<F, E>
 where
-    P: NonlinearProblem,
-    F: FnMut(&P, &StepRecord) -> Result<(), E>,
+    F: FnMut(&ShellProblem, &StepRecord) -> Result<(), E>,
     E: std::fmt::Display,
 {
-    fn n_dofs(&self) -> usize {
-        self.inner.n_dofs()
-    }
-    fn residual(&mut self, u: &[f64], load: f64, r: &mut [f64]) -> Result<(), ProblemError> {
-        self.check()?;
-        self.inner.residual(u, load, r)
-    }
-    fn tangent(&mut self, u: &[f64], load: f64, values: &mut [f64]) -> Result<(), ProblemError> {
-        self.check()?;
-        self.inner.tangent(u, load, values)
-    }
-    fn residual_and_tangent(
+    fn on_converged(
         &mut self,
-        u: &[f64],
-        load: f64,
-        r: &mut [f64],
-        values: &mut [f64],
+        _problem: &&mut ShellProblem,
+        step: &ConvergedStep<'_>,
     ) -> Result<(), ProblemError> {
-        self.check()?;
-        self.inner.residual_and_tangent(u, load, r, values)
-    }
-    fn essential(&self, load: f64) -> Vec<(usize, f64)> {
-        self.inner.essential(load)
-    }
-    fn force_norm(&self, load: f64) -> f64 {
-        self.inner.force_norm(load)
-    }
-    fn residual_scale(&self) -> f64 {
-        self.inner.residual_scale()
-    }
-    fn converged_tangent(&self) -> ConvergedTangent {
-        self.inner.converged_tangent()
-    }
-    fn on_converged(&mut self, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
-        self.inner.on_converged(step)?;
         self.record = Some(step.record.clone());
         Ok(())
     }
-    fn commit(&mut self, u: &[f64], load: f64) {
-        self.inner.commit(u, load);
+    fn after_commit(&mut self, problem: &&mut ShellProblem, _u: &[f64], _load: f64) {
         if let Some(rec) = self.record.take() {
             if self.error.is_none() {
-                if let Err(e) = (self.on_commit)(self.inner, &rec) {
+                if let Err(e) = (self.on_commit)(problem, &rec) {
                     self.error = Some(e);
                 }
             }
         }
     }
-    fn restore(&mut self) {
+    fn on_restore(&mut self) {
         self.record = None;
-        self.inner.restore();
+    }
+    fn failure(&self) -> Option<String> {
+        self.error.as_ref().map(|e| format!("writing results: {e}"))
     }
 }
 
@@ -638,8 +599,7 @@ pub fn run(
     );
     let surface = &case.surface;
     let contact = built.contact.clone();
-    let mut obs = Observed {
-        inner: &mut built.problem,
+    let hook = CommitHook {
         record: None,
         error: None,
         on_commit: |p: &ShellProblem, rec: &StepRecord| {
@@ -657,11 +617,12 @@ pub fn run(
             Ok::<(), OutputError>(())
         },
     };
+    let mut obs = Observed::new(&mut built.problem, hook);
     let result =
         built
             .newton
             .run_with_progress(&mut obs, &pattern, &mut solver, &vec![0.0; n], |_| {});
-    let hook_error = obs.error.take();
+    let hook_error = obs.observer.error.take();
     drop(obs);
     let (status, attempts) = match result {
         Ok(report) => (RunStatus::Complete, report.attempts),

@@ -21,10 +21,8 @@ use super::dual::SensitivityError;
 use super::{Design, DesignVariable, Monitor};
 use crate::contact::ShellContact;
 use crate::shell::problem::ShellProblem;
-use crate::solver::{
-    ConvergedStep, ConvergedTangent, LinearSolver, Method, NewtonSolver, NonlinearProblem,
-    ProblemError, SolverOptions,
-};
+use crate::solver::observe::{Observed, StepObserver};
+use crate::solver::{LinearSolver, Method, NewtonSolver, SolverOptions};
 use std::sync::Arc;
 
 /// The monitored responses of one complete run.
@@ -41,60 +39,27 @@ pub struct RunResponse {
     pub contact: Vec<Vec<bool>>,
 }
 
-/// The problem with a recorder after every commit.
+/// The recorder of the monitors, yield and contact status after every commit (an observer of
+/// the problem's converged steps).
 struct Recording<'a> {
-    problem: ShellProblem,
     contact: Option<Arc<ShellContact>>,
     monitors: &'a [Monitor],
     out: RunResponse,
+    /// `ē^p` of every layer point at the step start.
+    before: Vec<f64>,
     failure: Option<String>,
 }
 
-impl NonlinearProblem for Recording<'_> {
-    fn n_dofs(&self) -> usize {
-        self.problem.n_dofs()
+impl StepObserver<ShellProblem> for Recording<'_> {
+    fn before_commit(&mut self, problem: &ShellProblem, _u: &[f64], _load: f64) {
+        self.before.clear();
+        self.before
+            .extend(problem.model.history.iter().map(|h| h.material.eps_p));
     }
-    fn residual(&mut self, u: &[f64], load: f64, r: &mut [f64]) -> Result<(), ProblemError> {
-        self.problem.residual(u, load, r)
-    }
-    fn tangent(&mut self, u: &[f64], load: f64, values: &mut [f64]) -> Result<(), ProblemError> {
-        self.problem.tangent(u, load, values)
-    }
-    fn residual_and_tangent(
-        &mut self,
-        u: &[f64],
-        load: f64,
-        r: &mut [f64],
-        values: &mut [f64],
-    ) -> Result<(), ProblemError> {
-        self.problem.residual_and_tangent(u, load, r, values)
-    }
-    fn essential(&self, load: f64) -> Vec<(usize, f64)> {
-        self.problem.essential(load)
-    }
-    fn force_norm(&self, load: f64) -> f64 {
-        self.problem.force_norm(load)
-    }
-    fn residual_scale(&self) -> f64 {
-        self.problem.residual_scale()
-    }
-    fn on_converged(&mut self, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
-        self.problem.on_converged(step)
-    }
-    fn converged_tangent(&self) -> ConvergedTangent {
-        self.problem.converged_tangent()
-    }
-    fn commit(&mut self, u: &[f64], load: f64) {
-        let before: Vec<f64> = self
-            .problem
-            .model
-            .history
-            .iter()
-            .map(|h| h.material.eps_p)
-            .collect();
-        self.problem.commit(u, load);
-        let model = &self.problem.model;
-        let yielding = before
+    fn after_commit(&mut self, problem: &ShellProblem, _u: &[f64], load: f64) {
+        let model = &problem.model;
+        let yielding = self
+            .before
             .iter()
             .zip(&model.history)
             .map(|(a, h)| h.material.eps_p > *a)
@@ -119,8 +84,8 @@ impl NonlinearProblem for Recording<'_> {
             }
         }
     }
-    fn restore(&mut self) {
-        self.problem.restore();
+    fn failure(&self) -> Option<String> {
+        self.failure.as_ref().map(|f| format!("monitor: {f}"))
     }
 }
 
@@ -146,8 +111,7 @@ pub fn response_with_contact(
     let pattern = problem.pattern().clone();
     let mut linear = LinearSolver::new(&pattern, Method::auto(&pattern), solver)?;
     let u0 = problem.state().to_vec();
-    let mut rec = Recording {
-        problem,
+    let rec = Recording {
         contact,
         monitors,
         out: RunResponse {
@@ -156,17 +120,19 @@ pub fn response_with_contact(
             yielding: Vec::new(),
             contact: Vec::new(),
         },
+        before: Vec::new(),
         failure: None,
     };
+    let mut p = Observed::new(problem, rec);
     newton
-        .run(&mut rec, &pattern, &mut linear, &u0)
+        .run(&mut p, &pattern, &mut linear, &u0)
         .map_err(SensitivityError::Newton)?;
-    if let Some(f) = rec.failure {
+    if let Some(f) = p.observer.failure() {
         return Err(SensitivityError::Shell(
-            crate::shell::ShellError::InvalidInput(format!("monitor: {f}")),
+            crate::shell::ShellError::InvalidInput(f),
         ));
     }
-    Ok(rec.out)
+    Ok(p.observer.out)
 }
 
 /// Builds the analysis for a design: the problem and its driver.

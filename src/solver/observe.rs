@@ -144,3 +144,47 @@ impl<P: NonlinearProblem, O: StepObserver<P>> NonlinearProblem for Observed<P, O
         self.problem.restore();
     }
 }
+
+/// A borrowed problem is a problem: `Observed::new(&mut problem, observer)` observes a problem
+/// its owner keeps.
+impl<P: NonlinearProblem + ?Sized> NonlinearProblem for &mut P {
+    fn n_dofs(&self) -> usize {
+        (**self).n_dofs()
+    }
+    fn residual(&mut self, u: &[f64], load: f64, r: &mut [f64]) -> Result<(), ProblemError> {
+        (**self).residual(u, load, r)
+    }
+    fn tangent(&mut self, u: &[f64], load: f64, values: &mut [f64]) -> Result<(), ProblemError> {
+        (**self).tangent(u, load, values)
+    }
+    fn residual_and_tangent(
+        &mut self,
+        u: &[f64],
+        load: f64,
+        r: &mut [f64],
+        values: &mut [f64],
+    ) -> Result<(), ProblemError> {
+        (**self).residual_and_tangent(u, load, r, values)
+    }
+    fn essential(&self, load: f64) -> Vec<(usize, f64)> {
+        (**self).essential(load)
+    }
+    fn force_norm(&self, load: f64) -> f64 {
+        (**self).force_norm(load)
+    }
+    fn residual_scale(&self) -> f64 {
+        (**self).residual_scale()
+    }
+    fn on_converged(&mut self, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
+        (**self).on_converged(step)
+    }
+    fn converged_tangent(&self) -> ConvergedTangent {
+        (**self).converged_tangent()
+    }
+    fn commit(&mut self, u: &[f64], load: f64) {
+        (**self).commit(u, load)
+    }
+    fn restore(&mut self) {
+        (**self).restore()
+    }
+}
