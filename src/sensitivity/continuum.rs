@@ -67,7 +67,8 @@ pub enum TermGroup {
     Design,
     /// The material parameters (the `Ḋ` and yield-radius terms of `σ^fic`).
     Material,
-    /// The loads' explicit design dependence (eq 37's `l'_V` for a shape variable).
+    /// The loads' explicit design dependence (eq 37's `l'_V` for a shape variable; the
+    /// contact's dependence on the thickness through its faces and penalty).
     Load,
     /// The rigid tools' design velocity `V^c` in the contact force (`b'_N`, eqs 76–83).
     Tool,
@@ -521,9 +522,9 @@ impl ContinuumDsa {
 /// - gravity per unit initial area: the area element's shape derivative (group `load`);
 /// - a constant load: the inner load at factor 1;
 /// - the contact: `ShellContact::force_dot` (eqs 78–83, `b'_N`) with the committed particle
-///   dots (group `history`), the tool translations (group `tool`), the thickness (group
-///   `design`) and the penalty's `ω = c E/t` dependence (`Ė`: group `material`, `ṫ`: group
-///   `design`).
+///   dots (group `history`), the tool translations (group `tool`), the thickness (the contact
+///   faces at `±t/2`: group `load`) and the penalty's `ω = c E/t` dependence (`Ė`: group
+///   `material`, `ṫ`: group `load`).
 fn add_load_dot(
     model: &ShellModel,
     l: &DualLoad,
@@ -560,7 +561,7 @@ fn add_load_dot(
         DualLoad::Contact(c) => {
             let zero_tools = vec![[0.0; 3]; s.tools.len()];
             let (t_dot, e_dot) = (
-                if on(TermGroup::Design) {
+                if on(TermGroup::Load) {
                     s.thickness
                 } else {
                     0.0
