@@ -49,7 +49,7 @@ use crate::kinematics::{
     frame_update_dot, global_stress_dot, hughes_winget_dot, local_strain_increment,
     local_strain_increment_dot, strain_to_vec5, stress_from_vec5, HwIncrement, M3,
 };
-use crate::material::{material_sensitivity, MaterialParams, ReturnMap, Vec5};
+use crate::material::{material_sensitivity, MaterialParams, MaterialState, ReturnMap, Vec5};
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
@@ -409,6 +409,16 @@ impl<'a> LayerData<'a> {
         })
     }
 
+    fn keep(&self) -> LayerKeep {
+        LayerKeep {
+            f_half_inv: self.f_half_inv,
+            jn_inv_f: self.jn_inv * self.f_half_inv,
+            inc: self.inc,
+            deps_l: self.deps_l,
+            return_map: *self.return_map,
+        }
+    }
+
     /// The layer's `Ṗ` for one seed set, added into `acc` (with its `z`-moment), and the trial
     /// history's derivative.
     fn apply(
@@ -688,6 +698,25 @@ impl ShellModel {
         }
     }
 
+    /// The local DOFs of shape-function particle `j` from the global vector `g` (as the
+    /// analysis forms them): an image's are `T g` of its source's.
+    fn local_dofs(&self, j: usize, g: &[f64]) -> [f64; DOFS_PER_PARTICLE] {
+        const D: usize = DOFS_PER_PARTICLE;
+        let (src, q, det) = self.seed_map(j);
+        let g = &g[D * src..D * src + D];
+        if j < self.particles.len() {
+            [g[0], g[1], g[2], g[3], g[4]]
+        } else {
+            [
+                g[0] * q[(0, 0)] + g[1] * q[(0, 1)] + g[2] * q[(0, 2)],
+                g[0] * q[(1, 0)] + g[1] * q[(1, 1)] + g[2] * q[(1, 2)],
+                g[0] * q[(2, 0)] + g[1] * q[(2, 1)] + g[2] * q[(2, 2)],
+                g[3] * det,
+                g[4] * det,
+            ]
+        }
+    }
+
     fn check_model_seeds(&self, s: usize, seeds: &ModelSeeds) -> Result<(), ShellError> {
         let f = |name: &str| format!("seeds[{s}].{name}");
         if let Some(sp) = seeds.surface {
@@ -762,6 +791,33 @@ impl ShellModel {
         dofs: &[f64],
         seeds: &[ModelSeeds],
     ) -> Result<Vec<InternalForceDot>, ShellError> {
+        Ok(self.force_dots(dofs, seeds, false)?.0)
+    }
+
+    /// [`Self::internal_force_dots`], keeping what the increment-only part of the trial-history
+    /// derivative needs ([`StepLinearisation`]): with the seeds' `dofs` zero (the fictitious
+    /// loads of eq 65), the returned histories are the seed part of `ⁿ⁺¹(Q̇, σ̇, α̇, ė^p)`, and
+    /// [`Self::add_increment_history_dots`] adds the part of `Δq̇` once eq 65 is solved: by
+    /// linearity the same trial histories as `internal_force_dots` seeded with `Δq̇` as well,
+    /// without a second f64 evaluation of the layer points.
+    pub fn internal_force_dots_linearised(
+        &self,
+        dofs: &[f64],
+        seeds: &[ModelSeeds],
+    ) -> Result<(Vec<InternalForceDot>, StepLinearisation), ShellError> {
+        let (out, lin) = self.force_dots(dofs, seeds, true)?;
+        Ok((
+            out,
+            lin.expect("force_dots keeps the linearisation when asked"),
+        ))
+    }
+
+    fn force_dots(
+        &self,
+        dofs: &[f64],
+        seeds: &[ModelSeeds],
+        keep: bool,
+    ) -> Result<(Vec<InternalForceDot>, Option<StepLinearisation>), ShellError> {
         const D: usize = DOFS_PER_PARTICLE;
         if dofs.len() != self.n_dofs() {
             return Err(invalid(
@@ -779,21 +835,7 @@ impl ShellModel {
         let n_sf = self.particles.len() + self.symmetry.images.len();
         // Per shape-function particle: f64 state, local DOFs and increment (as the analysis
         // forms them), then, seed-major (`s · n_sf + j`), the derivatives of every seed set.
-        let local_dofs = |j: usize, g: &[f64]| -> [f64; D] {
-            let (src, q, det) = self.seed_map(j);
-            let g = &g[D * src..D * src + D];
-            if j < self.particles.len() {
-                [g[0], g[1], g[2], g[3], g[4]]
-            } else {
-                [
-                    g[0] * q[(0, 0)] + g[1] * q[(0, 1)] + g[2] * q[(0, 2)],
-                    g[0] * q[(1, 0)] + g[1] * q[(1, 1)] + g[2] * q[(1, 2)],
-                    g[0] * q[(2, 0)] + g[1] * q[(2, 1)] + g[2] * q[(2, 2)],
-                    g[3] * det,
-                    g[4] * det,
-                ]
-            }
-        };
+        let local_dofs = |j: usize, g: &[f64]| self.local_dofs(j, g);
         type Particle = (ParticleState<f64>, [f64; D], V3, [V3; 2]);
         let per: Vec<Particle> = (0..n_sf)
             .into_par_iter()
@@ -827,7 +869,7 @@ impl ShellModel {
             .collect();
         // Per in-plane point: the f64 layers once, every seed set on each; results flat
         // (seed-major) so that a point allocates two vectors whatever the number of seed sets.
-        type PointOut = (Vec<f64>, Vec<PointHistory<f64>>);
+        type PointOut = (Vec<f64>, Vec<PointHistory<f64>>, Vec<LayerKeep>);
         let per_point = (0..self.points.len())
             .into_par_iter()
             .map_init(Scratch::default, |sc, k| -> Result<PointOut, ShellError> {
@@ -866,6 +908,7 @@ impl ShellModel {
                 );
                 sc.dots.clear();
                 sc.dots.resize(ns, StressSums::zero());
+                let mut kept = Vec::with_capacity(if keep { nl } else { 0 });
                 let mut val = StressSums::zero();
                 for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
                     let inp = PointInput {
@@ -880,6 +923,9 @@ impl ShellModel {
                     };
                     let res = point_residual_with(&inp, &sc.inc)?;
                     let layer = LayerData::new(&inp, &res)?;
+                    if keep {
+                        kept.push(layer.keep());
+                    }
                     val.add_value(&layer.p, layer.z, zeta);
                     for (s, (sd, acc)) in seeds.iter().zip(sc.dots.iter_mut()).enumerate() {
                         histories[s * nl + l] = layer.apply(
@@ -911,7 +957,7 @@ impl ShellModel {
                         r,
                     );
                 }
-                Ok((residuals, histories))
+                Ok((residuals, histories, kept))
             })
             .collect::<Result<Vec<_>, ShellError>>()?;
         let mut out: Vec<InternalForceDot> = (0..ns)
@@ -922,7 +968,8 @@ impl ShellModel {
                 )
             })
             .collect();
-        for (k, (residuals, histories)) in per_point.iter().enumerate() {
+        let mut layers = Vec::with_capacity(if keep { self.history.len() } else { 0 });
+        for (k, (residuals, histories, kept)) in per_point.into_iter().enumerate() {
             let nr = D * self.points[k].neighbours.len();
             for ((f, h), (r, hs)) in out
                 .iter_mut()
@@ -931,7 +978,209 @@ impl ShellModel {
                 self.scatter_local(k, r, f);
                 h.extend_from_slice(hs);
             }
+            layers.extend(kept);
         }
-        Ok(out)
+        let lin = keep.then(|| StepLinearisation {
+            particles: per.into_iter().map(|(state, x, _, _)| (state, x)).collect(),
+            layers,
+        });
+        Ok((out, lin))
+    }
+
+    /// Add the increment-only part of the trial-history derivative (eqs 44–51 with `Δq̇` the
+    /// only seed) to `histories[v]` for `dofs_dot[v]` (`Δq̇` of seed set `v`, `n_dofs`), at the
+    /// step `lin` was kept at ([`Self::internal_force_dots_linearised`], same model state: the
+    /// model must not have committed since). Per layer point the chain is the `Δq̇` column of
+    /// [`point_residual_dot`]'s: `Ġ(Δq̇)` (with `Δḋ_I` of Rodrigues' increment), `Ḣ = Ġ Jⁿ⁻¹`
+    /// (`J̇ⁿ = 0`), `L̇ = F½⁻¹ Ḣ F½⁻¹` (eqs 56–57), the Hughes–Winget derivatives (eqs 54–55,
+    /// 58), `Δε̇ˡ` with `ⁿQ̇ = 0` (eq 50), the strain part of the return-map sensitivity
+    /// (eqs 44–49) and `Q̇ = Qₙ ṙᵀ` (eq 51); no `Ṗ`, no residual rows. Points run in parallel
+    /// (deterministic). Errors name the seed set and field of a wrong length, or a `lin` that
+    /// does not fit the model.
+    pub fn add_increment_history_dots(
+        &self,
+        lin: &StepLinearisation,
+        dofs_dot: &[&[f64]],
+        histories: &mut [Vec<PointHistory<f64>>],
+    ) -> Result<(), ShellError> {
+        let n_sf = self.particles.len() + self.symmetry.images.len();
+        if lin.particles.len() != n_sf {
+            return Err(invalid(
+                "lin.particles",
+                lin.particles.len(),
+                n_sf,
+                "one per shape-function particle of the model",
+            ));
+        }
+        if lin.layers.len() != self.history.len() {
+            return Err(invalid(
+                "lin.layers",
+                lin.layers.len(),
+                self.history.len(),
+                "one per layer point of the model",
+            ));
+        }
+        if histories.len() != dofs_dot.len() {
+            return Err(invalid(
+                "histories",
+                histories.len(),
+                dofs_dot.len(),
+                "one per seed set (dofs_dot)",
+            ));
+        }
+        for (s, (q, h)) in dofs_dot.iter().zip(histories.iter()).enumerate() {
+            if q.len() != self.n_dofs() {
+                return Err(invalid(
+                    &format!("dofs_dot[{s}]"),
+                    q.len(),
+                    self.n_dofs(),
+                    "5 per real particle",
+                ));
+            }
+            if h.len() != self.history.len() {
+                return Err(invalid(
+                    &format!("histories[{s}]"),
+                    h.len(),
+                    self.history.len(),
+                    "one per layer point, point-major",
+                ));
+            }
+        }
+        let ns = dofs_dot.len();
+        let nl = self.thickness_rule.len();
+        let zero = ParticleState {
+            u: V3::zeros(),
+            d: V3::zeros(),
+            d0: V3::zeros(),
+            e: [V3::zeros(); 2],
+        };
+        // Per shape-function particle and seed set (seed-major): `Δū̇_I`, `Δḋ_I` of `Δq̇` alone.
+        let per_dot: Vec<(V3, V3)> = (0..ns * n_sf)
+            .into_par_iter()
+            .map(|idx| {
+                let (qd, j) = (dofs_dot[idx / n_sf], idx % n_sf);
+                let x = self.local_dofs(j, qd);
+                let (state, xs) = &lin.particles[j];
+                let (du, dd, _) = particle_increment_dot(state, &zero, xs, &x);
+                (du, dd)
+            })
+            .collect();
+        let half_t = self.thickness * 0.5;
+        let per_point: Vec<Vec<PointHistory<f64>>> = (0..self.points.len())
+            .into_par_iter()
+            .map(|k| {
+                let p = &self.points[k];
+                let nb = &p.neighbours;
+                let mut out = Vec::with_capacity(ns * nl);
+                for s in 0..ns {
+                    let base = s * n_sf;
+                    let sums = SeedSums::new(&p.shape, None, |i| {
+                        let d = &per_dot[base + nb[i]];
+                        (&zero, d.0, d.1)
+                    });
+                    for (l, &(zeta, _)) in self.thickness_rule.iter().enumerate() {
+                        let i = k * nl + l;
+                        out.push(lin.layers[i].increment_history_dot(
+                            &self.history[i].frame,
+                            half_t,
+                            half_t * zeta,
+                            &self.material,
+                            &sums,
+                        ));
+                    }
+                }
+                out
+            })
+            .collect();
+        for (k, hs) in per_point.iter().enumerate() {
+            for (s, h) in hs.chunks_exact(nl).enumerate() {
+                for (l, d) in h.iter().enumerate() {
+                    add_history(&mut histories[s][k * nl + l], d);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn add_history(a: &mut PointHistory<f64>, b: &PointHistory<f64>) {
+    a.frame += b.frame;
+    a.material.stress += b.material.stress;
+    a.material.back_stress += b.material.back_stress;
+    a.material.eps_p += b.material.eps_p;
+}
+
+/// What the increment-only part of the trial-history derivative needs at one layer point
+/// ([`ShellModel::add_increment_history_dots`]), kept from the f64 evaluation of the fictitious
+/// loads' pass: 73 f64 (≈ 600 bytes) per layer point, whatever the number of seed sets.
+#[derive(Clone, Copy, Debug)]
+struct LayerKeep {
+    /// `F½⁻¹ = (I + ½H)⁻¹`.
+    f_half_inv: M3<f64>,
+    /// `Jⁿ⁻¹ F½⁻¹`.
+    jn_inv_f: M3<f64>,
+    inc: HwIncrement<f64>,
+    /// `Δεˡ` (the return map's strain increment).
+    deps_l: Vec5<f64>,
+    return_map: ReturnMap<f64>,
+}
+
+impl LayerKeep {
+    /// The `Δq̇` column of [`LayerData::apply`] (`J̇ⁿ = 0`, `ż = ṫ = 0`, no history or
+    /// material seeds): `ⁿ⁺¹(Q̇, σ̇, α̇, ė^p)`.
+    fn increment_history_dot(
+        &self,
+        q_n: &M3<f64>,
+        half_t: f64,
+        z: f64,
+        material: &MaterialParams<f64>,
+        sums: &SeedSums,
+    ) -> PointHistory<f64> {
+        let g_dot = M3::from_columns(&[
+            sums.g_u[0] + sums.g_d[0] * z,
+            sums.g_u[1] + sums.g_d[1] * z,
+            sums.g_d3 * half_t,
+        ]);
+        // L̇ = F½⁻¹ Ġ Jⁿ⁻¹ F½⁻¹ (eqs 56–57).
+        let l_dot = self.f_half_inv * g_dot * self.jn_inv_f;
+        let inc_dot = hughes_winget_dot(&self.inc, &l_dot);
+        let deps_l_dot = local_strain_increment_dot(
+            q_n,
+            &M3::zeros(),
+            &self.inc.r_half,
+            &inc_dot.r_half_dot,
+            &self.inc.deps,
+            &inc_dot.deps_dot,
+        );
+        let mat_dot = material_sensitivity(
+            material,
+            &self.deps_l,
+            &self.return_map,
+            &MaterialParams::zero(),
+            &MaterialState::zero(),
+            &strain_to_vec5(&deps_l_dot),
+        );
+        PointHistory {
+            frame: q_n * inc_dot.r_dot.transpose(),
+            material: mat_dot,
+        }
+    }
+}
+
+/// The f64 data of a converged step kept by [`ShellModel::internal_force_dots_linearised`] for
+/// [`ShellModel::add_increment_history_dots`]: per shape-function particle its committed state
+/// and local DOF increment, per layer point the kinematics and return-map outcome the
+/// increment-only chain needs.
+#[derive(Clone, Debug)]
+pub struct StepLinearisation {
+    particles: Vec<(ParticleState<f64>, [f64; DOFS_PER_PARTICLE])>,
+    layers: Vec<LayerKeep>,
+}
+
+impl StepLinearisation {
+    /// Heap memory held (bytes).
+    pub fn memory_bytes(&self) -> usize {
+        self.particles.capacity() * std::mem::size_of::<(ParticleState<f64>, [f64; 5])>()
+            + self.layers.capacity() * std::mem::size_of::<LayerKeep>()
     }
 }
