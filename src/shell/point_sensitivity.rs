@@ -21,7 +21,7 @@
 //! - `L̇ = F½⁻¹ Ḣ F½⁻¹` (eqs 56–57, [`crate::kinematics::mid_step_gradient_dot`]),
 //! - `Δε̇, Δω̇, ṙ, ½ṙ` (eqs 54–55, 58, [`crate::kinematics::hughes_winget_dot`]),
 //! - `Δε̇ˡ` with `ⁿQ̇` (eq 50, [`crate::kinematics::local_strain_increment_dot`]),
-//! - the return-map sensitivity `ⁿ⁺¹(σ̇, α̇, ė^p)` (eqs 44–49, [`material_sensitivity`]),
+//! - the return-map sensitivity `ⁿ⁺¹(σ̇, α̇, ė^p)` (eqs 44–49, [`crate::material::material_sensitivity`]),
 //! - `ⁿ⁺¹Q̇ = ⁿQ̇ rᵀ + ⁿQ ṙᵀ` (eq 51), `σ̇ᵍ` (eq 42),
 //! - `Ṗ = tr(J⁻¹J̇) P + w det J σ̇ᵍ J⁻ᵀ − P J̇ᵀ J⁻ᵀ` on `ⁿ⁺¹J = Jⁿ + G` (the `J̇` and `Ḟ⁻¹`
 //!   terms of eqs 38 and 41, with the parametric volume element carrying `div V`),
@@ -49,9 +49,7 @@ use crate::kinematics::{
     frame_update, global_stress, hughes_winget, local_strain_increment, mid_step_gradient,
     strain_to_vec5, stress_from_vec5, M3,
 };
-use crate::material::{
-    material_sensitivity, return_map, MaterialParams, MaterialState, ReturnMap, Vec5,
-};
+use crate::material::{return_map, MaterialParams, MaterialSensitivity, MaterialState};
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
@@ -430,7 +428,7 @@ fn invert(m: &M3<f64>, what: &'static str) -> Result<(f64, M3<f64>), ShellError>
 
 /// The f64 data of one layer point shared by all seed sets, with the seed-independent factors
 /// of the chain formed once ([`LayerKeep`] holds those the increment-only part needs).
-struct LayerData<'a> {
+struct LayerData {
     zeta: f64,
     half_t: f64,
     z: f64,
@@ -446,12 +444,11 @@ struct LayerData<'a> {
     jinv_t: M3<f64>,
     jinv_t_w: M3<f64>,
     p: M3<f64>,
-    material: &'a MaterialParams<f64>,
     keep: LayerKeep,
 }
 
-impl<'a> LayerData<'a> {
-    fn new(inp: &'a PointInput<f64>, res: &'a PointResult<f64>) -> Result<Self, ShellError> {
+impl LayerData {
+    fn new(inp: &PointInput<f64>, res: &PointResult<f64>) -> Result<Self, ShellError> {
         let k = &res.kinematics;
         let singular = |what: &str| {
             ShellError::InvalidInput(format!(
@@ -488,7 +485,6 @@ impl<'a> LayerData<'a> {
             jinv_t,
             jinv_t_w: jinv_t * (k.det1 * inp.weight),
             p: k.p,
-            material: inp.material,
             keep: LayerKeep {
                 f_half_inv,
                 jn_inv_f: k.jn_inv * f_half_inv,
@@ -498,8 +494,7 @@ impl<'a> LayerData<'a> {
                 s2: (M3::identity() + k.inc.r_half) * 0.25,
                 a,
                 c: k.inc.deps * a.transpose(),
-                deps_l,
-                return_map: res.return_map,
+                material: MaterialSensitivity::new(inp.material, &deps_l, &res.return_map),
             },
         })
     }
@@ -538,10 +533,7 @@ impl<'a> LayerData<'a> {
         let a_dot = history_dot.frame * self.r_half_t + self.q_n * hw.r_half_dot.transpose();
         let deps_l_dot = k.strain_dot(&a_dot, &hw.deps_dot);
         // Return-map sensitivity (eqs 44–49).
-        let mat_dot = material_sensitivity(
-            self.material,
-            &k.deps_l,
-            &k.return_map,
+        let mat_dot = k.material.apply(
             material_dot,
             &history_dot.material,
             &strain_to_vec5(&deps_l_dot),
@@ -1046,7 +1038,7 @@ impl ShellModel {
                 )
             })
             .collect();
-        let mut layers = Vec::with_capacity(if keep { self.history.len() } else { 0 });
+        let mut layers = Vec::with_capacity(if keep { self.points.len() } else { 0 });
         for (k, (residuals, histories, kept)) in per_point.into_iter().enumerate() {
             let nr = D * self.points[k].neighbours.len();
             for ((f, h), (r, hs)) in out
@@ -1056,7 +1048,9 @@ impl ShellModel {
                 self.scatter_local(k, r, f);
                 h.extend_from_slice(hs);
             }
-            layers.extend(kept);
+            if keep {
+                layers.push(kept);
+            }
         }
         let lin = keep.then(|| StepLinearisation {
             particles: per.into_iter().map(|(state, x, _, _)| (state, x)).collect(),
@@ -1090,12 +1084,13 @@ impl ShellModel {
                 "one per shape-function particle of the model",
             ));
         }
-        if lin.layers.len() != self.history.len() {
+        let nl = self.thickness_rule.len();
+        if lin.layers.len() != self.points.len() || lin.layers.iter().any(|l| l.len() != nl) {
             return Err(invalid(
                 "lin.layers",
-                lin.layers.len(),
+                lin.layers.iter().map(Vec::len).sum(),
                 self.history.len(),
-                "one per layer point of the model",
+                "one per layer point of the model, per in-plane point",
             ));
         }
         if histories.len() != dofs_dot.len() {
@@ -1125,7 +1120,6 @@ impl ShellModel {
             }
         }
         let ns = dofs_dot.len();
-        let nl = self.thickness_rule.len();
         let zero = ParticleState {
             u: V3::zeros(),
             d: V3::zeros(),
@@ -1158,11 +1152,10 @@ impl ShellModel {
                     });
                     for (l, &(zeta, _)) in self.thickness_rule.iter().enumerate() {
                         let i = k * nl + l;
-                        out.push(lin.layers[i].increment_history_dot(
+                        out.push(lin.layers[k][l].increment_history_dot(
                             &self.history[i].frame,
                             half_t,
                             half_t * zeta,
-                            &self.material,
                             &sums,
                         ));
                     }
@@ -1208,9 +1201,8 @@ struct LayerKeep {
     /// `A = Qₙ ½rᵀ` and `Δε Aᵀ` (eq 50).
     a: M3<f64>,
     c: M3<f64>,
-    /// `Δεˡ` (the return map's strain increment).
-    deps_l: Vec5<f64>,
-    return_map: ReturnMap<f64>,
+    /// The return-map sensitivity's seed-independent factors (eqs 44–49).
+    material: MaterialSensitivity,
 }
 
 /// `(Δε̇, ṙ, ½ṙ)` of [`LayerKeep::hw_dot`].
@@ -1248,7 +1240,6 @@ impl LayerKeep {
         q_n: &M3<f64>,
         half_t: f64,
         z: f64,
-        material: &MaterialParams<f64>,
         sums: &SeedSums,
     ) -> PointHistory<f64> {
         let g_dot = M3::from_columns(&[
@@ -1261,10 +1252,7 @@ impl LayerKeep {
         let hw = self.hw_dot(&l_dot);
         // Eq 50 with Ȧ = Qₙ ½ṙᵀ.
         let deps_l_dot = self.strain_dot(&(q_n * hw.r_half_dot.transpose()), &hw.deps_dot);
-        let mat_dot = material_sensitivity(
-            material,
-            &self.deps_l,
-            &self.return_map,
+        let mat_dot = self.material.apply(
             &MaterialParams::zero(),
             &MaterialState::zero(),
             &strain_to_vec5(&deps_l_dot),
@@ -1284,13 +1272,19 @@ impl LayerKeep {
 #[derive(Clone, Debug)]
 pub struct StepLinearisation {
     particles: Vec<(ParticleState<f64>, [f64; DOFS_PER_PARTICLE])>,
-    layers: Vec<LayerKeep>,
+    /// Per in-plane point, per layer.
+    layers: Vec<Vec<LayerKeep>>,
 }
 
 impl StepLinearisation {
     /// Heap memory held (bytes).
     pub fn memory_bytes(&self) -> usize {
         self.particles.capacity() * std::mem::size_of::<(ParticleState<f64>, [f64; 5])>()
-            + self.layers.capacity() * std::mem::size_of::<LayerKeep>()
+            + self.layers.capacity() * std::mem::size_of::<Vec<LayerKeep>>()
+            + self
+                .layers
+                .iter()
+                .map(|l| l.capacity() * std::mem::size_of::<LayerKeep>())
+                .sum::<usize>()
     }
 }
