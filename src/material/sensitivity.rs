@@ -147,6 +147,29 @@ impl MaterialSensitivity {
         }
     }
 
+    /// The strain part alone: [`Self::apply`] with `dm = 0`, `dn = 0` (the same result; for
+    /// the plastic branch `D^ep Δε̇` of eq 48 and its back-stress and `ē^p` companions).
+    pub fn strain(&self, ddeps: &Vec5<f64>) -> MaterialState<f64> {
+        let dsigma_tr = self.d * ddeps;
+        let Some(pl) = &self.plastic else {
+            return MaterialState {
+                stress: dsigma_tr,
+                back_stress: Vec5::zeros(),
+                eps_p: 0.0,
+            };
+        };
+        let lambda = self.out.lambda;
+        let xi_r = pl.xi * dsigma_tr;
+        let dlambda = pl.theta * pl.p_eta.dot(&xi_r) / pl.f2;
+        let deta = xi_r - pl.w * dlambda;
+        let dshift = pl.eta * (pl.c * dlambda);
+        MaterialState {
+            stress: deta * pl.f1 + dshift,
+            back_stress: dshift + deta * (lambda * pl.c),
+            eps_p: SQRT_2_3 * (dlambda * pl.phi + lambda * (pl.p_eta.dot(&deta) / pl.phi)),
+        }
+    }
+
     /// The sensitivity for the seeds `dm`, `dn`, `ddeps` (eqs 44–49, module docs).
     pub fn apply(
         &self,

@@ -49,7 +49,7 @@ use crate::kinematics::{
     frame_update, global_stress, hughes_winget, local_strain_increment, mid_step_gradient,
     strain_to_vec5, stress_from_vec5, M3,
 };
-use crate::material::{return_map, MaterialParams, MaterialSensitivity, MaterialState};
+use crate::material::{return_map, MaterialParams, MaterialSensitivity};
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
@@ -1146,10 +1146,16 @@ impl ShellModel {
                 let mut out = Vec::with_capacity(ns * nl);
                 for s in 0..ns {
                     let base = s * n_sf;
-                    let sums = SeedSums::new(&p.shape, None, |i| {
-                        let d = &per_dot[base + nb[i]];
-                        (&zero, d.0, d.1)
-                    });
+                    // Σ Ψ,α Δū̇, Σ Ψ,α Δḋ, Σ Ψ Δḋ (the other sums of SeedSums are zero).
+                    let mut sums = SeedSums::default();
+                    for (sh, &j) in p.shape.iter().zip(nb) {
+                        let (du, dd) = &per_dot[base + j];
+                        for a in 0..2 {
+                            sums.g_u[a] += du * sh.dpsi[a];
+                            sums.g_d[a] += dd * sh.dpsi[a];
+                        }
+                        sums.g_d3 += dd * sh.psi;
+                    }
                     for (l, &(zeta, _)) in self.thickness_rule.iter().enumerate() {
                         let i = k * nl + l;
                         out.push(lin.layers[k][l].increment_history_dot(
@@ -1252,11 +1258,7 @@ impl LayerKeep {
         let hw = self.hw_dot(&l_dot);
         // Eq 50 with Ȧ = Qₙ ½ṙᵀ.
         let deps_l_dot = self.strain_dot(&(q_n * hw.r_half_dot.transpose()), &hw.deps_dot);
-        let mat_dot = self.material.apply(
-            &MaterialParams::zero(),
-            &MaterialState::zero(),
-            &strain_to_vec5(&deps_l_dot),
-        );
+        let mat_dot = self.material.strain(&strain_to_vec5(&deps_l_dot));
         // Eq 51 with Q̇ₙ = 0.
         PointHistory {
             frame: q_n * hw.r_dot.transpose(),
