@@ -1190,8 +1190,9 @@ fn add_history(a: &mut PointHistory<f64>, b: &PointHistory<f64>) {
 /// The seed-independent factors of one layer point's derivative chain, formed once from the
 /// f64 evaluation and shared by every seed set; kept by the fictitious loads' pass for the
 /// increment-only part of the trial-history derivative
-/// ([`ShellModel::add_increment_history_dots`]): 86 f64 and the return map's outcome
-/// (≈ 800 bytes) per layer point, whatever the number of seed sets.
+/// ([`ShellModel::add_increment_history_dots`]): ≈ 1.4 kB per layer point (8 3×3 matrices and
+/// the return-map sensitivity's factors), whatever the number of seed sets; 7.0 MB on the
+/// 5120 layer points of the hemisphere (`benches/continuum.rs` prints it).
 #[derive(Clone, Copy, Debug)]
 struct LayerKeep {
     /// `F½⁻¹ = (I + ½H)⁻¹`.
