@@ -274,6 +274,110 @@ fn bench(c: &mut Criterion) {
         "CPU time per call (all threads), ms: internal_force_with f64 {:?}, internal_force_dots 1 set {:?}, 6 sets {:?}, internal_force_with DualSVec64<6> {:?}",
         cpu[0], cpu[1], cpu[2], cpu[3]
     );
+    // The continuum DSA's step with 4 design variables: the fictitious loads' pass (`Δq̇ = 0`,
+    // keeping the layer data) and the history update's increment-only part, against the
+    // former update (a second full pass seeded with `Δq̇`).
+    let zero_dofs = vec![0.0; q.len()];
+    let rhs_views: Vec<ModelSeeds> = views[..4]
+        .iter()
+        .map(|v| ModelSeeds {
+            dofs: &zero_dofs,
+            ..*v
+        })
+        .collect();
+    let dofs_dot: Vec<&[f64]> = owned[..4].iter().map(|o| &o.dofs[..]).collect();
+    let split = || {
+        let (d, lin) = m.internal_force_dots_linearised(&q, &rhs_views).unwrap();
+        let mut h: Vec<_> = d.into_iter().map(|(_, h)| h).collect();
+        m.add_increment_history_dots(&lin, &dofs_dot, &mut h)
+            .unwrap();
+        (h, lin.memory_bytes())
+    };
+    let (split_h, bytes) = split();
+    let full = m.internal_force_dots(&q, &views[..4]).unwrap();
+    for (k, ((_, fh), sh)) in full.iter().zip(&split_h).enumerate() {
+        let (mut err, mut scale) = (0.0_f64, 0.0_f64);
+        for (a, b) in fh.iter().zip(sh) {
+            for (x, y) in a
+                .material
+                .stress
+                .iter()
+                .chain(a.material.back_stress.iter())
+                .zip(
+                    b.material
+                        .stress
+                        .iter()
+                        .chain(b.material.back_stress.iter()),
+                )
+            {
+                err = err.max((x - y).abs());
+                scale = scale.max(x.abs());
+            }
+        }
+        println!(
+            "seed set {k}: trial stresses, split (seed part + Δq̇ part) against one pass: max \
+             difference / max = {:.2e}",
+            err / scale
+        );
+    }
+    let (d0, lin) = m.internal_force_dots_linearised(&q, &rhs_views).unwrap();
+    let mut h0: Vec<_> = d0.into_iter().map(|(_, h)| h).collect();
+    // Wall time, best of 10 blocks of 4 calls: the machine is shared, the least disturbed
+    // block is the closest to the cost (run with RAYON_NUM_THREADS=1 for a per-core figure).
+    let best_ms = |f: &mut dyn FnMut()| {
+        (0..10)
+            .map(|_| {
+                let t = std::time::Instant::now();
+                for _ in 0..4 {
+                    f();
+                }
+                t.elapsed().as_secs_f64() * 1e3 / 4.0
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let (d1, lin1) = m.internal_force_dots_linearised(&q, &rhs_views).unwrap();
+    let mut h1: Vec<_> = d1.into_iter().map(|(_, h)| h).collect();
+    let best = [
+        best_ms(&mut || {
+            black_box(m.internal_force_dots_linearised(&q, &rhs_views).unwrap());
+        }),
+        best_ms(&mut || {
+            m.add_increment_history_dots(&lin1, &dofs_dot, &mut h1)
+                .unwrap();
+        }),
+        best_ms(&mut || {
+            black_box(m.internal_force_dots(&q, &views[..4]).unwrap());
+        }),
+    ];
+    println!(
+        "4 seed sets, best wall ms per call: fictitious loads keeping the layer data {:.2}, \
+         increment-only history part {:.2}; one full pass with Δq̇ {:.2}",
+        best[0], best[1], best[2]
+    );
+    let cpu4 = [
+        cpu_ms_per_call(n, || {
+            black_box(m.internal_force_dots(&q, &rhs_views).unwrap());
+        }),
+        cpu_ms_per_call(n, || {
+            black_box(m.internal_force_dots_linearised(&q, &rhs_views).unwrap());
+        }),
+        cpu_ms_per_call(n, || {
+            m.add_increment_history_dots(&lin, &dofs_dot, &mut h0)
+                .unwrap();
+        }),
+        cpu_ms_per_call(n, || {
+            black_box(m.internal_force_dots(&q, &views[..4]).unwrap());
+        }),
+    ];
+    println!(
+        "4 seed sets, CPU ms per call: fictitious loads {:?}, the same keeping the layer data \
+         {:?} ({:.1} MB kept), increment-only history part {:?}; one full pass with Δq̇ {:?}",
+        cpu4[0],
+        cpu4[1],
+        bytes as f64 / 1e6,
+        cpu4[2],
+        cpu4[3]
+    );
     let mut g = c.benchmark_group("continuum_hemisphere_plastic");
     g.sample_size(10);
     g.bench_function("internal_force_with_f64", |b| {

@@ -80,45 +80,136 @@ pub fn material_sensitivity(
     dn: &MaterialState<f64>,
     ddeps: &Vec5<f64>,
 ) -> MaterialState<f64> {
-    let d = elastic_matrix(m);
-    let dd = elastic_matrix_derivative(m, dm);
-    let dsigma_tr = dn.stress + dd * deps + d * ddeps;
-    if !out.plastic {
-        // Elastic branch: σ = ⁿσ + D Δε, α and ē^p unchanged.
-        return MaterialState {
-            stress: dsigma_tr,
-            back_stress: dn.back_stress,
-            eps_p: dn.eps_p,
-        };
-    }
-    let p = p_matrix::<f64>();
-    let lambda = out.lambda;
-    let (h, beta) = (m.hardening, m.beta);
-    let c = m.kinematic_modulus();
-    let dc = 2.0 / 3.0 * ((1.0 - beta) * dm.hardening - h * dm.beta);
-    let f1 = 1.0 + lambda * c;
-    let xi = xi_matrix(m, lambda);
-    let eta = out.state.stress - out.state.back_stress;
-    let phi = eta_p_eta(&eta).sqrt();
-    let theta = 1.0 - 2.0 / 3.0 * beta * h * lambda;
-    let p_eta = p * eta;
-    let w = xi * (eta * c + d * p_eta);
-    let f2 = 2.0 / 3.0 * beta * h * phi * phi + theta * p_eta.dot(&w);
+    MaterialSensitivity::new(m, deps, out).apply(dm, dn, ddeps)
+}
 
-    let r = dsigma_tr - dn.back_stress - eta * (lambda * dc) - dd * p_eta * lambda;
-    let q = dm.sigma0 + (dm.beta * h + beta * dm.hardening) * out.state.eps_p + beta * h * dn.eps_p;
-    let xi_r = xi * r;
-    let dlambda = (theta * p_eta.dot(&xi_r) - SQRT_2_3 * phi * q) / f2;
-    let deta = xi_r - w * dlambda;
-    let dshift = eta * (c * dlambda + lambda * dc);
-    let dback = dn.back_stress + dshift + deta * (lambda * c);
-    let dstress = deta * f1 + dn.back_stress + dshift;
-    let dphi = p_eta.dot(&deta) / phi;
-    let deps_p = dn.eps_p + SQRT_2_3 * (dlambda * phi + lambda * dphi);
-    MaterialState {
-        stress: dstress,
-        back_stress: dback,
-        eps_p: deps_p,
+/// [`material_sensitivity`] with the factors that do not depend on the seeds (`D`, and on the
+/// plastic branch `Ξ`, `η`, `φ`, `θ`, `Pη`, `w`, `f2`) formed once, for several seed sets at
+/// one material point; [`MaterialSensitivity::apply`] gives the same result.
+#[derive(Clone, Copy, Debug)]
+pub struct MaterialSensitivity {
+    m: MaterialParams<f64>,
+    deps: Vec5<f64>,
+    out: ReturnMap<f64>,
+    d: Mat5<f64>,
+    plastic: Option<Plastic>,
+}
+
+/// The seed-independent factors of the plastic branch (module docs).
+#[derive(Clone, Copy, Debug)]
+struct Plastic {
+    c: f64,
+    f1: f64,
+    xi: Mat5<f64>,
+    eta: Vec5<f64>,
+    phi: f64,
+    theta: f64,
+    p_eta: Vec5<f64>,
+    w: Vec5<f64>,
+    f2: f64,
+}
+
+impl MaterialSensitivity {
+    /// The factors at the analysis data `m`, `deps`, `out` (as [`material_sensitivity`]).
+    pub fn new(m: &MaterialParams<f64>, deps: &Vec5<f64>, out: &ReturnMap<f64>) -> Self {
+        let d = elastic_matrix(m);
+        let plastic = out.plastic.then(|| {
+            let p = p_matrix::<f64>();
+            let lambda = out.lambda;
+            let (h, beta) = (m.hardening, m.beta);
+            let c = m.kinematic_modulus();
+            let f1 = 1.0 + lambda * c;
+            let xi = xi_matrix(m, lambda);
+            let eta = out.state.stress - out.state.back_stress;
+            let phi = eta_p_eta(&eta).sqrt();
+            let theta = 1.0 - 2.0 / 3.0 * beta * h * lambda;
+            let p_eta = p * eta;
+            let w = xi * (eta * c + d * p_eta);
+            let f2 = 2.0 / 3.0 * beta * h * phi * phi + theta * p_eta.dot(&w);
+            Plastic {
+                c,
+                f1,
+                xi,
+                eta,
+                phi,
+                theta,
+                p_eta,
+                w,
+                f2,
+            }
+        });
+        MaterialSensitivity {
+            m: *m,
+            deps: *deps,
+            out: *out,
+            d,
+            plastic,
+        }
+    }
+
+    /// The strain part alone: [`Self::apply`] with `dm = 0`, `dn = 0` (the same result; for
+    /// the plastic branch `D^ep Δε̇` of eq 48 and its back-stress and `ē^p` companions).
+    pub fn strain(&self, ddeps: &Vec5<f64>) -> MaterialState<f64> {
+        let dsigma_tr = self.d * ddeps;
+        let Some(pl) = &self.plastic else {
+            return MaterialState {
+                stress: dsigma_tr,
+                back_stress: Vec5::zeros(),
+                eps_p: 0.0,
+            };
+        };
+        let lambda = self.out.lambda;
+        let xi_r = pl.xi * dsigma_tr;
+        let dlambda = pl.theta * pl.p_eta.dot(&xi_r) / pl.f2;
+        let deta = xi_r - pl.w * dlambda;
+        let dshift = pl.eta * (pl.c * dlambda);
+        MaterialState {
+            stress: deta * pl.f1 + dshift,
+            back_stress: dshift + deta * (lambda * pl.c),
+            eps_p: SQRT_2_3 * (dlambda * pl.phi + lambda * (pl.p_eta.dot(&deta) / pl.phi)),
+        }
+    }
+
+    /// The sensitivity for the seeds `dm`, `dn`, `ddeps` (eqs 44–49, module docs).
+    pub fn apply(
+        &self,
+        dm: &MaterialParams<f64>,
+        dn: &MaterialState<f64>,
+        ddeps: &Vec5<f64>,
+    ) -> MaterialState<f64> {
+        let (m, deps, out, d) = (&self.m, &self.deps, &self.out, &self.d);
+        let dd = elastic_matrix_derivative(m, dm);
+        let dsigma_tr = dn.stress + dd * deps + d * ddeps;
+        let Some(pl) = &self.plastic else {
+            // Elastic branch: σ = ⁿσ + D Δε, α and ē^p unchanged.
+            return MaterialState {
+                stress: dsigma_tr,
+                back_stress: dn.back_stress,
+                eps_p: dn.eps_p,
+            };
+        };
+        let lambda = out.lambda;
+        let (h, beta) = (m.hardening, m.beta);
+        let (c, f1, xi, eta, phi) = (pl.c, pl.f1, &pl.xi, pl.eta, pl.phi);
+        let (theta, p_eta, w, f2) = (pl.theta, pl.p_eta, pl.w, pl.f2);
+        let dc = 2.0 / 3.0 * ((1.0 - beta) * dm.hardening - h * dm.beta);
+
+        let r = dsigma_tr - dn.back_stress - eta * (lambda * dc) - dd * p_eta * lambda;
+        let q =
+            dm.sigma0 + (dm.beta * h + beta * dm.hardening) * out.state.eps_p + beta * h * dn.eps_p;
+        let xi_r = xi * r;
+        let dlambda = (theta * p_eta.dot(&xi_r) - SQRT_2_3 * phi * q) / f2;
+        let deta = xi_r - w * dlambda;
+        let dshift = eta * (c * dlambda + lambda * dc);
+        let dback = dn.back_stress + dshift + deta * (lambda * c);
+        let dstress = deta * f1 + dn.back_stress + dshift;
+        let dphi = p_eta.dot(&deta) / phi;
+        let deps_p = dn.eps_p + SQRT_2_3 * (dlambda * phi + lambda * dphi);
+        MaterialState {
+            stress: dstress,
+            back_stress: dback,
+            eps_p: deps_p,
+        }
     }
 }
 

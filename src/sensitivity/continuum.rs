@@ -45,7 +45,7 @@ use crate::material::{MaterialParams, MaterialState};
 use crate::shell::load::ExternalLoad;
 use crate::shell::model::ShellModel;
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
-use crate::shell::point_sensitivity::{commit_particle_dot, ModelSeeds};
+use crate::shell::point_sensitivity::{commit_particle_dot, ModelSeeds, StepLinearisation};
 use crate::shell::problem::ShellProblem;
 use crate::solver::observe::{Observed, StepObserver};
 use crate::solver::NonlinearProblem;
@@ -401,17 +401,21 @@ impl ContinuumDsa {
         super::dual::check_loads(problem, &self.loads, &du[..n_q], step.load)?;
         // 1. Fictitious loads of all variables (eq 65's right-hand side).
         let t0 = Instant::now();
-        let rhs = self
-            .fictitious_loads(
-                problem,
-                StepState {
-                    du: &du,
-                    u: step.u,
-                    load: step.load,
-                },
-                None,
-            )
-            .map_err(fatal)?;
+        let (rhs, kept) = fictitious_loads_kept(
+            problem,
+            &self.loads,
+            &self.states,
+            &self.zero,
+            StepState {
+                du: &du,
+                u: step.u,
+                load: step.load,
+            },
+            None,
+            true,
+        )
+        .map_err(fatal)?;
+        let (mut histories, lin) = kept.ok_or_else(|| fatal("no linearisation kept"))?;
         let nv = self.variables.len();
         let mut b = vec![0.0; n * nv];
         for (v, r) in rhs.iter().enumerate() {
@@ -427,25 +431,23 @@ impl ContinuumDsa {
         step.solver
             .solve_columns_in_place(&mut b, nv)
             .map_err(fatal)?;
-        // 3. History and particle updates with Δu̇ (eqs 44–51).
-        let model = &problem.model;
-        let seeds: Vec<ModelSeeds> = self
-            .states
-            .iter()
-            .enumerate()
-            .map(|(v, s)| s.seeds(None, &b[v * n..v * n + n_q], &self.zero))
-            .collect();
         self.timing.solve += t0.elapsed().as_secs_f64();
+        // 3. History and particle updates with Δu̇ (eqs 44–51): the trial histories'
+        // derivative is linear in the seeds, so the fictitious loads' pass (Δq̇ = 0) gave its
+        // seed part and the Δq̇ part is added from the layer data that pass kept.
         let t0 = Instant::now();
-        let dots = model
-            .internal_force_dots(&du[..n_q], &seeds)
+        let model = &problem.model;
+        let dofs_dot: Vec<&[f64]> = (0..nv).map(|v| &b[v * n..v * n + n_q]).collect();
+        model
+            .add_increment_history_dots(&lin, &dofs_dot, &mut histories)
             .map_err(fatal)?;
+        drop(lin);
         let next = self
             .states
             .iter()
-            .zip(dots)
+            .zip(histories)
             .enumerate()
-            .map(|(v, (s, (_, history)))| {
+            .map(|(v, (s, history))| {
                 let dq = &b[v * n..(v + 1) * n];
                 let particles = model
                     .particles
@@ -630,6 +632,24 @@ pub fn fictitious_loads(
     at: StepState<'_>,
     group: Option<TermGroup>,
 ) -> Result<Vec<Vec<f64>>, SensitivityError> {
+    Ok(fictitious_loads_kept(problem, loads, states, zero, at, group, false)?.0)
+}
+
+/// The trial histories' seed part (one per variable) and the layer data of the step, kept by
+/// [`fictitious_loads_kept`] for the history update.
+type Kept = (Vec<Vec<PointHistory<f64>>>, StepLinearisation);
+
+/// [`fictitious_loads`], with `keep`: also the trial histories' seed part and the layer data
+/// of the step ([`ShellModel::internal_force_dots_linearised`]).
+fn fictitious_loads_kept(
+    problem: &ShellProblem,
+    loads: &[DualLoad],
+    states: &[SensitivityState],
+    zero: &SensitivityState,
+    at: StepState<'_>,
+    group: Option<TermGroup>,
+    keep: bool,
+) -> Result<(Vec<Vec<f64>>, Option<Kept>), SensitivityError> {
     let StepState { du, u, load } = at;
     let model = &problem.model;
     let n = u.len();
@@ -640,9 +660,18 @@ pub fn fictitious_loads(
         .map(|s| s.seeds(group, &zero_dofs, zero))
         .collect();
     let history_terms = group.is_none_or(|g| g == TermGroup::History);
-    let dots = model.internal_force_dots(&du[..n_q], &seeds)?;
+    let (dots, lin) = if keep {
+        let (d, l) = model.internal_force_dots_linearised(&du[..n_q], &seeds)?;
+        (d, Some(l))
+    } else {
+        (model.internal_force_dots(&du[..n_q], &seeds)?, None)
+    };
     let mut out = Vec::with_capacity(states.len());
-    for (s, (f_int, _)) in states.iter().zip(dots) {
+    let mut histories = Vec::with_capacity(if keep { states.len() } else { 0 });
+    for (s, (f_int, h)) in states.iter().zip(dots) {
+        if keep {
+            histories.push(h);
+        }
         let mut r = f_int;
         r.resize(n, 0.0);
         // The loads' derivative at fixed Δu (eqs 37, 83), subtracted: R = f_int − f_ext.
@@ -672,7 +701,7 @@ pub fn fictitious_loads(
         }
         out.push(r);
     }
-    Ok(out)
+    Ok((out, lin.map(|l| (histories, l))))
 }
 
 impl StepObserver<ShellProblem> for ContinuumDsa {

@@ -3,7 +3,7 @@
 //!
 //! The continuum DSA differentiates the residual of one converged step `R(Δq; ⁿs, τ)` with
 //! respect to everything it depends on. At one layer point this is [`point_residual_dot`]: the
-//! derivative of [`point_residual_with`]'s residual and trial history, linear in the seeds
+//! derivative of [`point_residual_with`](super::point::point_residual_with)'s residual and trial history, linear in the seeds
 //! ([`PointSeeds`]):
 //! - the design velocity of the initial geometry `ẋ⁰,α, ṅ⁰, ṅ⁰,α` (shape variables),
 //! - the thickness rate `ṫ` and the material-parameter rates `Ė, ν̇, k̇, σ̇0, Ḣ, β̇`,
@@ -19,9 +19,9 @@
 //! - `Ġ` from `Δū̇_I, Δḋ_I` ([`PointIncrementDot`]) and `ż, ṫ`,
 //! - `Ḣ = (Ġ − H J̇ⁿ) Jⁿ⁻¹`: the increment's gradient rate with the term `−H ∇ⁿV` of eqs 39–40,
 //! - `L̇ = F½⁻¹ Ḣ F½⁻¹` (eqs 56–57, [`crate::kinematics::mid_step_gradient_dot`]),
-//! - `Δε̇, Δω̇, ṙ, ½ṙ` (eqs 54–55, 58, [`hughes_winget_dot`]),
-//! - `Δε̇ˡ` with `ⁿQ̇` (eq 50, [`local_strain_increment_dot`]),
-//! - the return-map sensitivity `ⁿ⁺¹(σ̇, α̇, ė^p)` (eqs 44–49, [`material_sensitivity`]),
+//! - `Δε̇, Δω̇, ṙ, ½ṙ` (eqs 54–55, 58, [`crate::kinematics::hughes_winget_dot`]),
+//! - `Δε̇ˡ` with `ⁿQ̇` (eq 50, [`crate::kinematics::local_strain_increment_dot`]),
+//! - the return-map sensitivity `ⁿ⁺¹(σ̇, α̇, ė^p)` (eqs 44–49, [`crate::material::material_sensitivity`]),
 //! - `ⁿ⁺¹Q̇ = ⁿQ̇ rᵀ + ⁿQ ṙᵀ` (eq 51), `σ̇ᵍ` (eq 42),
 //! - `Ṗ = tr(J⁻¹J̇) P + w det J σ̇ᵍ J⁻ᵀ − P J̇ᵀ J⁻ᵀ` on `ⁿ⁺¹J = Jⁿ + G` (the `J̇` and `Ḟ⁻¹`
 //!   terms of eqs 38 and 41, with the parametric volume element carrying `div V`),
@@ -40,16 +40,16 @@
 
 use super::model::ShellModel;
 use super::point::{
-    point_residual_with, ParticleState, PointHistory, PointIncrement, PointInput, PointResult,
+    ParticleState, PointHistory, PointIncrement, PointInput, PointKinematics, PointResult,
     ShapeData, SurfacePoint, DOFS_PER_PARTICLE,
 };
 use super::rotation::rodrigues_coefficient_derivatives;
 use super::ShellError;
 use crate::kinematics::{
-    frame_update_dot, global_stress_dot, hughes_winget_dot, local_strain_increment,
-    local_strain_increment_dot, strain_to_vec5, stress_from_vec5, HwIncrement, M3,
+    frame_update, global_stress, hughes_winget, local_strain_increment, mid_step_gradient,
+    strain_to_vec5, stress_from_vec5, M3,
 };
-use crate::material::{material_sensitivity, MaterialParams, ReturnMap, Vec5};
+use crate::material::{return_map, MaterialParams, MaterialSensitivity};
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
@@ -316,12 +316,15 @@ impl SeedSums {
     }
 }
 
-/// Value sums at one in-plane point (f64, layer-independent): `d,α = n⁰,α + Σ Ψ_I,α (d_I − d⁰_I)`,
-/// `d = n⁰ + Σ Ψ_I (d_I − d⁰_I)`, `Σ Ψ_I,α Δd_I`, `Σ Ψ_I Δd_I` (the factors of `ż`, `ṫ/2`).
+/// Value sums at one in-plane point (f64, layer-independent): `x̄,α = x⁰,α + Σ Ψ_I,α ū_I`,
+/// `d,α = n⁰,α + Σ Ψ_I,α (d_I − d⁰_I)`, `d = n⁰ + Σ Ψ_I (d_I − d⁰_I)`, `Σ Ψ_I,α Δū_I`,
+/// `Σ Ψ_I,α Δd_I`, `Σ Ψ_I Δd_I`: the layers' `Jⁿ` and `G` (and the factors of `ż`, `ṫ/2`).
 #[derive(Clone, Copy, Debug)]
 struct ValueSums {
+    xa: [V3; 2],
     da: [V3; 2],
     d: V3,
+    g_u: [V3; 2],
     g_d: [V3; 2],
     g_d3: V3,
 }
@@ -334,15 +337,19 @@ impl ValueSums {
         incr: &PointIncrement<f64>,
     ) -> Self {
         let mut v = ValueSums {
+            xa: s.x_a,
             da: s.n_a,
             d: s.n,
+            g_u: [V3::zeros(); 2],
             g_d: [V3::zeros(); 2],
             g_d3: V3::zeros(),
         };
-        for ((sh, p), dd) in shape.iter().zip(particles).zip(&incr.dd) {
+        for (((sh, p), du), dd) in shape.iter().zip(particles).zip(&incr.du).zip(&incr.dd) {
             let ddir = p.d - p.d0;
             for a in 0..2 {
+                v.xa[a] += p.u * sh.dpsi[a];
                 v.da[a] += ddir * sh.dpsi[a];
+                v.g_u[a] += du * sh.dpsi[a];
                 v.g_d[a] += dd * sh.dpsi[a];
             }
             v.d += ddir * sh.psi;
@@ -350,62 +357,145 @@ impl ValueSums {
         }
         v
     }
+
+    /// The f64 evaluation of one layer of the point ([`point_residual_with`](super::point::point_residual_with)'s chain, eqs
+    /// 22–32) from the layer-independent sums: `Jⁿ = [x̄,α + d,α z | d t/2]`,
+    /// `G = [Σ Ψ,α Δū + z Σ Ψ,α Δd | t/2 Σ Ψ Δd]`, then `H`, `L` (eq 57), the Hughes–Winget
+    /// increment, `Δεˡ`, the return map, `ⁿ⁺¹Q`, `σᵍ` and `P = w det J σᵍ J⁻ᵀ`. Only the
+    /// residual rows are left out (`residual` is empty): the model forms them once per in-plane
+    /// point from the thickness sums of `P`. The same checks and errors as
+    /// [`point_residual_with`](super::point::point_residual_with).
+    fn layer(&self, inp: &PointInput<f64>) -> Result<PointResult<f64>, ShellError> {
+        let half_t = inp.thickness * 0.5;
+        let z = half_t * inp.zeta;
+        let jn = M3::from_columns(&[
+            self.xa[0] + self.da[0] * z,
+            self.xa[1] + self.da[1] * z,
+            self.d * half_t,
+        ]);
+        let g = M3::from_columns(&[
+            self.g_u[0] + self.g_d[0] * z,
+            self.g_u[1] + self.g_d[1] * z,
+            self.g_d3 * half_t,
+        ]);
+        let (_, jn_inv) = invert(&jn, "Jⁿ (step-start configuration)")?;
+        let h = g * jn_inv;
+        let l = mid_step_gradient(&h)?;
+        let inc = hughes_winget(&l)?;
+        let q_n = inp.history.frame;
+        let deps_l = local_strain_increment(&q_n, &inc.r_half, &inc.deps);
+        let rm = return_map(
+            inp.material,
+            &inp.history.material,
+            &strain_to_vec5(&deps_l),
+        )?;
+        let q1 = frame_update(&q_n, &inc.r);
+        let sigma_g = global_stress(&q1, &stress_from_vec5(&rm.state.stress));
+        let (det1, j1_inv) = invert(&(jn + g), "ⁿ⁺¹J (end-of-step configuration)")?;
+        let p = sigma_g * j1_inv.transpose() * (det1 * inp.weight);
+        Ok(PointResult {
+            residual: Vec::new(),
+            history: PointHistory {
+                frame: q1,
+                material: rm.state,
+            },
+            return_map: rm,
+            kinematics: PointKinematics {
+                jn_inv,
+                h,
+                inc,
+                j1_inv,
+                det1,
+                sigma_g,
+                p,
+            },
+        })
+    }
 }
 
-/// The f64 data of one layer point shared by all seed sets.
-struct LayerData<'a> {
+/// `(det M, M⁻¹)` of a configuration matrix; a non-positive (or NaN) determinant is an error
+/// naming the matrix, as in the analysis.
+fn invert(m: &M3<f64>, what: &'static str) -> Result<(f64, M3<f64>), ShellError> {
+    let det = m.determinant();
+    if det.is_nan() || det <= 0.0 {
+        return Err(ShellError::NonPositiveJacobian { what, det });
+    }
+    let inv = m
+        .try_inverse()
+        .ok_or(ShellError::NonPositiveJacobian { what, det })?;
+    Ok((det, inv))
+}
+
+/// The f64 data of one layer point shared by all seed sets, with the seed-independent factors
+/// of the chain formed once ([`LayerKeep`] holds those the increment-only part needs).
+struct LayerData {
     zeta: f64,
     half_t: f64,
     z: f64,
-    weight: f64,
     h: M3<f64>,
-    jn_inv: M3<f64>,
-    /// `F½⁻¹ = (I + ½H)⁻¹`.
-    f_half_inv: M3<f64>,
-    inc: HwIncrement<f64>,
     q_n: M3<f64>,
-    deps_l: Vec5<f64>,
+    /// `½rᵀ` and `rᵀ` (the `Q̇ₙ` terms of eqs 50–51).
+    r_half_t: M3<f64>,
+    r_t: M3<f64>,
     q1: M3<f64>,
-    sigma_l: M3<f64>,
-    j1_inv: M3<f64>,
-    det1: f64,
+    /// `ⁿ⁺¹Qᵀ σˡ`.
+    qt_sigma: M3<f64>,
+    /// `J⁻ᵀ` and `w det J J⁻ᵀ`.
+    jinv_t: M3<f64>,
+    jinv_t_w: M3<f64>,
     p: M3<f64>,
-    material: &'a MaterialParams<f64>,
-    return_map: &'a ReturnMap<f64>,
+    keep: LayerKeep,
 }
 
-impl<'a> LayerData<'a> {
-    fn new(inp: &'a PointInput<f64>, res: &'a PointResult<f64>) -> Result<Self, ShellError> {
+impl LayerData {
+    fn new(inp: &PointInput<f64>, res: &PointResult<f64>) -> Result<Self, ShellError> {
         let k = &res.kinematics;
+        let singular = |what: &str| {
+            ShellError::InvalidInput(format!(
+                "res: {what} of the given point result is singular (not from \
+                 point_residual_with?)"
+            ))
+        };
         let f_half = M3::identity() + k.h * 0.5;
-        // The f64 evaluation succeeded, so I + ½H passed the kinematics' determinant check.
-        let f_half_inv = f_half.try_inverse().ok_or_else(|| {
-            ShellError::InvalidInput(
-                "res: I + ½H of the given point result is singular (not from point_residual_with?)"
-                    .into(),
-            )
-        })?;
+        // The f64 evaluation succeeded, so I + ½H passed the kinematics' determinant check,
+        // and I − aΔω (Δω skew) has determinant 1 + a²|ω|² ≥ 1.
+        let f_half_inv = f_half.try_inverse().ok_or_else(|| singular("I + ½H"))?;
+        let resolvent = |a: f64| {
+            (M3::identity() - k.inc.domega * a)
+                .try_inverse()
+                .ok_or_else(|| singular("I − aΔω"))
+        };
         let q_n = inp.history.frame;
+        let a = q_n * k.inc.r_half.transpose();
         let deps_l = strain_to_vec5(&local_strain_increment(&q_n, &k.inc.r_half, &k.inc.deps));
         let half_t = inp.thickness * 0.5;
+        let q1 = res.history.frame;
+        let sigma_l = stress_from_vec5(&res.history.material.stress);
+        let jinv_t = k.j1_inv.transpose();
         Ok(LayerData {
             zeta: inp.zeta,
             half_t,
             z: half_t * inp.zeta,
-            weight: inp.weight,
             h: k.h,
-            jn_inv: k.jn_inv,
-            f_half_inv,
-            inc: k.inc,
             q_n,
-            deps_l,
-            q1: res.history.frame,
-            sigma_l: stress_from_vec5(&res.history.material.stress),
-            j1_inv: k.j1_inv,
-            det1: k.det1,
+            r_half_t: k.inc.r_half.transpose(),
+            r_t: k.inc.r.transpose(),
+            q1,
+            qt_sigma: q1.transpose() * sigma_l,
+            jinv_t,
+            jinv_t_w: jinv_t * (k.det1 * inp.weight),
             p: k.p,
-            material: inp.material,
-            return_map: &res.return_map,
+            keep: LayerKeep {
+                f_half_inv,
+                jn_inv_f: k.jn_inv * f_half_inv,
+                r1: resolvent(0.5)?,
+                s1: (M3::identity() + k.inc.r) * 0.5,
+                r2: resolvent(0.25)?,
+                s2: (M3::identity() + k.inc.r_half) * 0.25,
+                a,
+                c: k.inc.deps * a.transpose(),
+                material: MaterialSensitivity::new(inp.material, &deps_l, &res.return_map),
+            },
         })
     }
 
@@ -420,7 +510,7 @@ impl<'a> LayerData<'a> {
         history_dot: &PointHistory<f64>,
         acc: &mut StressSums,
     ) -> PointHistory<f64> {
-        let (z, half_t) = (self.z, self.half_t);
+        let (z, half_t, k) = (self.z, self.half_t, &self.keep);
         let half_t_dot = t_dot * 0.5;
         let z_dot = half_t_dot * self.zeta;
         // J̇ⁿ: the parametric gradient of the step-start design velocity ⁿV.
@@ -435,44 +525,32 @@ impl<'a> LayerData<'a> {
             sums.g_u[1] + sums.g_d[1] * z + values.g_d[1] * z_dot,
             sums.g_d3 * half_t + values.g_d3 * half_t_dot,
         ]);
-        // Ḣ = Ġ Jⁿ⁻¹ − G Jⁿ⁻¹ J̇ⁿ Jⁿ⁻¹ = (Ġ − H J̇ⁿ) Jⁿ⁻¹ (the −H ∇ⁿV term of eqs 39–40).
-        let h_dot = (g_dot - self.h * jn_dot) * self.jn_inv;
+        // Ḣ = Ġ Jⁿ⁻¹ − G Jⁿ⁻¹ J̇ⁿ Jⁿ⁻¹ = (Ġ − H J̇ⁿ) Jⁿ⁻¹ (the −H ∇ⁿV term of eqs 39–40), and
         // L̇ = F½⁻¹ Ḣ F½⁻¹ (eqs 56–57, kinematics::mid_step_gradient_dot).
-        let l_dot = self.f_half_inv * h_dot * self.f_half_inv;
-        let inc_dot = hughes_winget_dot(&self.inc, &l_dot);
-        // Δε̇ˡ with the history frame's sensitivity (eq 50).
-        let deps_l_dot = local_strain_increment_dot(
-            &self.q_n,
-            &history_dot.frame,
-            &self.inc.r_half,
-            &inc_dot.r_half_dot,
-            &self.inc.deps,
-            &inc_dot.deps_dot,
-        );
+        let l_dot = k.f_half_inv * (g_dot - self.h * jn_dot) * k.jn_inv_f;
+        let hw = k.hw_dot(&l_dot);
+        // Δε̇ˡ with the history frame's sensitivity (eq 50): Ȧ = Q̇ₙ ½rᵀ + Qₙ ½ṙᵀ.
+        let a_dot = history_dot.frame * self.r_half_t + self.q_n * hw.r_half_dot.transpose();
+        let deps_l_dot = k.strain_dot(&a_dot, &hw.deps_dot);
         // Return-map sensitivity (eqs 44–49).
-        let mat_dot = material_sensitivity(
-            self.material,
-            &self.deps_l,
-            self.return_map,
+        let mat_dot = k.material.apply(
             material_dot,
             &history_dot.material,
             &strain_to_vec5(&deps_l_dot),
         );
-        // ⁿ⁺¹Q̇ (eq 51) and σ̇ᵍ (eq 42).
-        let q1_dot = frame_update_dot(&self.q_n, &history_dot.frame, &self.inc.r, &inc_dot.r_dot);
-        let sigma_g_dot = global_stress_dot(
-            &self.q1,
-            &q1_dot,
-            &self.sigma_l,
-            &stress_from_vec5(&mat_dot.stress),
-        );
+        // ⁿ⁺¹Q̇ = Q̇ₙ rᵀ + Qₙ ṙᵀ (eq 51) and σ̇ᵍ = Q̇ᵀσˡQ + Qᵀσ̇ˡQ + QᵀσˡQ̇ (eq 42; σˡ is
+        // symmetric, so the first term is the transpose of the last).
+        let q1_dot = history_dot.frame * self.r_t + self.q_n * hw.r_dot.transpose();
+        let x = self.qt_sigma * q1_dot;
+        let sigma_g_dot =
+            x + x.transpose() + self.q1.transpose() * stress_from_vec5(&mat_dot.stress) * self.q1;
         // P = w det(J) σᵍ J⁻ᵀ on J = Jⁿ + G:
         // Ṗ = tr(J⁻¹J̇) P + w det J σ̇ᵍ J⁻ᵀ − P J̇ᵀ J⁻ᵀ.
         let j1_dot = jn_dot + g_dot;
-        let jinv_t = self.j1_inv.transpose();
-        let tr = (self.j1_inv * j1_dot).trace();
-        let p_dot = self.p * tr + sigma_g_dot * jinv_t * (self.det1 * self.weight)
-            - self.p * j1_dot.transpose() * jinv_t;
+        // tr(J⁻¹J̇) = J⁻ᵀ : J̇.
+        let tr = self.jinv_t.dot(&j1_dot);
+        let p_dot =
+            self.p * tr + sigma_g_dot * self.jinv_t_w - self.p * j1_dot.transpose() * self.jinv_t;
         acc.add(&p_dot, z);
         PointHistory {
             frame: q1_dot,
@@ -551,7 +629,7 @@ fn add_rows_dot(
     }
 }
 
-/// `d/dτ` of [`point_residual_with`]'s residual and trial history at one layer point.
+/// `d/dτ` of [`point_residual_with`](super::point::point_residual_with)'s residual and trial history at one layer point.
 ///
 /// `inp`, `incr`, `res`: the f64 evaluation (`res = point_residual_with(inp, incr)`);
 /// `incr_dot`: the increment's derivative ([`PointIncrementDot::new`] from `inp.particles`,
@@ -688,6 +766,25 @@ impl ShellModel {
         }
     }
 
+    /// The local DOFs of shape-function particle `j` from the global vector `g` (as the
+    /// analysis forms them): an image's are `T g` of its source's.
+    fn local_dofs(&self, j: usize, g: &[f64]) -> [f64; DOFS_PER_PARTICLE] {
+        const D: usize = DOFS_PER_PARTICLE;
+        let (src, q, det) = self.seed_map(j);
+        let g = &g[D * src..D * src + D];
+        if j < self.particles.len() {
+            [g[0], g[1], g[2], g[3], g[4]]
+        } else {
+            [
+                g[0] * q[(0, 0)] + g[1] * q[(0, 1)] + g[2] * q[(0, 2)],
+                g[0] * q[(1, 0)] + g[1] * q[(1, 1)] + g[2] * q[(1, 2)],
+                g[0] * q[(2, 0)] + g[1] * q[(2, 1)] + g[2] * q[(2, 2)],
+                g[3] * det,
+                g[4] * det,
+            ]
+        }
+    }
+
     fn check_model_seeds(&self, s: usize, seeds: &ModelSeeds) -> Result<(), ShellError> {
         let f = |name: &str| format!("seeds[{s}].{name}");
         if let Some(sp) = seeds.surface {
@@ -748,8 +845,10 @@ impl ShellModel {
     /// `dofs` is the converged increment `Δq` (f64, `n_dofs`); `seeds[v]` the seeds of design
     /// variable `v` ([`ModelSeeds`]). Returns, per seed set, `d f_int/dτ` (`n_dofs`) and the
     /// trial history sensitivities (point-major, as [`ShellModel::history`]). The f64 point
-    /// evaluation ([`point_residual_with`]) is done once per layer point and shared by all seed
-    /// sets; the per-particle increment derivatives once per shape-function particle; the
+    /// evaluation (the chain of [`point_residual_with`](super::point::point_residual_with) from
+    /// `Jⁿ` and `G` formed with per-point neighbour sums, without the residual rows) is done
+    /// once per layer point and shared by all seed sets; the per-particle increment
+    /// derivatives once per shape-function particle; the
     /// residual rows once per in-plane point from the thickness sums of `P` and `Ṗ` (the rows
     /// are linear in them), not once per layer. Images follow their sources: an image's state
     /// dot is `Q ṡ`, its DOF dot `T q̇`. Points run in parallel and are summed in point order
@@ -762,6 +861,33 @@ impl ShellModel {
         dofs: &[f64],
         seeds: &[ModelSeeds],
     ) -> Result<Vec<InternalForceDot>, ShellError> {
+        Ok(self.force_dots(dofs, seeds, false)?.0)
+    }
+
+    /// [`Self::internal_force_dots`], keeping what the increment-only part of the trial-history
+    /// derivative needs ([`StepLinearisation`]): with the seeds' `dofs` zero (the fictitious
+    /// loads of eq 65), the returned histories are the seed part of `ⁿ⁺¹(Q̇, σ̇, α̇, ė^p)`, and
+    /// [`Self::add_increment_history_dots`] adds the part of `Δq̇` once eq 65 is solved: by
+    /// linearity the same trial histories as `internal_force_dots` seeded with `Δq̇` as well,
+    /// without a second f64 evaluation of the layer points.
+    pub fn internal_force_dots_linearised(
+        &self,
+        dofs: &[f64],
+        seeds: &[ModelSeeds],
+    ) -> Result<(Vec<InternalForceDot>, StepLinearisation), ShellError> {
+        let (out, lin) = self.force_dots(dofs, seeds, true)?;
+        Ok((
+            out,
+            lin.expect("force_dots keeps the linearisation when asked"),
+        ))
+    }
+
+    fn force_dots(
+        &self,
+        dofs: &[f64],
+        seeds: &[ModelSeeds],
+        keep: bool,
+    ) -> Result<(Vec<InternalForceDot>, Option<StepLinearisation>), ShellError> {
         const D: usize = DOFS_PER_PARTICLE;
         if dofs.len() != self.n_dofs() {
             return Err(invalid(
@@ -779,21 +905,7 @@ impl ShellModel {
         let n_sf = self.particles.len() + self.symmetry.images.len();
         // Per shape-function particle: f64 state, local DOFs and increment (as the analysis
         // forms them), then, seed-major (`s · n_sf + j`), the derivatives of every seed set.
-        let local_dofs = |j: usize, g: &[f64]| -> [f64; D] {
-            let (src, q, det) = self.seed_map(j);
-            let g = &g[D * src..D * src + D];
-            if j < self.particles.len() {
-                [g[0], g[1], g[2], g[3], g[4]]
-            } else {
-                [
-                    g[0] * q[(0, 0)] + g[1] * q[(0, 1)] + g[2] * q[(0, 2)],
-                    g[0] * q[(1, 0)] + g[1] * q[(1, 1)] + g[2] * q[(1, 2)],
-                    g[0] * q[(2, 0)] + g[1] * q[(2, 1)] + g[2] * q[(2, 2)],
-                    g[3] * det,
-                    g[4] * det,
-                ]
-            }
-        };
+        let local_dofs = |j: usize, g: &[f64]| self.local_dofs(j, g);
         type Particle = (ParticleState<f64>, [f64; D], V3, [V3; 2]);
         let per: Vec<Particle> = (0..n_sf)
             .into_par_iter()
@@ -827,7 +939,7 @@ impl ShellModel {
             .collect();
         // Per in-plane point: the f64 layers once, every seed set on each; results flat
         // (seed-major) so that a point allocates two vectors whatever the number of seed sets.
-        type PointOut = (Vec<f64>, Vec<PointHistory<f64>>);
+        type PointOut = (Vec<f64>, Vec<PointHistory<f64>>, Vec<LayerKeep>);
         let per_point = (0..self.points.len())
             .into_par_iter()
             .map_init(Scratch::default, |sc, k| -> Result<PointOut, ShellError> {
@@ -866,6 +978,7 @@ impl ShellModel {
                 );
                 sc.dots.clear();
                 sc.dots.resize(ns, StressSums::zero());
+                let mut kept = Vec::with_capacity(if keep { nl } else { 0 });
                 let mut val = StressSums::zero();
                 for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
                     let inp = PointInput {
@@ -878,8 +991,11 @@ impl ShellModel {
                         material: &self.material,
                         history: &self.history[k * nl + l],
                     };
-                    let res = point_residual_with(&inp, &sc.inc)?;
+                    let res = values.layer(&inp)?;
                     let layer = LayerData::new(&inp, &res)?;
+                    if keep {
+                        kept.push(layer.keep);
+                    }
                     val.add_value(&layer.p, layer.z, zeta);
                     for (s, (sd, acc)) in seeds.iter().zip(sc.dots.iter_mut()).enumerate() {
                         histories[s * nl + l] = layer.apply(
@@ -911,7 +1027,7 @@ impl ShellModel {
                         r,
                     );
                 }
-                Ok((residuals, histories))
+                Ok((residuals, histories, kept))
             })
             .collect::<Result<Vec<_>, ShellError>>()?;
         let mut out: Vec<InternalForceDot> = (0..ns)
@@ -922,7 +1038,8 @@ impl ShellModel {
                 )
             })
             .collect();
-        for (k, (residuals, histories)) in per_point.iter().enumerate() {
+        let mut layers = Vec::with_capacity(if keep { self.points.len() } else { 0 });
+        for (k, (residuals, histories, kept)) in per_point.into_iter().enumerate() {
             let nr = D * self.points[k].neighbours.len();
             for ((f, h), (r, hs)) in out
                 .iter_mut()
@@ -931,7 +1048,246 @@ impl ShellModel {
                 self.scatter_local(k, r, f);
                 h.extend_from_slice(hs);
             }
+            if keep {
+                layers.push(kept);
+            }
         }
-        Ok(out)
+        let lin = keep.then(|| StepLinearisation {
+            particles: per.into_iter().map(|(state, x, _, _)| (state, x)).collect(),
+            layers,
+        });
+        Ok((out, lin))
+    }
+
+    /// Add the increment-only part of the trial-history derivative (eqs 44–51 with `Δq̇` the
+    /// only seed) to `histories[v]` for `dofs_dot[v]` (`Δq̇` of seed set `v`, `n_dofs`), at the
+    /// step `lin` was kept at ([`Self::internal_force_dots_linearised`], same model state: the
+    /// model must not have committed since). Per layer point the chain is the `Δq̇` column of
+    /// [`point_residual_dot`]'s: `Ġ(Δq̇)` (with `Δḋ_I` of Rodrigues' increment), `Ḣ = Ġ Jⁿ⁻¹`
+    /// (`J̇ⁿ = 0`), `L̇ = F½⁻¹ Ḣ F½⁻¹` (eqs 56–57), the Hughes–Winget derivatives (eqs 54–55,
+    /// 58), `Δε̇ˡ` with `ⁿQ̇ = 0` (eq 50), the strain part of the return-map sensitivity
+    /// (eqs 44–49) and `Q̇ = Qₙ ṙᵀ` (eq 51); no `Ṗ`, no residual rows. Points run in parallel
+    /// (deterministic). Errors name the seed set and field of a wrong length, or a `lin` that
+    /// does not fit the model.
+    pub fn add_increment_history_dots(
+        &self,
+        lin: &StepLinearisation,
+        dofs_dot: &[&[f64]],
+        histories: &mut [Vec<PointHistory<f64>>],
+    ) -> Result<(), ShellError> {
+        let n_sf = self.particles.len() + self.symmetry.images.len();
+        if lin.particles.len() != n_sf {
+            return Err(invalid(
+                "lin.particles",
+                lin.particles.len(),
+                n_sf,
+                "one per shape-function particle of the model",
+            ));
+        }
+        let nl = self.thickness_rule.len();
+        if lin.layers.len() != self.points.len() || lin.layers.iter().any(|l| l.len() != nl) {
+            return Err(invalid(
+                "lin.layers",
+                lin.layers.iter().map(Vec::len).sum(),
+                self.history.len(),
+                "one per layer point of the model, per in-plane point",
+            ));
+        }
+        if histories.len() != dofs_dot.len() {
+            return Err(invalid(
+                "histories",
+                histories.len(),
+                dofs_dot.len(),
+                "one per seed set (dofs_dot)",
+            ));
+        }
+        for (s, (q, h)) in dofs_dot.iter().zip(histories.iter()).enumerate() {
+            if q.len() != self.n_dofs() {
+                return Err(invalid(
+                    &format!("dofs_dot[{s}]"),
+                    q.len(),
+                    self.n_dofs(),
+                    "5 per real particle",
+                ));
+            }
+            if h.len() != self.history.len() {
+                return Err(invalid(
+                    &format!("histories[{s}]"),
+                    h.len(),
+                    self.history.len(),
+                    "one per layer point, point-major",
+                ));
+            }
+        }
+        let ns = dofs_dot.len();
+        let zero = ParticleState {
+            u: V3::zeros(),
+            d: V3::zeros(),
+            d0: V3::zeros(),
+            e: [V3::zeros(); 2],
+        };
+        // Per shape-function particle and seed set (seed-major): `Δū̇_I`, `Δḋ_I` of `Δq̇` alone.
+        let per_dot: Vec<(V3, V3)> = (0..ns * n_sf)
+            .into_par_iter()
+            .map(|idx| {
+                let (qd, j) = (dofs_dot[idx / n_sf], idx % n_sf);
+                let x = self.local_dofs(j, qd);
+                let (state, xs) = &lin.particles[j];
+                let (du, dd, _) = particle_increment_dot(state, &zero, xs, &x);
+                (du, dd)
+            })
+            .collect();
+        let half_t = self.thickness * 0.5;
+        let per_point: Vec<Vec<PointHistory<f64>>> = (0..self.points.len())
+            .into_par_iter()
+            .map(|k| {
+                let p = &self.points[k];
+                let nb = &p.neighbours;
+                let mut out = Vec::with_capacity(ns * nl);
+                for s in 0..ns {
+                    let base = s * n_sf;
+                    // Σ Ψ,α Δū̇, Σ Ψ,α Δḋ, Σ Ψ Δḋ (the other sums of SeedSums are zero).
+                    let mut sums = SeedSums::default();
+                    for (sh, &j) in p.shape.iter().zip(nb) {
+                        let (du, dd) = &per_dot[base + j];
+                        for a in 0..2 {
+                            sums.g_u[a] += du * sh.dpsi[a];
+                            sums.g_d[a] += dd * sh.dpsi[a];
+                        }
+                        sums.g_d3 += dd * sh.psi;
+                    }
+                    for (l, &(zeta, _)) in self.thickness_rule.iter().enumerate() {
+                        let i = k * nl + l;
+                        out.push(lin.layers[k][l].increment_history_dot(
+                            &self.history[i].frame,
+                            half_t,
+                            half_t * zeta,
+                            &sums,
+                        ));
+                    }
+                }
+                out
+            })
+            .collect();
+        for (k, hs) in per_point.iter().enumerate() {
+            for (s, h) in hs.chunks_exact(nl).enumerate() {
+                for (l, d) in h.iter().enumerate() {
+                    add_history(&mut histories[s][k * nl + l], d);
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn add_history(a: &mut PointHistory<f64>, b: &PointHistory<f64>) {
+    a.frame += b.frame;
+    a.material.stress += b.material.stress;
+    a.material.back_stress += b.material.back_stress;
+    a.material.eps_p += b.material.eps_p;
+}
+
+/// The seed-independent factors of one layer point's derivative chain, formed once from the
+/// f64 evaluation and shared by every seed set; kept by the fictitious loads' pass for the
+/// increment-only part of the trial-history derivative
+/// ([`ShellModel::add_increment_history_dots`]): ≈ 1.4 kB per layer point (8 3×3 matrices and
+/// the return-map sensitivity's factors), whatever the number of seed sets; 7.0 MB on the
+/// 5120 layer points of the hemisphere (`benches/continuum.rs` prints it).
+#[derive(Clone, Copy, Debug)]
+struct LayerKeep {
+    /// `F½⁻¹ = (I + ½H)⁻¹`.
+    f_half_inv: M3<f64>,
+    /// `Jⁿ⁻¹ F½⁻¹`.
+    jn_inv_f: M3<f64>,
+    /// `(I − ½Δω)⁻¹`, `½(I + r)`: `ṙ = (2I − Δω)⁻¹ Δω̇ (I + r)` (eqs 54–55).
+    r1: M3<f64>,
+    s1: M3<f64>,
+    /// `(I − ¼Δω)⁻¹`, `¼(I + ½r)`: `½ṙ = (4I − Δω)⁻¹ Δω̇ (I + ½r)` (eqs 54–55).
+    r2: M3<f64>,
+    s2: M3<f64>,
+    /// `A = Qₙ ½rᵀ` and `Δε Aᵀ` (eq 50).
+    a: M3<f64>,
+    c: M3<f64>,
+    /// The return-map sensitivity's seed-independent factors (eqs 44–49).
+    material: MaterialSensitivity,
+}
+
+/// `(Δε̇, ṙ, ½ṙ)` of [`LayerKeep::hw_dot`].
+struct HwDot {
+    deps_dot: M3<f64>,
+    r_dot: M3<f64>,
+    r_half_dot: M3<f64>,
+}
+
+impl LayerKeep {
+    /// The Hughes–Winget derivatives (eqs 54–55, 58; [`crate::kinematics::hughes_winget_dot`] with the
+    /// resolvents formed once): `Δε̇ = sym L̇`, `Δω̇ = skew L̇`,
+    /// `ṙ = (I − ½Δω)⁻¹ Δω̇ ½(I + r)`, `½ṙ = (I − ¼Δω)⁻¹ Δω̇ ¼(I + ½r)`.
+    fn hw_dot(&self, l_dot: &M3<f64>) -> HwDot {
+        let lt = l_dot.transpose();
+        let domega_dot = (l_dot - lt) * 0.5;
+        HwDot {
+            deps_dot: (l_dot + lt) * 0.5,
+            r_dot: self.r1 * domega_dot * self.s1,
+            r_half_dot: self.r2 * domega_dot * self.s2,
+        }
+    }
+
+    /// `Δε̇ˡ = Ȧ Δε Aᵀ + A Δε̇ Aᵀ + A Δε Ȧᵀ` (eq 50, [`crate::kinematics::local_strain_increment_dot`]); `Δε` is
+    /// symmetric, so the last term is the transpose of the first.
+    fn strain_dot(&self, a_dot: &M3<f64>, deps_dot: &M3<f64>) -> M3<f64> {
+        let t = a_dot * self.c;
+        t + t.transpose() + self.a * deps_dot * self.a.transpose()
+    }
+
+    /// The `Δq̇` column of [`LayerData::apply`] (`J̇ⁿ = 0`, `ż = ṫ = 0`, no history or
+    /// material seeds): `ⁿ⁺¹(Q̇, σ̇, α̇, ė^p)`.
+    fn increment_history_dot(
+        &self,
+        q_n: &M3<f64>,
+        half_t: f64,
+        z: f64,
+        sums: &SeedSums,
+    ) -> PointHistory<f64> {
+        let g_dot = M3::from_columns(&[
+            sums.g_u[0] + sums.g_d[0] * z,
+            sums.g_u[1] + sums.g_d[1] * z,
+            sums.g_d3 * half_t,
+        ]);
+        // L̇ = F½⁻¹ Ġ Jⁿ⁻¹ F½⁻¹ (eqs 56–57).
+        let l_dot = self.f_half_inv * g_dot * self.jn_inv_f;
+        let hw = self.hw_dot(&l_dot);
+        // Eq 50 with Ȧ = Qₙ ½ṙᵀ.
+        let deps_l_dot = self.strain_dot(&(q_n * hw.r_half_dot.transpose()), &hw.deps_dot);
+        let mat_dot = self.material.strain(&strain_to_vec5(&deps_l_dot));
+        // Eq 51 with Q̇ₙ = 0.
+        PointHistory {
+            frame: q_n * hw.r_dot.transpose(),
+            material: mat_dot,
+        }
+    }
+}
+
+/// The f64 data of a converged step kept by [`ShellModel::internal_force_dots_linearised`] for
+/// [`ShellModel::add_increment_history_dots`]: per shape-function particle its committed state
+/// and local DOF increment, per layer point the kinematics and return-map outcome the
+/// increment-only chain needs.
+#[derive(Clone, Debug)]
+pub struct StepLinearisation {
+    particles: Vec<(ParticleState<f64>, [f64; DOFS_PER_PARTICLE])>,
+    /// Per in-plane point, per layer.
+    layers: Vec<Vec<LayerKeep>>,
+}
+
+impl StepLinearisation {
+    /// Heap memory held (bytes).
+    pub fn memory_bytes(&self) -> usize {
+        self.particles.capacity() * std::mem::size_of::<(ParticleState<f64>, [f64; 5])>()
+            + self.layers.capacity() * std::mem::size_of::<Vec<LayerKeep>>()
+            + self
+                .layers
+                .iter()
+                .map(|l| l.capacity() * std::mem::size_of::<LayerKeep>())
+                .sum::<usize>()
     }
 }
