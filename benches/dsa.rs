@@ -87,8 +87,9 @@ impl Setup {
         .unwrap();
         let t = r.timing;
         eprintln!(
-            "continuum stages: rhs {:.3} s, solve {:.3} s, update {:.3} s, record {:.3} s",
-            t.rhs, t.solve, t.update, t.record
+            "continuum stages: rhs {:.3} s, solve {:.3} s, update {:.3} s, record {:.3} s, load \
+             check {:.3} s",
+            t.rhs, t.solve, t.update, t.record, t.check
         );
         (r.dsa.as_secs_f64(), r.total.as_secs_f64())
     }

@@ -39,7 +39,7 @@
 //! Verified against the dual-number evaluation [`ShellContact::force_with`] and central
 //! differences (`tests/dsa_contact.rs`).
 
-use super::shell::{neighbour_state, ShellContact};
+use super::shell::{neighbour_state, ShellContact, SiteEval};
 use crate::shell::model::ShellModel;
 use crate::shell::point::{director_first_derivatives, ParticleState, DOFS_PER_PARTICLE};
 use crate::shell::rotation::rodrigues_coefficient_derivatives;
@@ -118,20 +118,50 @@ impl ShellContact {
         load: f64,
         seeds: &ContactSeeds<'_>,
     ) -> Result<Vec<f64>, ShellError> {
-        self.check_model(model, q.len(), Some(seeds.increment.len()))?;
-        for (expected, got) in [
-            (model.particles.len(), seeds.particles.len()),
-            (self.tools().len(), seeds.tools.len()),
-        ] {
-            if expected != got {
-                return Err(ShellError::Dimension { expected, got });
+        Ok(self
+            .force_dots(model, q, load, std::slice::from_ref(seeds))?
+            .pop()
+            .unwrap_or_default())
+    }
+
+    /// [`ShellContact::force_dot`] for several seed sets (design variables) at once: the slave
+    /// positions and their projections onto the tools are evaluated once and shared.
+    pub fn force_dots(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        load: f64,
+        seeds: &[ContactSeeds<'_>],
+    ) -> Result<Vec<Vec<f64>>, ShellError> {
+        for sd in seeds {
+            self.check_model(model, q.len(), Some(sd.increment.len()))?;
+            for (expected, got) in [
+                (model.particles.len(), sd.particles.len()),
+                (self.tools().len(), sd.tools.len()),
+            ] {
+                if expected != got {
+                    return Err(ShellError::Dimension { expected, got });
+                }
             }
         }
         let surfaces: Vec<_> = self.tools().iter().map(|tl| tl.surface.clone()).collect();
         let evals = self.evaluate(model, q, load, &surfaces)?;
+        seeds
+            .iter()
+            .map(|sd| self.dot_with(model, &evals, sd))
+            .collect()
+    }
+
+    /// The force derivative for one seed set from the evaluated sites.
+    fn dot_with(
+        &self,
+        model: &ShellModel,
+        evals: &[SiteEval<f64>],
+        seeds: &ContactSeeds<'_>,
+    ) -> Result<Vec<f64>, ShellError> {
         let omega = self.penalty();
         let mut out = vec![0.0; model.n_dofs()];
-        for (site, ev) in self.sites().iter().zip(&evals) {
+        for (site, ev) in self.sites().iter().zip(evals) {
             let active: Vec<_> = ev
                 .faces
                 .iter()

@@ -281,6 +281,9 @@ pub struct ContinuumTiming {
     pub update: f64,
     /// Monitor derivatives after the commit.
     pub record: f64,
+    /// The check that the loads given to the method are the problem's (both evaluated at
+    /// every step: with contact, two contact-force evaluations).
+    pub check: f64,
 }
 
 /// The continuum DSA as an observer of the analysis' converged steps.
@@ -398,7 +401,9 @@ impl ContinuumDsa {
             .zip(problem.state())
             .map(|(a, b)| a - b)
             .collect();
+        let t0 = Instant::now();
         super::dual::check_loads(problem, &self.loads, &du[..n_q], step.load)?;
+        self.timing.check += t0.elapsed().as_secs_f64();
         // 1. Fictitious loads of all variables (eq 65's right-hand side).
         let t0 = Instant::now();
         let (rhs, kept) = fictitious_loads_kept(
@@ -516,6 +521,67 @@ impl ContinuumDsa {
     }
 }
 
+/// The contact force's derivative (`b'_N`, eqs 78–83, `ShellContact::force_dots`: the slave
+/// projections evaluated once for all variables) for every state's seeds restricted to `group`:
+/// the committed particle dots (group `history`), the tool translations (group `tool`), the
+/// thickness (the contact faces at `±t/2`: group `load`) and the penalty's `ω = c E/t`
+/// dependence (`Ė`: group `material`, `ṫ`: group `load`). `None` without contact.
+fn contact_dots(
+    model: &ShellModel,
+    loads: &[DualLoad],
+    states: &[SensitivityState],
+    zero: &SensitivityState,
+    group: Option<TermGroup>,
+    dq: &[f64],
+    factor: f64,
+) -> Result<Option<Vec<Vec<f64>>>, SensitivityError> {
+    let Some(c) = loads.iter().find_map(|l| match l {
+        DualLoad::Contact(c) => Some(c),
+        _ => None,
+    }) else {
+        return Ok(None);
+    };
+    let on = |g: TermGroup| group.is_none_or(|x| x == g);
+    let increment = vec![0.0; dq.len()];
+    let seeds: Vec<ContactSeeds> = states
+        .iter()
+        .map(|s| {
+            let t_dot = if on(TermGroup::Load) {
+                s.thickness
+            } else {
+                0.0
+            };
+            let e_dot = if on(TermGroup::Material) {
+                s.material.young
+            } else {
+                0.0
+            };
+            ContactSeeds {
+                tools: if on(TermGroup::Tool) {
+                    &s.tools
+                } else {
+                    &zero.tools
+                },
+                thickness: t_dot,
+                penalty: match c.penalty_factor {
+                    Some(k) => {
+                        k * (e_dot * model.thickness - model.material.young * t_dot)
+                            / (model.thickness * model.thickness)
+                    }
+                    None => 0.0,
+                },
+                particles: if on(TermGroup::History) {
+                    &s.particles
+                } else {
+                    &zero.particles
+                },
+                increment: &increment,
+            }
+        })
+        .collect();
+    Ok(Some(c.contact.force_dots(model, dq, factor, &seeds)?))
+}
+
 /// Add the derivative of load `l` at the increment `dq` and factor `factor` for the seeds of
 /// `s` restricted to `group` (`None`: all) into `f`, hand-derived:
 /// - a follower pressure depends on `ⁿū + Δū` only: its history term is its load stiffness at
@@ -523,10 +589,7 @@ impl ContinuumDsa {
 ///   initial tangents `x̄⁰,α` (`Pressure::add_design_derivative`, group `load`);
 /// - gravity per unit initial area: the area element's shape derivative (group `load`);
 /// - a constant load: the inner load at factor 1;
-/// - the contact: `ShellContact::force_dot` (eqs 78–83, `b'_N`) with the committed particle
-///   dots (group `history`), the tool translations (group `tool`), the thickness (the contact
-///   faces at `±t/2`: group `load`) and the penalty's `ω = c E/t` dependence (`Ė`: group
-///   `material`, `ṫ`: group `load`).
+/// - the contact: [`contact_dots`], for all variables at once.
 fn add_load_dot(
     model: &ShellModel,
     l: &DualLoad,
@@ -560,50 +623,15 @@ fn add_load_dot(
         }
         DualLoad::PointForce(_) => {}
         DualLoad::Constant(inner) => add_load_dot(model, inner, s, group, dq, 1.0, f)?,
-        DualLoad::Contact(c) => {
-            let zero_tools = vec![[0.0; 3]; s.tools.len()];
-            let (t_dot, e_dot) = (
-                if on(TermGroup::Load) {
-                    s.thickness
-                } else {
-                    0.0
-                },
-                if on(TermGroup::Material) {
-                    s.material.young
-                } else {
-                    0.0
-                },
-            );
-            let penalty = match c.penalty_factor {
-                Some(k) => {
-                    k * (e_dot * model.thickness - model.material.young * t_dot)
-                        / (model.thickness * model.thickness)
-                }
-                None => 0.0,
-            };
-            let zero_particles;
-            let particles = if on(TermGroup::History) {
-                &s.particles
-            } else {
-                zero_particles = vec![zero_particle(); s.particles.len()];
-                &zero_particles
-            };
-            let increment = vec![0.0; dq.len()];
-            let seeds = ContactSeeds {
-                tools: if on(TermGroup::Tool) {
-                    &s.tools
-                } else {
-                    &zero_tools
-                },
-                thickness: t_dot,
-                penalty,
-                particles,
-                increment: &increment,
-            };
-            let d = c.contact.force_dot(model, dq, factor, &seeds)?;
-            for (fi, di) in f.iter_mut().zip(&d) {
-                *fi += di;
-            }
+        // The contact is evaluated for all variables at once (`contact_dots`).
+        DualLoad::Contact(_) => {
+            return Err(SensitivityError::Shell(
+                crate::shell::ShellError::InvalidInput(
+                    "continuum sensitivity: a contact inside a constant load: expected the \
+                 contact as a load of its own"
+                        .into(),
+                ),
+            ))
         }
     }
     Ok(())
@@ -666,6 +694,8 @@ fn fictitious_loads_kept(
     } else {
         (model.internal_force_dots(&du[..n_q], &seeds)?, None)
     };
+    let mut contact =
+        contact_dots(model, loads, states, zero, group, &du[..n_q], load)?.map(|v| v.into_iter());
     let mut out = Vec::with_capacity(states.len());
     let mut histories = Vec::with_capacity(if keep { states.len() } else { 0 });
     for (s, (f_int, h)) in states.iter().zip(dots) {
@@ -675,8 +705,11 @@ fn fictitious_loads_kept(
         let mut r = f_int;
         r.resize(n, 0.0);
         // The loads' derivative at fixed Δu (eqs 37, 83), subtracted: R = f_int − f_ext.
-        let mut f = vec![0.0; n_q];
-        for l in loads {
+        let mut f = match contact.as_mut().and_then(|c| c.next()) {
+            Some(c) => c,
+            None => vec![0.0; n_q],
+        };
+        for l in loads.iter().filter(|l| !matches!(l, DualLoad::Contact(_))) {
             add_load_dot(model, l, s, group, &du[..n_q], load, &mut f)?;
         }
         for (ri, fi) in r.iter_mut().zip(&f) {
