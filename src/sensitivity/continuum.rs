@@ -36,7 +36,8 @@
 use super::dual::{DualLoad, SensitivityError};
 use super::shape::ShapeVelocity;
 use super::{
-    validate_design, validate_design_on, DesignError, DesignKind, DesignVariable, Monitor,
+    record_monitors, validate_design, validate_design_on, DesignError, DesignKind, DesignVariable,
+    Monitor,
 };
 use crate::contact::ContactSeeds;
 use crate::geometry::Surface;
@@ -488,8 +489,6 @@ impl ContinuumDsa {
         self.states = next;
         let model = &problem.model;
         let n_q = problem.n_generalised();
-        let mut values = Vec::with_capacity(self.monitors.len());
-        let mut derivatives = vec![vec![0.0; self.variables.len()]; self.monitors.len()];
         let udot: Vec<Vec<f64>> = self
             .states
             .iter()
@@ -503,14 +502,7 @@ impl ContinuumDsa {
                 g
             })
             .collect();
-        for (mi, m) in self.monitors.iter().enumerate() {
-            values.push(m.value(model).map_err(|e| e.to_string())?);
-            for (v, ud) in udot.iter().enumerate() {
-                derivatives[mi][v] = model
-                    .interpolate_translation(m.uv, ud)
-                    .map_err(|e| e.to_string())?[m.component];
-            }
-        }
+        let (values, derivatives) = record_monitors(model, &self.monitors, &udot)?;
         self.records.push(ContinuumStepRecord {
             step: self.records.len(),
             load,
@@ -832,11 +824,4 @@ pub fn run_continuum(
         dsa: dsa.time,
         timing: dsa.timing,
     })
-}
-
-/// Monitor derivatives of a model for generalised sensitivities `q̇` (translations used).
-pub fn monitor_derivative(model: &ShellModel, m: &Monitor, qdot: &[f64]) -> Result<f64, String> {
-    Ok(model
-        .interpolate_translation(m.uv, qdot)
-        .map_err(|e| e.to_string())?[m.component])
 }

@@ -723,8 +723,6 @@ impl<D: DesignDual> DualShellProblem<D> {
         }
         let nv = self.variables.len();
         let n_q = self.problem.n_generalised();
-        let mut values = Vec::with_capacity(self.monitors.len());
-        let mut derivatives = vec![vec![0.0; nv]; self.monitors.len()];
         // ū̇ of the real particles as generalised vectors, one per variable.
         let mut udot = vec![vec![0.0; n_q]; nv];
         for g in &self.groups {
@@ -736,14 +734,7 @@ impl<D: DesignDual> DualShellProblem<D> {
                 }
             }
         }
-        for (mi, m) in self.monitors.iter().enumerate() {
-            values.push(m.value(model).map_err(|e| e.to_string())?);
-            for (v, ud) in udot.iter().enumerate() {
-                derivatives[mi][v] = model
-                    .interpolate_translation(m.uv, ud)
-                    .map_err(|e| e.to_string())?[m.component];
-            }
-        }
+        let (values, derivatives) = super::record_monitors(model, &self.monitors, &udot)?;
         self.records.push(DualStepRecord {
             step: self.records.len(),
             load,

@@ -485,6 +485,27 @@ pub fn check_tools(variables: &[DesignVariable], tools: &[&str]) -> Result<(), D
     Ok(())
 }
 
+/// The monitors' values on `model` and their derivatives for the generalised displacement
+/// sensitivities `udot` (one vector per design variable, translations used):
+/// `(values[m], derivatives[m][v])`.
+pub fn record_monitors(
+    model: &ShellModel,
+    monitors: &[Monitor],
+    udot: &[Vec<f64>],
+) -> Result<(Vec<f64>, Vec<Vec<f64>>), String> {
+    let mut values = Vec::with_capacity(monitors.len());
+    let mut derivatives = vec![vec![0.0; udot.len()]; monitors.len()];
+    for (mi, m) in monitors.iter().enumerate() {
+        values.push(m.value(model).map_err(|e| e.to_string())?);
+        for (v, ud) in udot.iter().enumerate() {
+            derivatives[mi][v] = model
+                .interpolate_translation(m.uv, ud)
+                .map_err(|e| e.to_string())?[m.component];
+        }
+    }
+    Ok((values, derivatives))
+}
+
 /// A monitored response: a component of the RK-interpolated mid-surface displacement
 /// `Σ Ψ_J ū_J` at parameter coordinates `uv` ([`ShellModel::displacement_at`]).
 #[derive(Clone, Debug, PartialEq)]
