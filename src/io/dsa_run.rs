@@ -19,7 +19,7 @@ use super::shell_case::ShellCase;
 use super::CaseError;
 use crate::contact::ShellContact;
 use crate::sensitivity::continuum::run_continuum;
-use crate::sensitivity::dual::{run_dual_on, DualMode, SensitivityError};
+use crate::sensitivity::dual::{run_dual_on, DualLoad, DualMode, SensitivityError};
 use crate::sensitivity::fd::{self, fit_rate, Analysis, RunResponse, TaylorFit, TaylorRow};
 use crate::sensitivity::terms::{breakdown, TermBreakdown};
 use crate::sensitivity::{validate_design_on, Design, DesignVariable};
@@ -104,6 +104,36 @@ impl Analysis for CaseAnalysis<'_> {
         })?;
         Ok((b.problem, b.newton, b.contact))
     }
+}
+
+/// A sensitivity method's problem for `design`: the problem, its driver and the loads as the
+/// methods see them (the case's loads and, with tools, the problem's own contact).
+fn method_problem(
+    analysis: &CaseAnalysis<'_>,
+    case: &ShellCase,
+    design: &Design,
+) -> Result<(ShellProblem, NewtonSolver, Vec<DualLoad>), DsaError> {
+    let (problem, newton, contact) = analysis.build_with_contact(design)?;
+    let mut loads = dual_loads(case)?;
+    if let Some(c) = contact {
+        loads.push(dual_contact(case, c));
+    }
+    Ok((problem, newton, loads))
+}
+
+/// Per-step derivatives `[step][monitor][variable]` regrouped as `[variable][step][monitor]`.
+fn by_variable<'a>(
+    nv: usize,
+    steps: impl Iterator<Item = &'a [Vec<f64>]> + Clone,
+) -> Vec<Vec<Vec<f64>>> {
+    (0..nv)
+        .map(|v| {
+            steps
+                .clone()
+                .map(|s| s.iter().map(|d| d[v]).collect())
+                .collect()
+        })
+        .collect()
 }
 
 /// The case's nominal design: thickness, material and surface.
@@ -279,11 +309,7 @@ pub fn run(
     let (mut time_continuum, mut time_continuum_run) = (None, None);
     let mut continuum_value_difference = None;
     if spec.methods.contains(&DsaMethod::Continuum) {
-        let mut loads = dual_loads(case)?;
-        let (problem, newton, contact) = analysis.build_with_contact(&base)?;
-        if let Some(c) = contact {
-            loads.push(dual_contact(case, c));
-        }
+        let (problem, newton, loads) = method_problem(&analysis, case, &base)?;
         let r = run_continuum(
             problem,
             Some(&case.surface),
@@ -313,16 +339,10 @@ pub fn run(
             r.dsa.as_secs_f64(),
             r.total.as_secs_f64()
         ));
-        continuum = Some(
-            (0..vars.len())
-                .map(|v| {
-                    r.records
-                        .iter()
-                        .map(|s| s.derivatives.iter().map(|d| d[v]).collect())
-                        .collect()
-                })
-                .collect(),
-        );
+        continuum = Some(by_variable(
+            vars.len(),
+            r.records.iter().map(|s| s.derivatives.as_slice()),
+        ));
     }
 
     // (2b) The dual reference.
@@ -330,11 +350,7 @@ pub fn run(
     let (mut time_dual, mut time_dual_run, mut dual_value_difference) = (None, None, None);
     let mut dual_state_mismatch = None;
     if spec.methods.contains(&DsaMethod::Dual) {
-        let mut loads = dual_loads(case)?;
-        let (problem, newton, contact) = analysis.build_with_contact(&base)?;
-        if let Some(c) = contact {
-            loads.push(dual_contact(case, c));
-        }
+        let (problem, newton, loads) = method_problem(&analysis, case, &base)?;
         let mode = if vars.len() <= 8 {
             DualMode::Vector
         } else {
@@ -375,16 +391,10 @@ pub fn run(
             r.reference.as_secs_f64(),
             r.total.as_secs_f64()
         ));
-        dual = Some(
-            (0..vars.len())
-                .map(|v| {
-                    r.records
-                        .iter()
-                        .map(|s| s.derivatives.iter().map(|d| d[v]).collect())
-                        .collect()
-                })
-                .collect(),
-        );
+        dual = Some(by_variable(
+            vars.len(),
+            r.records.iter().map(|s| s.derivatives.as_slice()),
+        ));
     }
 
     // (3) Finite differences.
@@ -823,12 +833,8 @@ pub fn terms(
 ) -> Result<Vec<TermBreakdown>, DsaError> {
     let analysis = CaseAnalysis { case };
     let base = base_design(case);
-    let (problem, newton, contact) = analysis.build_with_contact(&base)?;
+    let (problem, newton, loads) = method_problem(&analysis, case, &base)?;
     let vars: Vec<DesignVariable> = spec.design.iter().map(|d| d.variable.clone()).collect();
-    let mut loads = dual_loads(case)?;
-    if let Some(c) = contact {
-        loads.push(dual_contact(case, c));
-    }
     Ok(breakdown(
         problem,
         Some(&case.surface),
