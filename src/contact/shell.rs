@@ -791,6 +791,9 @@ impl ExternalLoad for std::sync::Arc<ShellContact> {
     fn is_follower(&self) -> bool {
         true
     }
+    fn shared_object(&self) -> Option<*const ()> {
+        Some(std::sync::Arc::as_ptr(self).cast())
+    }
     fn scaling(&self) -> LoadScaling {
         LoadScaling::Prescribed
     }

@@ -282,8 +282,8 @@ pub struct ContinuumTiming {
     pub update: f64,
     /// Monitor derivatives after the commit.
     pub record: f64,
-    /// The check that the loads given to the method are the problem's (both evaluated at
-    /// every step: with contact, two contact-force evaluations).
+    /// The check that the loads given to the method are the problem's (at every step; a
+    /// contact that is the problem's own object is recognised by identity, not evaluated).
     pub check: f64,
 }
 

@@ -72,6 +72,12 @@ pub trait ExternalLoad: Send + Sync + Debug {
     fn scaling(&self) -> LoadScaling {
         LoadScaling::Proportional
     }
+    /// The address of a shared object this load is a handle of (an `Arc` it delegates to), so
+    /// that a caller holding another handle recognises the same load without evaluating it
+    /// (the sensitivity methods' load check). Default: none.
+    fn shared_object(&self) -> Option<*const ()> {
+        None
+    }
     /// Add `factor · ∂f_ext/∂q` (for a [`LoadScaling::Prescribed`] load `∂f_ext(q; λ)/∂q` with
     /// `λ = factor`) as global `(row, column, value)` entries (default: a dead load).
     fn add_stiffness(

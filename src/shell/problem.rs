@@ -406,6 +406,11 @@ impl ShellProblem {
             .collect()
     }
 
+    /// The external loads, in the order given.
+    pub fn loads(&self) -> &[Box<dyn ExternalLoad>] {
+        &self.loads
+    }
+
     /// The external generalised force `λ f_ext(q)` for the increment `q` from the committed
     /// state (length [`Self::n_generalised`]).
     pub fn external_force(&self, q: &[f64], load: f64) -> Result<Vec<f64>, ShellError> {
