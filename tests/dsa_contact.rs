@@ -10,12 +10,20 @@
 //! 2. The dual reference (`sensitivity::dual`, `DualLoad::Contact`) for the die's horizontal
 //!    and vertical position and the thickness against central differences of complete re-runs
 //!    (`shelldsa dsa`'s run), and the Taylor remainder's rate.
+//! 3. Tool **rotations** (`tool.<name>.<rx|ry|rz>`): `force_dot` with rotation rates against
+//!    the dual evaluation and central differences of the force with the tool rotated
+//!    (`ToolPath::rotated`), with pivots off the origin and paths that rotate (`R(t) ≠ I`);
+//!    whole runs (continuum = dual, central differences of re-runs, Taylor rates) for the
+//!    die and the punch turned about z; and `die.ry` = a translation of the die over a run.
 //!
 //! Run: `cargo test --release --test dsa_contact -- --nocapture`.
 
 use nalgebra::Vector3;
 use num_dual::Dual64;
-use shelldsa::contact::{ContactInputs, ContactSeeds, ShellContact};
+use shelldsa::contact::sensitivity::ToolRate;
+use shelldsa::contact::{
+    ContactFaces, ContactInputs, ContactSeeds, PathKey, RigidTool, ShellContact, ToolPath,
+};
 use shelldsa::io::dsa_case::DsaMethod;
 use shelldsa::io::dsa_run;
 use shelldsa::io::shell_build;
@@ -162,7 +170,7 @@ fn bent_state() -> (ShellModel, Arc<ShellContact>) {
 /// Input derivatives of one test seed.
 struct Seed {
     name: &'static str,
-    tools: Vec<[f64; 3]>,
+    tools: Vec<ToolRate>,
     thickness: f64,
     penalty: f64,
     particles: Vec<ParticleState<f64>>,
@@ -202,12 +210,22 @@ fn force_f64(
     s: f64,
 ) -> Vec<f64> {
     let particles = shifted(model, seed, s);
-    let offsets: Vec<Vector3<f64>> = seed.tools.iter().map(|a| Vector3::from(*a) * s).collect();
+    let offsets: Vec<Vector3<f64>> = seed
+        .tools
+        .iter()
+        .map(|a| Vector3::from(a.translation) * s)
+        .collect();
+    let rotations: Vec<Vector3<f64>> = seed
+        .tools
+        .iter()
+        .map(|a| Vector3::from(a.rotation) * s)
+        .collect();
     let inputs = ContactInputs {
         particles: &particles,
         thickness: model.thickness + s * seed.thickness,
         penalty: contact.penalty() + s * seed.penalty,
         offsets: &offsets,
+        rotations: &rotations,
     };
     let qs: Vec<f64> = q
         .iter()
@@ -238,16 +256,15 @@ fn force_dual(
             e: [dv(&p.e[0], &d.e[0]), dv(&p.e[1], &d.e[1])],
         })
         .collect();
-    let offsets: Vec<Vector3<Dual64>> = seed
-        .tools
-        .iter()
-        .map(|a| Vector3::from(*a).map(|v| Dual64::new(0.0, v)))
-        .collect();
+    let seeded = |v: [f64; 3]| Vector3::from(v).map(|x| Dual64::new(0.0, x));
+    let offsets: Vec<Vector3<Dual64>> = seed.tools.iter().map(|a| seeded(a.translation)).collect();
+    let rotations: Vec<Vector3<Dual64>> = seed.tools.iter().map(|a| seeded(a.rotation)).collect();
     let inputs = ContactInputs {
         particles: &particles,
         thickness: Dual64::new(model.thickness, seed.thickness),
         penalty: Dual64::new(contact.penalty(), seed.penalty),
         offsets: &offsets,
+        rotations: &rotations,
     };
     let qd: Vec<Dual64> = q
         .iter()
@@ -257,6 +274,22 @@ fn force_dual(
     let mut f = vec![Dual64::from(0.0); q.len()];
     contact.force_with(model, &inputs, &qd, t, &mut f).unwrap();
     f.iter().map(|v| v.eps).collect()
+}
+
+/// A translation rate `ȧ`.
+fn translation(a: [f64; 3]) -> ToolRate {
+    ToolRate {
+        translation: a,
+        rotation: [0.0; 3],
+    }
+}
+
+/// A rotation rate `φ̇`.
+fn rotation(phi: [f64; 3]) -> ToolRate {
+    ToolRate {
+        translation: [0.0; 3],
+        rotation: phi,
+    }
 }
 
 fn max_abs(v: &[f64]) -> f64 {
@@ -302,7 +335,7 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
     let seeds = vec![
         Seed {
             name: "die x",
-            tools: vec![[0.0; 3], [1.0, 0.0, 0.0]],
+            tools: vec![ToolRate::default(), translation([1.0, 0.0, 0.0])],
             thickness: 0.0,
             penalty: 0.0,
             particles: zeros.clone(),
@@ -310,7 +343,7 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
         },
         Seed {
             name: "die z",
-            tools: vec![[0.0; 3], [0.0, 0.0, 1.0]],
+            tools: vec![ToolRate::default(), translation([0.0, 0.0, 1.0])],
             thickness: 0.0,
             penalty: 0.0,
             particles: zeros.clone(),
@@ -318,7 +351,7 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
         },
         Seed {
             name: "punch z",
-            tools: vec![[0.0, 0.0, 1.0], [0.0; 3]],
+            tools: vec![translation([0.0, 0.0, 1.0]), ToolRate::default()],
             thickness: 0.0,
             penalty: 0.0,
             particles: zeros.clone(),
@@ -326,7 +359,7 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
         },
         Seed {
             name: "thickness, penalty",
-            tools: vec![[0.0; 3]; 2],
+            tools: vec![ToolRate::default(); 2],
             thickness: 1.0,
             penalty: -1000.0, // ω = c E/t: ω̇ = −ω/t
             particles: zeros.clone(),
@@ -334,7 +367,7 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
         },
         Seed {
             name: "state, increment",
-            tools: vec![[0.0; 3]; 2],
+            tools: vec![ToolRate::default(); 2],
             thickness: 0.0,
             penalty: 0.0,
             particles: state_dots,
@@ -378,6 +411,234 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
             e_cd < 1e-7,
             "{}: hand vs central differences {e_cd:e}",
             seed.name
+        );
+    }
+}
+
+/// The contact of `model` with `contact`'s tools on new paths (`path(i, tool)`), on both faces
+/// with the same penalty.
+fn with_paths(
+    model: &ShellModel,
+    contact: &ShellContact,
+    path: impl Fn(usize, &RigidTool) -> ToolPath,
+) -> ShellContact {
+    let surface = case(0.5, "").surface;
+    let tools: Vec<RigidTool> = contact
+        .tools()
+        .iter()
+        .enumerate()
+        .map(|(i, tl)| RigidTool {
+            path: path(i, tl),
+            ..tl.clone()
+        })
+        .collect();
+    ShellContact::new(
+        model,
+        &surface,
+        tools,
+        ContactFaces::Both,
+        contact.penalty(),
+    )
+    .unwrap()
+}
+
+/// The force with every input at `x + s ẋ`, the tools' design placements applied to their
+/// paths (`ToolPath::translated`, `ToolPath::rotated`: what a finite-difference re-run
+/// builds) instead of being passed as `ContactInputs` offsets.
+fn force_rotated_tools(
+    model: &ShellModel,
+    contact: &ShellContact,
+    q: &[f64],
+    t: f64,
+    seed: &Seed,
+    s: f64,
+) -> Vec<f64> {
+    let moved = with_paths(model, contact, |i, tl| {
+        let r = &seed.tools[i];
+        tl.path
+            .translated(r.translation.map(|v| v * s))
+            .and_then(|p| p.rotated(r.rotation.map(|v| v * s)))
+            .unwrap()
+    });
+    let still = Seed {
+        name: seed.name,
+        tools: vec![ToolRate::default(); seed.tools.len()],
+        thickness: seed.thickness,
+        penalty: seed.penalty,
+        particles: seed.particles.clone(),
+        increment: seed.increment.clone(),
+    };
+    force_f64(model, &moved, q, t, &still, s)
+}
+
+/// Tool rotations (`tool.<name>.<rx|ry|rz>`): `force_dot` with rotation rates `φ̇` (module
+/// documentation of `contact::sensitivity`: `V^c = ȧ + Ω (x^c − p)`, eq 80's `g n·(Ω x^c,α)`,
+/// `ṅ = Ω n + n,β ξ̇_β`) against the `Dual64` evaluation of `force_with` (the dual `R(φ)`
+/// composed into the motion) and central differences of the force with the tools rotated as a
+/// re-run rotates them. Both tools have pivots off the origin on their axes and paths that
+/// rotate about their axes (`R(t) ≠ I`; the cylinders map onto themselves, so the contact
+/// state is the bent one), the punch's pivot moving with its stroke (`p = c + a(t)`).
+#[test]
+fn tool_rotation_sensitivity_matches_dual_and_central_differences() {
+    let (model, base) = bent_state();
+    let n = model.n_dofs();
+    let np = model.particles.len();
+    // Punch axis through (0, y, 10.51), die axis through (22, y, −10.49), both along y.
+    let contact = with_paths(&model, &base, |i, _| {
+        let (pivot, a1, th1) = if i == 0 {
+            ([0.0, 2.5, 10.51], [0.0, 0.0, -6.0], [0.0, -0.2, 0.0])
+        } else {
+            ([22.0, 2.5, -10.49], [0.0; 3], [0.0, 0.3, 0.0])
+        };
+        let key = |t: f64, translation, rotation| PathKey {
+            t,
+            translation,
+            rotation,
+        };
+        ToolPath::new(pivot, vec![key(0.0, [0.0; 3], [0.0; 3]), key(1.0, a1, th1)]).unwrap()
+    });
+    let mut rng = Lcg(0x0dd_ba11);
+    let q: Vec<f64> = (0..n).map(|_| rng.next() * 0.02).collect();
+    let t = 0.505;
+    // The rotating paths give the bent case's geometry (each cylinder turned about its own
+    // axis): the same force to round-off of positions ~30 mm (ε·30·ω·w ≪ 1e-9 max|f|).
+    let zero = Seed {
+        name: "none",
+        tools: vec![ToolRate::default(); 2],
+        thickness: 0.0,
+        penalty: 0.0,
+        particles: vec![zero_state(); np],
+        increment: vec![0.0; n],
+    };
+    let f_base = force_f64(&model, &base, &q, t, &zero, 0.0);
+    let f_rot = force_f64(&model, &contact, &q, t, &zero, 0.0);
+    let e_geom = max_diff(&f_base, &f_rot) / max_abs(&f_base);
+    println!(
+        "force with rotating paths vs fixed: {e_geom:.2e} of max|f| {:.3e}",
+        max_abs(&f_base)
+    );
+    assert!(
+        e_geom < 1e-9,
+        "rotating paths change the force by {e_geom:e}"
+    );
+    let report = contact.report(&model, &q, t).unwrap();
+    let active: Vec<usize> = report.tools.iter().map(|r| r.active_points).collect();
+    assert!(active.iter().all(|&a| a > 0), "active points {active:?}");
+    for tl in contact.tools() {
+        assert!(
+            (tl.path.path_rotation(t) - nalgebra::Matrix3::identity()).norm() > 0.05,
+            "R(t) = I for `{}`",
+            tl.name
+        );
+    }
+
+    let none = ToolRate::default();
+    let seed = |name, tools| Seed {
+        name,
+        tools,
+        thickness: 0.0,
+        penalty: 0.0,
+        particles: vec![zero_state(); np],
+        increment: vec![0.0; n],
+    };
+    let seeds = vec![
+        seed("die rx", vec![none, rotation([1.0, 0.0, 0.0])]),
+        seed("die rz", vec![none, rotation([0.0, 0.0, 1.0])]),
+        seed("punch rx", vec![rotation([1.0, 0.0, 0.0]), none]),
+        seed("punch rz", vec![rotation([0.0, 0.0, 1.0]), none]),
+        seed(
+            "both, mixed",
+            vec![
+                ToolRate {
+                    translation: [0.1, -0.2, 0.3],
+                    rotation: [0.4, 0.1, -0.3],
+                },
+                ToolRate {
+                    translation: [0.3, 0.0, -0.2],
+                    rotation: [0.2, -0.5, 0.7],
+                },
+            ],
+        ),
+    ];
+    let mut scale_rx = 0.0;
+    for seed in &seeds {
+        let cs = ContactSeeds {
+            tools: &seed.tools,
+            thickness: 0.0,
+            penalty: 0.0,
+            particles: &seed.particles,
+            increment: &seed.increment,
+        };
+        let hand = contact.force_dot(&model, &q, t, &cs).unwrap();
+        let dual = force_dual(&model, &contact, &q, t, seed);
+        // h = 1e-6 rad moves tool points ≤ 30 mm away from the pivot by ≤ 3e-5 mm.
+        let h = 1e-6;
+        let fp = force_rotated_tools(&model, &contact, &q, t, seed, h);
+        let fm = force_rotated_tools(&model, &contact, &q, t, seed, -h);
+        // The re-run's rotated path and the dual's composition R(θ(t)) R(φ) are the same
+        // motion: the forces agree to round-off (1e-12 of max|f|).
+        let fi = force_f64(&model, &contact, &q, t, seed, h);
+        let e_repr = max_diff(&fp, &fi) / max_abs(&fi);
+        let cd: Vec<f64> = fp
+            .iter()
+            .zip(&fm)
+            .map(|(a, b)| (a - b) / (2.0 * h))
+            .collect();
+        let scale = max_abs(&dual);
+        let e_dual = max_diff(&hand, &dual) / scale;
+        let e_cd = max_diff(&hand, &cd) / scale;
+        println!(
+            "{:<12} max|ḟ| {scale:.4e}  |hand − dual| {e_dual:.2e}  |hand − central| {e_cd:.2e}  \
+             rotated path vs inputs {e_repr:.1e}",
+            seed.name
+        );
+        if seed.name == "die rx" {
+            scale_rx = scale;
+        }
+        assert!(scale > 0.0, "{}: the seed must move the force", seed.name);
+        assert!(
+            e_repr < 1e-12,
+            "{}: rotated path vs inputs {e_repr:e}",
+            seed.name
+        );
+        // As for the translations (test above): the same formulas two ways, round-off.
+        assert!(e_dual < 1e-10, "{}: hand vs dual {e_dual:e}", seed.name);
+        // Central differences: truncation ~h²|f'''| and round-off ~ε|f|/h ≈ 1e-10 of the
+        // force, as for the translations.
+        assert!(
+            e_cd < 1e-7,
+            "{}: hand vs central differences {e_cd:e}",
+            seed.name
+        );
+    }
+    // A rotation about a tool's own axis (pivot on it, R(t) keeps it along y) maps the cylinder
+    // onto itself: the tool point slides along the surface (V^c tangential, ġ = 0) and the
+    // normal's turn Ω n is cancelled by its slide n,β ξ̇_β, so ḟ = 0. Independent of the dual:
+    // it checks the eq-80 term g n·(Ω x^c,α) and the pivot p = c + a(t) of the moving punch.
+    // Round-off of the cancelling terms, ~1e-15 of the punch-lever terms, allows 1e-12 of
+    // max|ḟ| of a genuine tilt.
+    for (name, tools) in [
+        ("die ry", vec![none, rotation([0.0, 1.0, 0.0])]),
+        ("punch ry", vec![rotation([0.0, 1.0, 0.0]), none]),
+    ] {
+        let particles = vec![zero_state(); np];
+        let increment = vec![0.0; n];
+        let cs = ContactSeeds {
+            tools: &tools,
+            thickness: 0.0,
+            penalty: 0.0,
+            particles: &particles,
+            increment: &increment,
+        };
+        let hand = contact.force_dot(&model, &q, t, &cs).unwrap();
+        let e = max_abs(&hand) / scale_rx;
+        println!(
+            "{name:<12} max|ḟ| {:.2e} = {e:.1e} of die rx's",
+            max_abs(&hand)
+        );
+        assert!(
+            e < 1e-12,
+            "{name}: a rotation about the axis gives ḟ = {e:e}"
         );
     }
 }
@@ -490,6 +751,140 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
     assert!(d.last().unwrap().iter().any(|x| x.abs() > 1e-3));
 }
 
+/// Whole runs for tool rotations: the die and the punch turn about their own axes along the
+/// stroke (pivots on the axes at mid-width, the punch's moving with it; `R(t) ≠ I`, and
+/// `R(t) e_z ≠ e_z`, while the geometry is the base case's) and are turned as built about the
+/// vertical through their pivots (`tool.<name>.rz`: the contact line turns in plan). The
+/// continuum derivative (hand-derived `b'_N` with the rotation terms) equals the dual one;
+/// both match central differences of complete re-runs with the tool rotated
+/// (`ToolPath::rotated`), whose Taylor remainder falls as h².
+///
+/// (A tilt about x, `tool.die.rx`, is not used here: it raises one end of the die's contact
+/// line, on which the sheet rests under its self-weight with a penetration of ~1e-8 mm, so
+/// the sheet rocks and the contact set changes within ±h from the first step: every step is
+/// flagged. Its force derivative is checked in the test above.)
+#[test]
+fn tool_rotation_derivatives_match_dual_and_re_runs() {
+    let design = r#"
+[[design]]
+name = "die.rz"
+kind = "tool.die.rz"
+fd_steps = [1.6e-3, 8e-4, 4e-4, 2e-4]
+[[design]]
+name = "punch.rz"
+kind = "tool.punch.rz"
+fd_steps = [1.6e-3, 8e-4, 4e-4, 2e-4]
+[dsa]
+monitors = ["center.uz", "edge.ux", "edge.uz"]
+"#;
+    let die_path = "keys = [{ t = 0.0, translation = [0.0, 0.0, 0.0] }]";
+    let punch_end = "{ t = 1.0, translation = [0.0, 0.0, -6.0] },\n]";
+    let text = CASE.replace("{final}", "0.5").replace("{design}", design);
+    assert_eq!(text.matches(die_path).count(), 1);
+    assert_eq!(text.matches(punch_end).count(), 1);
+    let text = text
+        .replace(
+            die_path,
+            "pivot = [22.0, 2.5, -10.49]\nkeys = [\n    \
+             { t = 0.0, translation = [0.0, 0.0, 0.0] },\n    \
+             { t = 1.0, translation = [0.0, 0.0, 0.0], rotation = [0.0, 0.2, 0.0] },\n]",
+        )
+        .replace(
+            punch_end,
+            "{ t = 1.0, translation = [0.0, 0.0, -6.0], rotation = [0.0, -0.2, 0.0] },\n]\n\
+             pivot = [0.0, 2.5, 10.51]",
+        );
+    let c = parse_shell_case(&text, Path::new("tests/dsa_contact.rs")).unwrap();
+    let spec = dsa_run::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
+    let t0 = std::time::Instant::now();
+    let r = dsa_run::run(&c, &spec, &mut |_| {}).unwrap();
+    println!(
+        "rotations: {} steps; analysis {:.2} s, continuum {:.3} s, dual {:.2} s, fd {:.2} s \
+         (total {:.1} s)",
+        r.nominal.loads.len(),
+        r.time_analysis,
+        r.time_continuum.unwrap(),
+        r.time_dual.unwrap(),
+        r.time_fd.unwrap(),
+        t0.elapsed().as_secs_f64(),
+    );
+    assert!(r.dual_state_mismatch.unwrap() < 1e-10);
+    for v in 0..r.variables.len() {
+        let var = &r.variables[v];
+        let all: Vec<String> = var
+            .fd
+            .iter()
+            .map(|c| format!("{:.2e}", dsa_run::max_rel_diff(var, c).unwrap_or(f64::NAN)))
+            .collect();
+        println!(
+            "`{}`: continuum vs FD per h {all:?}",
+            var.entry.variable.name
+        );
+        check_variable(&r, v);
+        // The tilt moves the sheet.
+        let d = var.continuum.as_ref().unwrap();
+        assert!(
+            d.last().unwrap().iter().any(|x| x.abs() > 1e-3),
+            "`{}`: {:?}",
+            var.entry.variable.name,
+            d.last()
+        );
+    }
+}
+
+/// A rotation of the die about the global y axis through its pivot (the origin here) turns
+/// its cylinder about a line parallel to its axis: a translation of the axis, through
+/// A = (22, ·, −10.49), by `e_y × (A − c)` = (−10.49, 0, −22) per radian, plus a
+/// re-parametrisation that leaves the force unchanged. So over a whole run
+/// `ψ'(die.ry) = −10.49 ψ'(die.x) − 22 ψ'(die.z)`, for the continuum and the dual method:
+/// both are linear in the design velocity `V^c`, so the identity holds to round-off of the
+/// terms summed (1e-10 of max|ψ'(die.ry)|). Independent of finite differences.
+#[test]
+fn die_rotation_about_its_axis_direction_equals_a_translation_over_the_run() {
+    let design = r#"
+[[design]]
+name = "die.x"
+kind = "tool.die.x"
+[[design]]
+name = "die.z"
+kind = "tool.die.z"
+[[design]]
+name = "die.ry"
+kind = "tool.die.ry"
+[dsa]
+monitors = ["center.uz", "edge.ux", "edge.uz"]
+"#;
+    let c = case(0.5, design);
+    let spec = dsa_run::validate(&c, &[DsaMethod::Continuum, DsaMethod::Dual]).unwrap();
+    let r = dsa_run::run(&c, &spec, &mut |_| {}).unwrap();
+    for method in ["continuum", "dual"] {
+        let d = |v: &dsa_run::VariableResult| match method {
+            "continuum" => v.continuum.clone(),
+            _ => v.dual.clone(),
+        };
+        let (x, z, ry) = (
+            d(&r.variables[0]).unwrap(),
+            d(&r.variables[1]).unwrap(),
+            d(&r.variables[2]).unwrap(),
+        );
+        let big = ry.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
+        let worst = x
+            .iter()
+            .flatten()
+            .zip(z.iter().flatten())
+            .zip(ry.iter().flatten())
+            .fold(0.0f64, |a, ((x, z), ry)| {
+                a.max((ry - (-10.49 * x - 22.0 * z)).abs())
+            });
+        println!(
+            "{method}: |ψ'(ry) − (−10.49 ψ'(x) − 22 ψ'(z))| = {:.1e} of max|ψ'(ry)| {big:.3e}",
+            worst / big
+        );
+        assert!(big > 1e-2, "{method}: max|ψ'(die.ry)| = {big:e}");
+        assert!(worst <= 1e-10 * big, "{method}: {:e}", worst / big);
+    }
+}
+
 #[test]
 fn tool_design_variables_are_checked() {
     use shelldsa::io::CaseError;
@@ -509,12 +904,51 @@ fn tool_design_variables_are_checked() {
             axis: 0
         }
     );
-    for bad in ["tool.die.w", "tool.die", "tool..x", "tool."] {
+    // Rotations: `rx|ry|rz`, a kind of their own (translation behaviour unchanged).
+    assert_eq!(
+        DesignKind::parse("tool.die.ry").unwrap(),
+        DesignKind::ToolRotation {
+            tool: "die".into(),
+            axis: 1
+        }
+    );
+    assert_eq!(
+        DesignKind::parse("tool.a.rx.rz").unwrap(),
+        DesignKind::ToolRotation {
+            tool: "a.rx".into(),
+            axis: 2
+        }
+    );
+    for bad in [
+        "tool.die.w",
+        "tool.die",
+        "tool..x",
+        "tool.",
+        "tool.die.r",
+        "tool.die.rw",
+    ] {
         let e = DesignKind::parse(bad).unwrap_err().to_string();
-        assert!(e.contains(bad) && e.contains("tool.<name>.<x|y|z>"), "{e}");
+        assert!(
+            e.contains(bad) && e.contains("tool.<name>.<x|y|z|rx|ry|rz>"),
+            "{e}"
+        );
     }
     assert!(DesignVariable::tool("die", 3).is_err());
     assert_eq!(DesignVariable::tool("die", 1).unwrap().name, "die.y");
+    assert!(DesignVariable::tool_rotation("die", 3).is_err());
+    assert_eq!(
+        DesignVariable::tool_rotation("die", 2).unwrap().name,
+        "die.rz"
+    );
+    // A non-finite orientation is a typed error naming the component.
+    let e = ToolPath::fixed()
+        .rotated([0.0, f64::NAN, 0.0])
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("path.orientation[1]") && e.contains("finite"),
+        "{e}"
+    );
     // An unknown tool in a case: a typed error at the key, listing the case's tools.
     let text = CASE.replace("{final}", "0.5").replace(
         "{design}",
@@ -546,7 +980,43 @@ fn tool_design_variables_are_checked() {
     assert_eq!(spec.design[0].absolute_steps(&base), vec![2e-3]);
     let moved = spec.design[0].variable.perturbed(&base, 2e-3).unwrap();
     assert_eq!(moved.tool_offset("die"), [2e-3, 0.0, 0.0]);
+    assert_eq!(moved.tool_rotation("die"), [0.0; 3]);
     assert_eq!(spec.design[0].variable.value(&moved), 2e-3);
+    // Rotations likewise (absolute angles), and an unknown tool is reported as for
+    // translations.
+    let c = case(
+        0.5,
+        "[[design]]\nname = \"r\"\nkind = \"tool.die.ry\"\nfd_steps = [1e-3]\n",
+    );
+    let spec = c.dsa.clone().unwrap();
+    assert_eq!(spec.design[0].absolute_steps(&base), vec![1e-3]);
+    let turned = spec.design[0].variable.perturbed(&base, -1e-3).unwrap();
+    assert_eq!(turned.tool_rotation("die"), [0.0, -1e-3, 0.0]);
+    assert_eq!(turned.tool_offset("die"), [0.0; 3]);
+    assert_eq!(spec.design[0].variable.value(&turned), -1e-3);
+    // The re-run's die is the case's rotated as built about its pivot: R(θ(t)) R_φ.
+    let analysis = dsa_run::CaseAnalysis { case: &c };
+    let (_, _, contact) =
+        shelldsa::sensitivity::fd::Analysis::build_with_contact(&analysis, &turned).unwrap();
+    let contact = contact.unwrap();
+    let die = &contact.tools()[1];
+    let expected = ToolPath::fixed().rotated([0.0, -1e-3, 0.0]).unwrap();
+    assert_eq!(die.path.orientation(), expected.orientation());
+    assert!((die.path.orientation()[(0, 2)] + (1e-3f64).sin()).abs() < 1e-15);
+    let text = CASE.replace("{final}", "0.5").replace(
+        "{design}",
+        "[[design]]\nname = \"h\"\nkind = \"tool.holder.rz\"\nfd_steps = [1e-3]\n",
+    );
+    match parse_shell_case(&text, Path::new("x.toml")) {
+        Err(CaseError::Invalid { key, expected, .. }) => {
+            assert_eq!(key, "design[0].kind");
+            assert!(
+                expected.contains("\"punch\"") && expected.contains("\"die\""),
+                "{expected}"
+            );
+        }
+        other => panic!("expected an Invalid error, got {other:?}"),
+    }
 }
 
 #[test]
@@ -619,13 +1089,16 @@ kind = "tool.die.x"
 [[design]]
 name = "t"
 kind = "thickness"
+[[design]]
+name = "die.rz"
+kind = "tool.die.rz"
 [dsa]
 monitors = ["center.uz"]
 "#;
     let c = case(0.25, design);
     let spec = dsa_run::validate(&c, &[DsaMethod::Continuum, DsaMethod::Dual]).unwrap();
     let bs = dsa_run::terms(&c, &spec, 8).unwrap();
-    assert_eq!(bs.len(), 2);
+    assert_eq!(bs.len(), 3);
     for b in &bs {
         let scale = b.groups.iter().fold(0.0f64, |a, g| a.max(g.dual_max));
         for g in &b.groups {
@@ -656,4 +1129,9 @@ monitors = ["center.uz"]
     };
     assert!(group(&bs[0], "tool") > 0.0);
     assert!(group(&bs[1], "load") > 0.0);
+    // A tool rotation is filed under `tool` too, and under nothing explicit besides.
+    assert!(group(&bs[2], "tool") > 0.0);
+    for g in ["design", "material", "load"] {
+        assert_eq!(group(&bs[2], g), 0.0, "die.rz in {g}");
+    }
 }

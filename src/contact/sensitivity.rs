@@ -6,6 +6,13 @@
 //! - the **tool translations** `ȧ_i` (a tool-position design variable moves the whole tool:
 //!   the design velocity on the tool is the constant `V^c = ȧ`, eq 76; its tangents
 //!   `x^c,α` and curvatures do not change);
+//! - the **tool rotations** `φ̇_i` (a tool-rotation design variable turns the tool as built
+//!   about its pivot `c` before its motion, `x^c = c + R(t) R_φ (X − c) + a(t)`,
+//!   [`super::ToolPath::rotated`]): at `φ = 0`, `d(R(t) R_φ)/dτ = R(t) [φ̇]× = Ω R(t)` with
+//!   `Ω = [R(t) φ̇]×` (`R(t) = R(θ(t))`, the path's rotation), so with the moved pivot
+//!   `p = c + a(t)` the design velocity of the tool point is `V^c = ȧ + Ω (x^c − p)` (eq 76),
+//!   and the tangents, second derivatives and normal move with the tool:
+//!   `V^c,α = Ω x^c,α`, `V^c,αβ = Ω x^c,αβ`, `ṅ|_ξ = Ω n`;
 //! - the **thickness** `ṫ` (slave faces at `ζ t/2`, initial face areas) and the **penalty**
 //!   `ω̇` (`ω = c E/t` makes it design-dependent);
 //! - the **shell state**: the committed particle states' dots `ū̇, ḋ, ė` (the history
@@ -20,10 +27,16 @@
 //! `ẋ = 2 θ·θ̇`, `ċ = θ̇×dⁿ + θ×ḋⁿ`.
 //!
 //! **Projection sensitivity (eq 80).** Differentiating eq (67),
-//! `(x − x^c(ξ))·x^c,α = 0`, with the tool point moving by `V^c = ȧ`:
-//! `A ξ̇ = [x^c,α·(ẋ − ȧ)]`, `A = m − g b` (eq 79). **Gap and normal:** `ġ = n·(ẋ − ȧ)`
-//! (`x − x^c = g n`, `n ⟂ x^c,α`, `n·ṅ = 0`), and Weingarten's `n,β = −(b m⁻¹)_βγ x^c,γ`
-//! gives `ṅ = n,β ξ̇_β`. **Force (eq 83's `b'_N` with the state terms):** `f = −ω w g n`
+//! `(x − x^c(ξ))·x^c,α(ξ) = 0`, with the tool point moving by `V^c` and its tangents by
+//! `V^c,α = Ω x^c,α`:
+//! `(ẋ − V^c − x^c,β ξ̇_β)·x^c,α + (x − x^c)·(Ω x^c,α + x^c,αβ ξ̇_β) = 0`; with
+//! `x − x^c = g n` (eq 68 at an interior projection) this is
+//! `A ξ̇ = [x^c,α·(ẋ − V^c) + g n·(Ω x^c,α)]`, `A = m − g b` (eqs 79–80: the last term is
+//! eq 80's `g n·V^c,α`, zero for a translation). **Gap and normal:** `g = (x − x^c)·n`, so
+//! `ġ = n·(ẋ − V^c − x^c,β ξ̇_β) + g n·ṅ = n·(ẋ − V^c)` (eq 78; `n ⟂ x^c,β`, `n·ṅ = 0`);
+//! the normal turns with the tool and slides along it: `ṅ = Ω n + n,β ξ̇_β` with
+//! Weingarten's `n,β = −(b m⁻¹)_βγ x^c,γ` (the curvature term of eqs 77, 83).
+//! **Force (eq 83's `b'_N` with the state terms):** `f = −ω w g n`
 //! (eq 70), so `ḟ = −(ω̇ w g + ω ẇ g + ω w ġ) n − ω w g ṅ`, with `ẇ` the derivative of
 //! the initial face area `w |x⁰,1 × x⁰,2|`, `x⁰,α = x̄⁰,α + ζ t/2 n⁰,α`, in `t`.
 //!
@@ -49,13 +62,25 @@ use nalgebra::{Vector2, Vector3};
 
 type V3 = Vector3<f64>;
 
+/// The design rates of one rigid tool's placement ([`ContactSeeds::tools`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ToolRate {
+    /// `ȧ`: the derivative of the translation added to its path (`V^c = ȧ`, eq 76): a unit
+    /// vector along the axis of a tool-position variable, zero otherwise.
+    pub translation: [f64; 3],
+    /// `φ̇`: the derivative of the rotation vector turning the tool as built about its pivot
+    /// (global axes; `V^c = Ω (x^c − p)`, `Ω = [R(t) φ̇]×`, module documentation): a unit
+    /// vector along the axis of a tool-rotation variable, zero otherwise.
+    pub rotation: [f64; 3],
+}
+
 /// Derivatives of the contact force's inputs with respect to one design variable
 /// ([`ShellContact::force_dot`]).
 #[derive(Clone, Copy, Debug)]
 pub struct ContactSeeds<'a> {
-    /// Per tool (in the contact's order), the derivative `ȧ` of its translation (`V^c`,
-    /// eq 76): a unit vector along the axis of a tool-position variable, zero otherwise.
-    pub tools: &'a [[f64; 3]],
+    /// Per tool (in the contact's order), the rates of its translation and rotation (eq 76's
+    /// `V^c`).
+    pub tools: &'a [ToolRate],
     /// `ṫ` (1 for the thickness variable).
     pub thickness: f64,
     /// `ω̇` (non-zero when the penalty is `c E/t` and the variable is `E` or `t`).
@@ -148,18 +173,30 @@ impl ShellContact {
         let evals = self.evaluate(model, q, load, &surfaces)?;
         seeds
             .iter()
-            .map(|sd| self.dot_with(model, &evals, sd))
+            .map(|sd| self.dot_with(model, &evals, load, sd))
             .collect()
     }
 
-    /// The force derivative for one seed set from the evaluated sites.
+    /// The force derivative for one seed set from the evaluated sites at pseudo-time `load`.
     fn dot_with(
         &self,
         model: &ShellModel,
         evals: &[SiteEval<f64>],
+        load: f64,
         seeds: &ContactSeeds<'_>,
     ) -> Result<Vec<f64>, ShellError> {
         let omega = self.penalty();
+        // Per tool: ȧ, the spin ω_t = R(θ(t)) φ̇ (Ω = [ω_t]×) and the moved pivot p = c + a(t).
+        let tool_motion: Vec<(V3, V3, V3)> = self
+            .tools()
+            .iter()
+            .zip(seeds.tools)
+            .map(|(tl, rate)| {
+                let m = tl.motion(load);
+                let spin = tl.path.path_rotation(load) * V3::from(rate.rotation);
+                (V3::from(rate.translation), spin, m.pivot + m.translation)
+            })
+            .collect();
         let mut out = vec![0.0; model.n_dofs()];
         for (site, ev) in self.sites().iter().zip(evals) {
             let active: Vec<_> = ev
@@ -206,9 +243,12 @@ impl ShellContact {
                 let cr_dot = (sf.n_a[0] * zh_dot).cross(&a2) + a1.cross(&(sf.n_a[1] * zh_dot));
                 let w_dot = cr.dot(&cr_dot) / cr.norm() * p.weight;
                 let w = fe.area;
-                // Relative velocity of the slave point to the tool (V^c = ȧ).
+                // Relative velocity of the slave point to the tool point,
+                // V^c = ȧ + Ω (x^c − p) (eq 76).
+                let (a_dot, spin, pivot) = &tool_motion[tool];
                 let x_dot = xbar_dot + d * zh_dot + d_dot * zh;
-                let rel = x_dot - V3::from(seeds.tools[tool]);
+                let v_c = a_dot + spin.cross(&(cp.surface.x - pivot));
+                let rel = x_dot - v_c;
                 let t = [cp.surface.xu, cp.surface.xv];
                 let a_inv = cp.a_matrix().try_inverse();
                 let m_inv = cp.metric().try_inverse();
@@ -219,18 +259,20 @@ impl ShellContact {
                         site.point, fe.zeta
                     )));
                 };
-                // Eq 80: A ξ̇ = [x^c,α·(ẋ − V^c)].
-                let xi_dot = a_inv * Vector2::new(t[0].dot(&rel), t[1].dot(&rel));
-                let g_dot = cp.normal.dot(&rel);
-                // Weingarten: n,β = −(b m⁻¹)_βγ x^c,γ.
+                // Eq 80: A ξ̇ = [x^c,α·(ẋ − V^c) + g n·(Ω x^c,α)].
+                let g = cp.gap;
+                let n = cp.normal;
+                let rhs = |a: usize| t[a].dot(&rel) + g * n.dot(&spin.cross(&t[a]));
+                let xi_dot = a_inv * Vector2::new(rhs(0), rhs(1));
+                let g_dot = n.dot(&rel);
+                // ṅ = Ω n + n,β ξ̇_β, Weingarten: n,β = −(b m⁻¹)_βγ x^c,γ.
                 let bm = cp.curvature() * m_inv;
-                let mut n_dot = V3::zeros();
+                let mut n_dot = spin.cross(&n);
                 for b in 0..2 {
                     for gm in 0..2 {
                         n_dot -= t[gm] * (bm[(b, gm)] * xi_dot[b]);
                     }
                 }
-                let g = cp.gap;
                 let f = cp.normal * (-omega * w * g);
                 let f_dot = cp.normal
                     * -(seeds.penalty * w * g + omega * w_dot * g + omega * w * g_dot)

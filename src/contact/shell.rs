@@ -166,6 +166,10 @@ pub struct ContactInputs<'a, T> {
     pub penalty: T,
     /// Per tool, a translation added to its path (zero: the tools as built).
     pub offsets: &'a [V3<T>],
+    /// Per tool, a rotation vector `φ` (radians, global axes) turning the tool as built about
+    /// its pivot before its motion, `x^c = c + R(θ(t)) R(φ) R_φ₀ (X − c) + a(t)`
+    /// ([`crate::contact::ToolPath::motion_with`]; zero: the tools as built).
+    pub rotations: &'a [V3<T>],
 }
 
 /// The committed state of shape-function particle `j` from the real particles' `particles`: an
@@ -353,12 +357,13 @@ impl ShellContact {
             thickness: T::cst(model.thickness),
             penalty: T::cst(self.penalty),
             offsets: &offsets,
+            rotations: &offsets,
         };
         self.evaluate_with(model, &inputs, q, t, surfaces)
     }
 
     /// Slave positions and projections of every site at `(q, t)` from `inputs` (committed
-    /// particle states, thickness, tool offsets in scalar `T`), generic.
+    /// particle states, thickness, tool offsets and rotations in scalar `T`), generic.
     fn evaluate_with<T: Real>(
         &self,
         model: &ShellModel,
@@ -370,12 +375,8 @@ impl ShellContact {
         let motions: Vec<_> = self
             .tools
             .iter()
-            .zip(inputs.offsets)
-            .map(|(tl, o)| {
-                let mut m = tl.motion(t).lift::<T>();
-                m.translation += o;
-                m
-            })
+            .zip(inputs.offsets.iter().zip(inputs.rotations))
+            .map(|(tl, (o, phi))| tl.path.motion_with(t, phi, o))
             .collect();
         let mut out = Vec::with_capacity(self.sites.len());
         for site in &self.sites {
@@ -466,10 +467,13 @@ impl ShellContact {
     /// Adds `f_c(q; t)` in scalar `T` with the design-dependent inputs in `T` (the dual-number
     /// reference, `crate::sensitivity::dual`): the committed particle states of `inputs` (so
     /// that their sensitivities, the history dependence of the contact force, are carried),
-    /// the thickness (slave faces at `ζ t/2`, face areas), the penalty and each tool's
+    /// the thickness (slave faces at `ζ t/2`, face areas), the penalty, each tool's
     /// translation added to its path (tool-position design variables, eq 76 with a constant
-    /// `V^c`). Eqs 68–70 evaluated through [`closest_point`], whose final Newton correction in
-    /// `T` carries the projection sensitivity of eq (80). Not tracked.
+    /// `V^c`) and each tool's rotation `R(φ)` of the tool as built composed into its motion
+    /// (tool-rotation design variables: the moved point, its tangents and curvatures and the
+    /// normal all turn, eq 76 with `V^c = ȧ + Ω (x^c − p)`). Eqs 68–70 evaluated through
+    /// [`closest_point`], whose final Newton correction in `T` carries the projection
+    /// sensitivity of eq (80). Not tracked.
     pub fn force_with<T: Real>(
         &self,
         model: &ShellModel,
@@ -485,11 +489,13 @@ impl ShellContact {
                 got: inputs.particles.len(),
             });
         }
-        if inputs.offsets.len() != self.tools.len() {
-            return Err(ShellError::Dimension {
-                expected: self.tools.len(),
-                got: inputs.offsets.len(),
-            });
+        for got in [inputs.offsets.len(), inputs.rotations.len()] {
+            if got != self.tools.len() {
+                return Err(ShellError::Dimension {
+                    expected: self.tools.len(),
+                    got,
+                });
+            }
         }
         let surfaces: Vec<Surface<T>> = self.tools.iter().map(|tl| tl.surface.lift()).collect();
         let evals = self.evaluate_with(model, inputs, q, t, &surfaces)?;

@@ -5,6 +5,13 @@
 //! the pivot, `R(t)` the rotation of the rotation vector `θ(t)`, `a(t)` the translation). Its
 //! tangents are `x^c,α = R X,α` and the contact normal of eq (66) is `n = s R n_X` with
 //! `s = ±1` from [`Side`], so that `n` points out of the solid tool.
+//!
+//! A path may carry an **orientation** `R_φ` of the tool as built (a rotation about the pivot
+//! applied before the motion, [`ToolPath::rotated`]: the tool-rotation design variable of
+//! `crate::sensitivity::DesignKind::ToolRotation`): then `R(t)` above stands for
+//! `R(θ(t)) R_φ`, so `x^c = c + R(θ(t)) R_φ (X − c) + a(t)`. The orientation is kept as its
+//! own factor (never folded into the keys' rotation vectors, which are interpolated), so a
+//! rotated tool is represented exactly.
 
 use super::{invalid, ContactError};
 use crate::geometry::{GeometryError, Surface, SurfaceDerivs};
@@ -56,6 +63,9 @@ pub struct PathKey {
 pub struct ToolPath {
     pivot: [f64; 3],
     keys: Vec<PathKey>,
+    /// Orientation `R_φ` of the tool as built, applied about the pivot before the motion
+    /// (identity unless [`ToolPath::rotated`]).
+    orientation: Matrix3<f64>,
 }
 
 impl ToolPath {
@@ -96,7 +106,11 @@ impl ToolPath {
                 ));
             }
         }
-        Ok(ToolPath { pivot, keys })
+        Ok(ToolPath {
+            pivot,
+            keys,
+            orientation: Matrix3::identity(),
+        })
     }
 
     /// A tool at rest at its built position.
@@ -108,6 +122,7 @@ impl ToolPath {
                 translation: [0.0; 3],
                 rotation: [0.0; 3],
             }],
+            orientation: Matrix3::identity(),
         }
     }
 
@@ -174,13 +189,70 @@ impl ToolPath {
                 rotation: k.rotation,
             })
             .collect();
-        ToolPath::new(self.pivot, keys)
+        let mut p = ToolPath::new(self.pivot, keys)?;
+        p.orientation = self.orientation;
+        Ok(p)
     }
 
-    /// The rigid motion at pseudo-time `t`.
+    /// The same path with the tool as built turned by the rotation vector `phi` (radians,
+    /// axis times angle, global axes) about the pivot `c`, before its motion:
+    /// `x^c = c + R(θ(t)) R_φ R₀ (X − c) + a(t)` with `R₀` this path's orientation (identity
+    /// for a path from [`ToolPath::new`]). The orientation is composed exactly (a matrix, not
+    /// an interpolated rotation vector): the tool-rotation design variable of
+    /// `crate::sensitivity::DesignKind::ToolRotation`.
+    pub fn rotated(&self, phi: [f64; 3]) -> Result<Self, ContactError> {
+        for (c, v) in phi.iter().enumerate() {
+            if !v.is_finite() {
+                return Err(invalid(
+                    format!("path.orientation[{c}]"),
+                    v,
+                    "a finite rotation (radians)",
+                ));
+            }
+        }
+        let r = RigidMotion::new(V3::zeros(), V3::from(phi), V3::zeros()).rotation;
+        Ok(ToolPath {
+            pivot: self.pivot,
+            keys: self.keys.clone(),
+            orientation: r * self.orientation,
+        })
+    }
+
+    /// The orientation `R_φ` of the tool as built (identity unless [`ToolPath::rotated`]).
+    pub fn orientation(&self) -> Matrix3<f64> {
+        self.orientation
+    }
+
+    /// The rotation `R(θ(t))` of the path alone (without the orientation): the frame in which a
+    /// design rotation `φ̇` of the tool as built acts at `t` (`Ω = [R(θ(t)) φ̇]×`,
+    /// `crate::contact::sensitivity`).
+    pub fn path_rotation(&self, t: f64) -> Matrix3<f64> {
+        let (_, theta) = self.position(t);
+        RigidMotion::new(V3::zeros(), V3::from(theta), V3::zeros()).rotation
+    }
+
+    /// The rigid motion at pseudo-time `t`: pivot `c`, rotation `R(θ(t)) R_φ`, translation
+    /// `a(t)`.
     pub fn motion(&self, t: f64) -> RigidMotion<f64> {
         let (a, theta) = self.position(t);
-        RigidMotion::new(V3::from(self.pivot), V3::from(theta), V3::from(a))
+        let mut m = RigidMotion::new(V3::from(self.pivot), V3::from(theta), V3::from(a));
+        m.rotation *= self.orientation;
+        m
+    }
+
+    /// The rigid motion at pseudo-time `t` with a further design rotation `phi` of the tool as
+    /// built and a design translation `offset`, in scalar `T` (the dual-number reference seeds
+    /// them): pivot `c`, rotation `R(θ(t)) R(φ) R_φ₀`, translation `a(t) + offset`. With
+    /// `phi = 0` and `offset = 0` it equals [`ToolPath::motion`] exactly (`R(0) = I`).
+    pub fn motion_with<T: Real>(&self, t: f64, phi: &V3<T>, offset: &V3<T>) -> RigidMotion<T> {
+        let (a, theta) = self.position(t);
+        let path = RigidMotion::new(V3::from(self.pivot), V3::from(theta), V3::from(a));
+        let design = RigidMotion::new(V3::zeros(), *phi, V3::zeros()).rotation;
+        RigidMotion {
+            pivot: path.pivot.map(T::cst),
+            rotation: path.rotation.map(T::cst) * design * self.orientation.map(T::cst),
+            translation: path.translation.map(T::cst) + offset,
+        }
     }
 }
 

@@ -8,8 +8,10 @@
 //!                                 #    | "material.hardening" | "material.beta" | "material.shear_factor"
 //!                                 #    | "shape.<surface parameter>" ("shape.radius", "shape.cp[2][3].z")
 //!                                 #    | "tool.<name>.<x|y|z>" (translation of a tool's path)
+//!                                 #    | "tool.<name>.<rx|ry|rz>" (rotation of the tool as built
+//!                                 #      about its pivot, radians)
 //! fd_steps = [1e-3, 1e-4]         # relative steps h/|τ| of the finite-difference study
-//!                                 # (absolute lengths for a tool variable, whose τ is 0)
+//!                                 # (absolute lengths or angles for a tool variable, whose τ is 0)
 //!
 //! [dsa]
 //! methods = ["continuum", "dual", "fd"]   # default: all three
@@ -110,10 +112,11 @@ pub struct DesignEntry {
 }
 
 impl DesignEntry {
-    /// The absolute steps `h = (h/|τ|)·|τ|` at `design`; for a tool translation (whose value,
-    /// the offset, is 0 at the nominal design) `fd_steps` are absolute lengths.
+    /// The absolute steps `h = (h/|τ|)·|τ|` at `design`; for a tool translation or rotation
+    /// (whose value, the offset, is 0 at the nominal design) `fd_steps` are absolute lengths
+    /// or angles (radians).
     pub fn absolute_steps(&self, design: &Design) -> Vec<f64> {
-        if matches!(self.variable.kind, DesignKind::Tool { .. }) {
+        if is_tool_kind(&self.variable.kind) {
             return self.fd_steps.clone();
         }
         let tau = self.variable.value(design).abs();
@@ -237,7 +240,7 @@ pub(crate) fn check(
                 ),
             ));
         }
-        let is_tool = matches!(kind, DesignKind::Tool { .. });
+        let is_tool = is_tool_kind(&kind);
         let variable = DesignVariable::new(d.name.clone(), kind);
         let fd_steps = d
             .fd_steps
@@ -414,6 +417,15 @@ fn monitor_selection(
     Ok(vec![sens_monitor(path, key, m, c, comp)?])
 }
 
+/// A tool translation or rotation: its value (the offset from the case's tool) is 0 at the
+/// nominal design, so its finite-difference steps are absolute.
+fn is_tool_kind(kind: &DesignKind) -> bool {
+    matches!(
+        kind,
+        DesignKind::Tool { .. } | DesignKind::ToolRotation { .. }
+    )
+}
+
 fn design_kind(
     path: &Path,
     key: &str,
@@ -422,7 +434,7 @@ fn design_kind(
 ) -> Result<DesignKind, CaseError> {
     const EXPECTED: &str = "\"thickness\", \"material.<young|poisson|shear_factor|sigma0|\
                             hardening|beta>\", \"shape.<surface parameter>\" or \
-                            \"tool.<name>.<x|y|z>\"";
+                            \"tool.<name>.<x|y|z|rx|ry|rz>\"";
     DesignKind::parse_on(s, surface)
         .map_err(|e| invalid(path, key, format!("{s:?}"), format!("{EXPECTED} ({e})")))
 }

@@ -62,7 +62,8 @@ impl Analysis for CaseAnalysis<'_> {
     }
 
     /// The case with the design's thickness, material and tool offsets (each tool's whole path
-    /// translated, [`crate::contact::ToolPath::translated`]), and its contact.
+    /// translated, [`crate::contact::ToolPath::translated`], and the tool as built rotated
+    /// about its pivot, [`crate::contact::ToolPath::rotated`]), and its contact.
     fn build_with_contact(
         &self,
         design: &Design,
@@ -90,11 +91,16 @@ impl Analysis for CaseAnalysis<'_> {
                         ),
                     })
                 })?;
-            tool.path = tool.path.translated(*offset).map_err(|e| {
-                SensitivityError::Shell(ShellError::InvalidInput(format!(
-                    "tool `{name}` moved by {offset:?}: {e}"
-                )))
-            })?;
+            tool.path = tool
+                .path
+                .translated(offset.translation)
+                .and_then(|p| p.rotated(offset.rotation))
+                .map_err(|e| {
+                    SensitivityError::Shell(ShellError::InvalidInput(format!(
+                        "tool `{name}` moved by {:?} and rotated by {:?}: {e}",
+                        offset.translation, offset.rotation
+                    )))
+                })?;
         }
         let b = shell_build::build(&c).map_err(|e| {
             SensitivityError::Shell(ShellError::InvalidInput(format!(
@@ -655,7 +661,8 @@ pub fn to_json(case: &ShellCase, r: &DsaResult) -> Value {
     })
 }
 
-/// `thickness`, `material.<name>`, `shape.<surface parameter>` or `tool.<name>.<x|y|z>`.
+/// `thickness`, `material.<name>`, `shape.<surface parameter>`, `tool.<name>.<x|y|z>` or
+/// `tool.<name>.<rx|ry|rz>`.
 pub fn kind_name(v: &DesignVariable) -> String {
     match &v.kind {
         crate::sensitivity::DesignKind::Material(p) => format!("material.{}", p.name()),
@@ -664,6 +671,12 @@ pub fn kind_name(v: &DesignVariable) -> String {
             format!(
                 "tool.{tool}.{}",
                 crate::sensitivity::TOOL_AXES[*axis.min(&2)]
+            )
+        }
+        crate::sensitivity::DesignKind::ToolRotation { tool, axis } => {
+            format!(
+                "tool.{tool}.{}",
+                crate::sensitivity::TOOL_ROTATION_AXES[*axis.min(&2)]
             )
         }
         _ => "thickness".into(),
@@ -720,8 +733,9 @@ pub fn table(r: &DsaResult, v: usize) -> String {
             if matches!(
                 var.entry.variable.kind,
                 crate::sensitivity::DesignKind::Tool { .. }
+                    | crate::sensitivity::DesignKind::ToolRotation { .. }
             ) {
-                // τ is the tool's offset (0): fd_steps are absolute.
+                // τ is the tool's offset or rotation (0): fd_steps are absolute.
                 format!(", Δτ = {:e} (absolute: τ is the tool's offset)", c.h)
             } else {
                 format!(", Δτ = {:e} (h/|τ| = {:e})", c.h, c.relative)

@@ -111,9 +111,9 @@ pub struct SensitivityState {
     pub thickness: f64,
     /// `Ė, ν̇, k̇, σ̇0, Ḣ, β̇`.
     pub material: MaterialParams<f64>,
-    /// Per tool of the contact (its order; empty without contact): the translation's
-    /// derivative `V^c` (eq 76), a unit vector for a tool-position variable.
-    pub tools: Vec<[f64; 3]>,
+    /// Per tool of the contact (its order; empty without contact): the rates of its
+    /// translation and rotation (`V^c`, eq 76), a unit vector for a tool variable.
+    pub tools: Vec<crate::contact::sensitivity::ToolRate>,
 }
 
 /// A zero particle-state sensitivity.
@@ -185,7 +185,18 @@ impl SensitivityState {
                         expected: format!("{names:?}"),
                     }
                 })?;
-                s.tools[i][*axis] = 1.0;
+                s.tools[i].translation[*axis] = 1.0;
+            }
+            DesignKind::ToolRotation { tool, axis } => {
+                let names = contact_tools(loads);
+                let i = names.iter().position(|n| n == tool).ok_or_else(|| {
+                    DesignError::UnknownTool {
+                        variable: var.name.clone(),
+                        tool: tool.clone(),
+                        expected: format!("{names:?}"),
+                    }
+                })?;
+                s.tools[i].rotation[*axis] = 1.0;
             }
             #[allow(unreachable_patterns)]
             _ => {
@@ -240,7 +251,7 @@ impl SensitivityState {
             surface: None,
             thickness: 0.0,
             material: MaterialParams::zero(),
-            tools: vec![[0.0; 3]; contact_tools(loads).len()],
+            tools: vec![Default::default(); contact_tools(loads).len()],
         }
     }
 }

@@ -47,7 +47,10 @@
 //! exactly, as for the pressure), the converged increment (constant), the dual thickness, the
 //! penalty (`c E/t` in `D` when the case gives `penalty_factor`) and, per tool, a translation
 //! offset of value 0 seeded with unit derivative along the axis of a tool variable
-//! ([`crate::sensitivity::DesignKind::Tool`]). The closest-point projection's final Newton
+//! ([`crate::sensitivity::DesignKind::Tool`]) and a rotation vector `φ` of value 0 seeded
+//! along the axis of a tool-rotation variable ([`crate::sensitivity::DesignKind::ToolRotation`]:
+//! `R(φ)` in `D` is composed into the tool's motion, `R(θ(t)) R(φ)`, so the moved point, its
+//! tangents, curvatures and normal carry the rotation). The closest-point projection's final Newton
 //! correction in `D` carries the projection sensitivity (eq 80) into the gap and the normal, so
 //! the derivative part of the contact force is the fictitious load `b'_N` of eq (83) plus its
 //! history terms, computed rather than derived. The contact's tangent is in the tangent the
@@ -218,6 +221,10 @@ pub struct DualState<D> {
     /// Per tool of the contact load (empty without one): the translation added to its path,
     /// value 0 (the problem's tools are at the design's position), seeded for tool variables.
     pub tool_offsets: Vec<Vector3<D>>,
+    /// Per tool of the contact load (empty without one): the rotation vector of the tool as
+    /// built about its pivot, value 0 (the problem's tools are at the design's orientation),
+    /// seeded for tool-rotation variables.
+    pub tool_rotations: Vec<Vector3<D>>,
 }
 
 /// The sensitivities recorded at one converged step.
@@ -418,6 +425,7 @@ impl<D: DesignDual> DualShellProblem<D> {
                 let mut shape = false;
                 let mut tool_parts =
                     vec![[vec![0.0; nd], vec![0.0; nd], vec![0.0; nd]]; tool_names.len()];
+                let mut rotation_parts = tool_parts.clone();
                 for (k, v) in variables[first..first + count].iter().enumerate() {
                     match &v.kind {
                         DesignKind::Thickness => t_parts[k] = 1.0,
@@ -431,6 +439,12 @@ impl<D: DesignDual> DualShellProblem<D> {
                             // check_tools above: the tool exists.
                             if let Some(i) = tool_names.iter().position(|n| n == tool) {
                                 tool_parts[i][*axis][k] = 1.0;
+                            }
+                        }
+                        DesignKind::ToolRotation { tool, axis } => {
+                            // check_tools above: the tool exists.
+                            if let Some(i) = tool_names.iter().position(|n| n == tool) {
+                                rotation_parts[i][*axis][k] = 1.0;
                             }
                         }
                     }
@@ -463,6 +477,10 @@ impl<D: DesignDual> DualShellProblem<D> {
                     unknowns: problem.state().iter().map(|&v| D::cst(v)).collect(),
                     surfaces,
                     tool_offsets: tool_parts
+                        .iter()
+                        .map(|p| Vector3::from_fn(|c, _| D::from_parts(0.0, &p[c])))
+                        .collect(),
+                    tool_rotations: rotation_parts
                         .iter()
                         .map(|p| Vector3::from_fn(|c, _| D::from_parts(0.0, &p[c])))
                         .collect(),
@@ -623,6 +641,7 @@ impl<D: DesignDual> DualShellProblem<D> {
                     thickness: g.thickness,
                     penalty,
                     offsets: &g.tool_offsets,
+                    rotations: &g.tool_rotations,
                 };
                 c.contact.force_with(model, &inputs, dq, factor, f)
             }
@@ -703,6 +722,7 @@ impl<D: DesignDual> DualShellProblem<D> {
                 unknowns,
                 surfaces: g.surfaces.clone(),
                 tool_offsets: g.tool_offsets.clone(),
+                tool_rotations: g.tool_rotations.clone(),
             });
         }
         self.pending = Some(next);

@@ -2,8 +2,9 @@
 //! dual-number reference ([`dual`]) and finite differences of complete re-runs ([`fd`]).
 //!
 //! The **non-shape** design variables: the thickness `t` and the material parameters
-//! `E, ν, k, σ0, H, β` (eqs 9–13), and the **tool positions** ([`DesignKind::Tool`], the
-//! translation of a rigid tool's whole path, which enters through the contact force only:
+//! `E, ν, k, σ0, H, β` (eqs 9–13), and the **tool placements** ([`DesignKind::Tool`], the
+//! translation of a rigid tool's whole path, and [`DesignKind::ToolRotation`], a rotation of
+//! the tool as built about its pivot, which enter through the contact force only:
 //! `b'_N` of eq 83, `crate::contact::sensitivity`). The first ones enter the
 //! residual (eq 32) only through the point kernel's `PointInput::thickness` and
 //! `PointInput::material`; the design velocity of eqs 37–43 is zero for them (the geometry does
@@ -12,7 +13,8 @@
 //! mid-surface, `Surface::design_parameters`) move the initial geometry at fixed parameter
 //! coordinates; their design velocity field (eqs 37–43) is hand-derived in [`shape`], and the
 //! dual reference seeds the surface parameter ([`shape::dual_geometry`]). Tool placements
-//! ([`DesignKind::Tool`]) translate a rigid tool's path (`b'_N`, eq 83).
+//! ([`DesignKind::Tool`], [`DesignKind::ToolRotation`]) translate a rigid tool's path or turn
+//! the tool as built (`b'_N`, eq 83).
 //!
 //! Layout: `docs/sensitivity.md`.
 
@@ -110,26 +112,47 @@ pub enum DesignKind {
         /// Axis 0, 1, 2.
         axis: usize,
     },
+    /// The rotation of the named rigid tool **as built** by `τ` radians about the global axis
+    /// `axis` (0, 1, 2 = x, y, z) through its pivot `c` (`path.pivot`), before its motion:
+    /// `x^c = c + R(θ(t)) R_φ (X − c) + a(t)` with `φ = τ e_axis`
+    /// ([`crate::contact::ToolPath::rotated`]). Its design velocity on the tool is
+    /// `V^c = Ω (x^c − p)`, `Ω = [R(θ(t)) e_axis]×`, `p = c + a(t)` (eq 76), with the tangents'
+    /// `V^c,α = Ω x^c,α` in the projection sensitivity (eq 80) and the fictitious load `b'_N`
+    /// (eq 83). The variable's value is the rotation from the case's tool (0 at the nominal
+    /// design); the derivatives are taken there.
+    ToolRotation {
+        /// Tool name (`[[tool]] name`).
+        tool: String,
+        /// Axis 0, 1, 2.
+        axis: usize,
+    },
 }
 
 /// The axis names of [`DesignKind::Tool`] in case keys (`tool.<name>.x`).
 pub const TOOL_AXES: [&str; 3] = ["x", "y", "z"];
 
+/// The axis names of [`DesignKind::ToolRotation`] in case keys (`tool.<name>.rx`).
+pub const TOOL_ROTATION_AXES: [&str; 3] = ["rx", "ry", "rz"];
+
 impl DesignKind {
     /// From a case-file key: `thickness`, `material.<name>` with `<name>` one of
-    /// [`PARAM_NAMES`], or `tool.<name>.<x|y|z>` (the tool name is checked against the case's
-    /// tools by [`check_tools`]).
+    /// [`PARAM_NAMES`], `tool.<name>.<x|y|z>` (translation) or `tool.<name>.<rx|ry|rz>`
+    /// (rotation; the tool name is checked against the case's tools by [`check_tools`]).
     pub fn parse(key: &str) -> Result<Self, DesignError> {
         if key == "thickness" {
             return Ok(DesignKind::Thickness);
         }
         if let Some(rest) = key.strip_prefix("tool.") {
             let parsed = rest.rsplit_once('.').and_then(|(name, ax)| {
-                let axis = TOOL_AXES.iter().position(|a| *a == ax)?;
-                (!name.trim().is_empty()).then(|| DesignKind::Tool {
-                    tool: name.to_string(),
-                    axis,
-                })
+                if name.trim().is_empty() {
+                    return None;
+                }
+                let tool = name.to_string();
+                if let Some(axis) = TOOL_AXES.iter().position(|a| *a == ax) {
+                    return Some(DesignKind::Tool { tool, axis });
+                }
+                let axis = TOOL_ROTATION_AXES.iter().position(|a| *a == ax)?;
+                Some(DesignKind::ToolRotation { tool, axis })
             });
             return parsed.ok_or_else(|| DesignError::UnknownKind {
                 key: key.to_string(),
@@ -219,6 +242,19 @@ impl DesignVariable {
         Ok(Self::new(name, DesignKind::Tool { tool, axis }))
     }
 
+    /// A tool rotation about the global axis `axis` (0, 1, 2) through its pivot, named
+    /// `<tool>.<rx|ry|rz>`.
+    pub fn tool_rotation(tool: impl Into<String>, axis: usize) -> Result<Self, DesignError> {
+        let tool = tool.into();
+        let Some(a) = TOOL_ROTATION_AXES.get(axis) else {
+            return Err(DesignError::UnknownKind {
+                key: format!("tool.{tool}.<rotation axis {axis}>"),
+            });
+        };
+        let name = format!("{tool}.{a}");
+        Ok(Self::new(name, DesignKind::ToolRotation { tool, axis }))
+    }
+
     /// Its value at `design` (a shape variable of a design without a surface, or with an
     /// index beyond its parameters, is NaN: [`DesignVariable::perturbed`] and
     /// [`DesignVariable::validate_on`] report it as an error).
@@ -232,6 +268,11 @@ impl DesignVariable {
                 .and_then(|s| s.parameter_values().get(*parameter).copied())
                 .unwrap_or(f64::NAN),
             DesignKind::Tool { tool, axis } => design.tool_offset(tool)[*axis],
+            DesignKind::ToolRotation { tool, axis } => design
+                .tool_rotation(tool)
+                .get(*axis)
+                .copied()
+                .unwrap_or(f64::NAN),
         }
     }
 
@@ -308,7 +349,19 @@ impl DesignVariable {
                         detail: format!("tool axis {axis}: expected 0, 1 or 2 (x, y, z)"),
                     });
                 }
-                d.tool_offsets.entry(tool.clone()).or_insert([0.0; 3])[*axis] += delta;
+                d.tool_offsets.entry(tool.clone()).or_default().translation[*axis] += delta;
+            }
+            DesignKind::ToolRotation { tool, axis } => {
+                if *axis > 2 {
+                    return Err(DesignError::InvalidPerturbation {
+                        variable: self.name.clone(),
+                        delta,
+                        detail: format!(
+                            "tool rotation axis {axis}: expected 0, 1 or 2 (rx, ry, rz)"
+                        ),
+                    });
+                }
+                d.tool_offsets.entry(tool.clone()).or_default().rotation[*axis] += delta;
             }
         }
         Ok(d)
@@ -420,6 +473,18 @@ fn validate_list(
     Ok(())
 }
 
+/// The placement of one rigid tool relative to the case's ([`Design::tool_offsets`]): a
+/// translation of its whole path and a rotation of the tool as built about its pivot
+/// (`crate::contact::ToolPath::translated`, `crate::contact::ToolPath::rotated`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ToolOffset {
+    /// Translation added to the path at every key ([`DesignKind::Tool`]).
+    pub translation: [f64; 3],
+    /// Rotation vector `φ` (radians, global axes) of the tool as built about its pivot,
+    /// before its motion ([`DesignKind::ToolRotation`]).
+    pub rotation: [f64; 3],
+}
+
 /// The design of a shell: thickness, material, (for shape variables) the mid-surface,
 /// whose design parameters are `Surface::design_parameters`, and the rigid tools' offsets.
 #[derive(Clone, Debug, PartialEq)]
@@ -431,8 +496,9 @@ pub struct Design {
     /// The mid-surface with its design parameter values (`None`: not a design variable; shape
     /// variables need it).
     pub surface: Option<Surface<f64>>,
-    /// Translation of each named tool's whole path from the case's (absent: zero).
-    pub tool_offsets: BTreeMap<String, [f64; 3]>,
+    /// Placement of each named tool from the case's: translation of its whole path and
+    /// rotation of the tool as built (absent: zero).
+    pub tool_offsets: BTreeMap<String, ToolOffset>,
 }
 
 impl Design {
@@ -462,9 +528,16 @@ impl Design {
             .unwrap_or_default()
     }
 
-    /// The offset of tool `name` (zero when not set).
+    /// The translation offset of tool `name` (zero when not set).
     pub fn tool_offset(&self, name: &str) -> [f64; 3] {
-        self.tool_offsets.get(name).copied().unwrap_or([0.0; 3])
+        self.tool_offsets
+            .get(name)
+            .map_or([0.0; 3], |o| o.translation)
+    }
+
+    /// The rotation vector of tool `name` as built (zero when not set).
+    pub fn tool_rotation(&self, name: &str) -> [f64; 3] {
+        self.tool_offsets.get(name).map_or([0.0; 3], |o| o.rotation)
     }
 }
 
@@ -472,7 +545,7 @@ impl Design {
 /// [`DesignError::UnknownTool`] listing them otherwise.
 pub fn check_tools(variables: &[DesignVariable], tools: &[&str]) -> Result<(), DesignError> {
     for v in variables {
-        if let DesignKind::Tool { tool, .. } = &v.kind {
+        if let DesignKind::Tool { tool, .. } | DesignKind::ToolRotation { tool, .. } = &v.kind {
             if !tools.contains(&tool.as_str()) {
                 return Err(DesignError::UnknownTool {
                     variable: v.name.clone(),
@@ -572,8 +645,9 @@ pub enum DesignError {
     },
     /// A key that is no design-variable kind.
     #[error(
-        "design variable kind `{key}`: expected `thickness`, `material.<parameter>` or \
-         `shape.<surface parameter>` or `tool.<name>.<x|y|z>`"
+        "design variable kind `{key}`: expected `thickness`, `material.<parameter>`, \
+         `shape.<surface parameter>` or `tool.<name>.<x|y|z|rx|ry|rz>` (a tool's translation \
+         or rotation)"
     )]
     UnknownKind {
         /// The key given.

@@ -19,6 +19,7 @@
 use super::continuum::{fictitious_loads, SensitivityState, StepState, TermGroup};
 use super::dual::{DualLoad, DualShellProblem, DualState, SensitivityError};
 use super::DesignVariable;
+use crate::contact::sensitivity::ToolRate;
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
@@ -134,10 +135,15 @@ fn seeds_of(g: &DualState<Dual64>) -> SensitivityState {
             }),
         thickness: g.thickness.eps,
         material: MaterialParams::from_array(g.material.to_array().map(|x| x.eps)),
+        // Tool translations and rotations both feed the `Tool` group (V^c, eq 76).
         tools: g
             .tool_offsets
             .iter()
-            .map(|v| [v[0].eps, v[1].eps, v[2].eps])
+            .zip(&g.tool_rotations)
+            .map(|(a, r)| ToolRate {
+                translation: [a[0].eps, a[1].eps, a[2].eps],
+                rotation: [r[0].eps, r[1].eps, r[2].eps],
+            })
             .collect(),
     }
 }
@@ -185,7 +191,7 @@ fn masked(g: &DualState<Dual64>, group: TermGroup) -> DualState<Dual64> {
         }
     }
     if group != TermGroup::Tool {
-        for v in &mut m.tool_offsets {
+        for v in m.tool_offsets.iter_mut().chain(&mut m.tool_rotations) {
             *v = v.map(|x| c(&x));
         }
     }
