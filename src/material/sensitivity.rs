@@ -178,8 +178,11 @@ impl MaterialSensitivity {
         ddeps: &Vec5<f64>,
     ) -> MaterialState<f64> {
         let (m, deps, out, d) = (&self.m, &self.deps, &self.out, &self.d);
-        let dd = elastic_matrix_derivative(m, dm);
-        let dsigma_tr = dn.stress + dd * deps + d * ddeps;
+        // Ḋ only for a material seed (the other seed sets skip its 5 × 5 products; adding the
+        // zero vectors instead gives the same floating-point result).
+        let dd = (*dm != MaterialParams::zero()).then(|| elastic_matrix_derivative(m, dm));
+        let dd_times = |v: &Vec5<f64>| dd.map_or_else(Vec5::zeros, |dd| dd * v);
+        let dsigma_tr = dn.stress + dd_times(deps) + d * ddeps;
         let Some(pl) = &self.plastic else {
             // Elastic branch: σ = ⁿσ + D Δε, α and ē^p unchanged.
             return MaterialState {
@@ -194,7 +197,7 @@ impl MaterialSensitivity {
         let (theta, p_eta, w, f2) = (pl.theta, pl.p_eta, pl.w, pl.f2);
         let dc = 2.0 / 3.0 * ((1.0 - beta) * dm.hardening - h * dm.beta);
 
-        let r = dsigma_tr - dn.back_stress - eta * (lambda * dc) - dd * p_eta * lambda;
+        let r = dsigma_tr - dn.back_stress - eta * (lambda * dc) - dd_times(&p_eta) * lambda;
         let q =
             dm.sigma0 + (dm.beta * h + beta * dm.hardening) * out.state.eps_p + beta * h * dn.eps_p;
         let xi_r = xi * r;

@@ -433,9 +433,8 @@ struct LayerData {
     half_t: f64,
     z: f64,
     h: M3<f64>,
-    q_n: M3<f64>,
-    /// `½rᵀ` and `rᵀ` (the `Q̇ₙ` terms of eqs 50–51).
-    r_half_t: M3<f64>,
+    /// `½rᵀ Δε Aᵀ` and `rᵀ` (the `Q̇ₙ` terms of eqs 50–51).
+    r_half_t_c: M3<f64>,
     r_t: M3<f64>,
     q1: M3<f64>,
     /// `ⁿ⁺¹Qᵀ σˡ`.
@@ -466,19 +465,32 @@ impl LayerData {
                 .ok_or_else(|| singular("I − aΔω"))
         };
         let q_n = inp.history.frame;
-        let a = q_n * k.inc.r_half.transpose();
+        let r_half_t = k.inc.r_half.transpose();
+        let a = q_n * r_half_t;
         let deps_l = strain_to_vec5(&local_strain_increment(&q_n, &k.inc.r_half, &k.inc.deps));
         let half_t = inp.thickness * 0.5;
         let q1 = res.history.frame;
         let sigma_l = stress_from_vec5(&res.history.material.stress);
         let jinv_t = k.j1_inv.transpose();
+        let c = k.inc.deps * a.transpose();
+        // The rotation rates are linear in the spin rate's axial vector ω (Δω̇ = [ω]×,
+        // eqs 54–55): ṙ = Σ ω_i (I − ½Δω)⁻¹ E_i ½(I + r), ½ṙ = Σ ω_i (I − ¼Δω)⁻¹ E_i ¼(I + ½r)
+        // with E_i = [e_i]×, so the terms Qₙ ½ṙᵀ Δε Aᵀ (eq 50) and Qₙ ṙᵀ (eq 51) are
+        // Σ ω_i of per-layer matrices, formed once here for every seed set:
+        // (R E_i S)ᵀ = −Sᵀ E_i Rᵀ.
+        let (r1, s1) = (resolvent(0.5)?, (M3::identity() + k.inc.r) * 0.5);
+        let (r2, s2) = (resolvent(0.25)?, (M3::identity() + k.inc.r_half) * 0.25);
+        let (u, w) = (q_n * s2.transpose(), r2.transpose() * c);
+        let (v, r1t) = (q_n * s1.transpose(), r1.transpose());
+        let axis = |i: usize| V3::ith(i, 1.0).cross_matrix();
+        let strain_rot = std::array::from_fn(|i| -(u * axis(i)) * w);
+        let frame_rot = std::array::from_fn(|i| -(v * axis(i)) * r1t);
         Ok(LayerData {
             zeta: inp.zeta,
             half_t,
             z: half_t * inp.zeta,
             h: k.h,
-            q_n,
-            r_half_t: k.inc.r_half.transpose(),
+            r_half_t_c: r_half_t * c,
             r_t: k.inc.r.transpose(),
             q1,
             qt_sigma: q1.transpose() * sigma_l,
@@ -488,12 +500,9 @@ impl LayerData {
             keep: LayerKeep {
                 f_half_inv,
                 jn_inv_f: k.jn_inv * f_half_inv,
-                r1: resolvent(0.5)?,
-                s1: (M3::identity() + k.inc.r) * 0.5,
-                r2: resolvent(0.25)?,
-                s2: (M3::identity() + k.inc.r_half) * 0.25,
                 a,
-                c: k.inc.deps * a.transpose(),
+                strain_rot,
+                frame_rot,
                 material: MaterialSensitivity::new(inp.material, &deps_l, &res.return_map),
             },
         })
@@ -528,10 +537,9 @@ impl LayerData {
         // Ḣ = Ġ Jⁿ⁻¹ − G Jⁿ⁻¹ J̇ⁿ Jⁿ⁻¹ = (Ġ − H J̇ⁿ) Jⁿ⁻¹ (the −H ∇ⁿV term of eqs 39–40), and
         // L̇ = F½⁻¹ Ḣ F½⁻¹ (eqs 56–57, kinematics::mid_step_gradient_dot).
         let l_dot = k.f_half_inv * (g_dot - self.h * jn_dot) * k.jn_inv_f;
-        let hw = k.hw_dot(&l_dot);
+        let (deps_dot, omega) = LayerKeep::rates(&l_dot);
         // Δε̇ˡ with the history frame's sensitivity (eq 50): Ȧ = Q̇ₙ ½rᵀ + Qₙ ½ṙᵀ.
-        let a_dot = history_dot.frame * self.r_half_t + self.q_n * hw.r_half_dot.transpose();
-        let deps_l_dot = k.strain_dot(&a_dot, &hw.deps_dot);
+        let deps_l_dot = k.strain_dot(&(history_dot.frame * self.r_half_t_c), &omega, &deps_dot);
         // Return-map sensitivity (eqs 44–49).
         let mat_dot = k.material.apply(
             material_dot,
@@ -540,7 +548,7 @@ impl LayerData {
         );
         // ⁿ⁺¹Q̇ = Q̇ₙ rᵀ + Qₙ ṙᵀ (eq 51) and σ̇ᵍ = Q̇ᵀσˡQ + Qᵀσ̇ˡQ + QᵀσˡQ̇ (eq 42; σˡ is
         // symmetric, so the first term is the transpose of the last).
-        let q1_dot = history_dot.frame * self.r_t + self.q_n * hw.r_dot.transpose();
+        let q1_dot = history_dot.frame * self.r_t + k.frame_rate(&omega);
         let x = self.qt_sigma * q1_dot;
         let sigma_g_dot =
             x + x.transpose() + self.q1.transpose() * stress_from_vec5(&mat_dot.stress) * self.q1;
@@ -1030,28 +1038,30 @@ impl ShellModel {
                 Ok((residuals, histories, kept))
             })
             .collect::<Result<Vec<_>, ShellError>>()?;
-        let mut out: Vec<InternalForceDot> = (0..ns)
-            .map(|_| {
-                (
-                    vec![0.0; self.n_dofs()],
-                    Vec::with_capacity(self.history.len()),
-                )
+        let mut layers = Vec::with_capacity(if keep { self.points.len() } else { 0 });
+        let per_point: Vec<(Vec<f64>, Vec<PointHistory<f64>>)> = per_point
+            .into_iter()
+            .map(|(residuals, histories, kept)| {
+                if keep {
+                    layers.push(kept);
+                }
+                (residuals, histories)
             })
             .collect();
-        let mut layers = Vec::with_capacity(if keep { self.points.len() } else { 0 });
-        for (k, (residuals, histories, kept)) in per_point.into_iter().enumerate() {
-            let nr = D * self.points[k].neighbours.len();
-            for ((f, h), (r, hs)) in out
-                .iter_mut()
-                .zip(residuals.chunks_exact(nr).zip(histories.chunks_exact(nl)))
-            {
-                self.scatter_local(k, r, f);
-                h.extend_from_slice(hs);
-            }
-            if keep {
-                layers.push(kept);
-            }
-        }
+        // Seed sets in parallel, each summed in point order (deterministic).
+        let out: Vec<InternalForceDot> = (0..ns)
+            .into_par_iter()
+            .map(|s| {
+                let mut f = vec![0.0; self.n_dofs()];
+                let mut h = Vec::with_capacity(self.history.len());
+                for (k, (residuals, histories)) in per_point.iter().enumerate() {
+                    let nr = D * self.points[k].neighbours.len();
+                    self.scatter_local(k, &residuals[s * nr..(s + 1) * nr], &mut f);
+                    h.extend_from_slice(&histories[s * nl..(s + 1) * nl]);
+                }
+                (f, h)
+            })
+            .collect();
         let lin = keep.then(|| StepLinearisation {
             particles: per.into_iter().map(|(state, x, _, _)| (state, x)).collect(),
             layers,
@@ -1157,9 +1167,7 @@ impl ShellModel {
                         sums.g_d3 += dd * sh.psi;
                     }
                     for (l, &(zeta, _)) in self.thickness_rule.iter().enumerate() {
-                        let i = k * nl + l;
                         out.push(lin.layers[k][l].increment_history_dot(
-                            &self.history[i].frame,
                             half_t,
                             half_t * zeta,
                             &sums,
@@ -1169,13 +1177,13 @@ impl ShellModel {
                 out
             })
             .collect();
-        for (k, hs) in per_point.iter().enumerate() {
-            for (s, h) in hs.chunks_exact(nl).enumerate() {
-                for (l, d) in h.iter().enumerate() {
-                    add_history(&mut histories[s][k * nl + l], d);
+        histories.par_iter_mut().enumerate().for_each(|(s, h)| {
+            for (k, hs) in per_point.iter().enumerate() {
+                for (l, d) in hs[s * nl..(s + 1) * nl].iter().enumerate() {
+                    add_history(&mut h[k * nl + l], d);
                 }
             }
-        }
+        });
         Ok(())
     }
 }
@@ -1190,8 +1198,8 @@ fn add_history(a: &mut PointHistory<f64>, b: &PointHistory<f64>) {
 /// The seed-independent factors of one layer point's derivative chain, formed once from the
 /// f64 evaluation and shared by every seed set; kept by the fictitious loads' pass for the
 /// increment-only part of the trial-history derivative
-/// ([`ShellModel::add_increment_history_dots`]): ≈ 1.4 kB per layer point (8 3×3 matrices and
-/// the return-map sensitivity's factors), whatever the number of seed sets; 7.0 MB on the
+/// ([`ShellModel::add_increment_history_dots`]): ≈ 1.4 kB per layer point (9 3×3 matrices and
+/// the return-map sensitivity's factors), whatever the number of seed sets; 7 MB on the
 /// 5120 layer points of the hemisphere (`benches/continuum.rs` prints it).
 #[derive(Clone, Copy, Debug)]
 struct LayerKeep {
@@ -1199,56 +1207,50 @@ struct LayerKeep {
     f_half_inv: M3<f64>,
     /// `Jⁿ⁻¹ F½⁻¹`.
     jn_inv_f: M3<f64>,
-    /// `(I − ½Δω)⁻¹`, `½(I + r)`: `ṙ = (2I − Δω)⁻¹ Δω̇ (I + r)` (eqs 54–55).
-    r1: M3<f64>,
-    s1: M3<f64>,
-    /// `(I − ¼Δω)⁻¹`, `¼(I + ½r)`: `½ṙ = (4I − Δω)⁻¹ Δω̇ (I + ½r)` (eqs 54–55).
-    r2: M3<f64>,
-    s2: M3<f64>,
-    /// `A = Qₙ ½rᵀ` and `Δε Aᵀ` (eq 50).
+    /// `A = Qₙ ½rᵀ` (eq 50).
     a: M3<f64>,
-    c: M3<f64>,
+    /// `Qₙ (½ṙ_i)ᵀ Δε Aᵀ` for the spin rate `ω = e_i` (eqs 50, 54–55):
+    /// `Qₙ ½ṙᵀ Δε Aᵀ = Σ ω_i strain_rot[i]`.
+    strain_rot: [M3<f64>; 3],
+    /// `Qₙ ṙ_iᵀ` for `ω = e_i` (eqs 51, 54–55): `Qₙ ṙᵀ = Σ ω_i frame_rot[i]`.
+    frame_rot: [M3<f64>; 3],
     /// The return-map sensitivity's seed-independent factors (eqs 44–49).
     material: MaterialSensitivity,
 }
 
-/// `(Δε̇, ṙ, ½ṙ)` of [`LayerKeep::hw_dot`].
-struct HwDot {
-    deps_dot: M3<f64>,
-    r_dot: M3<f64>,
-    r_half_dot: M3<f64>,
-}
-
 impl LayerKeep {
-    /// The Hughes–Winget derivatives (eqs 54–55, 58; [`crate::kinematics::hughes_winget_dot`] with the
-    /// resolvents formed once): `Δε̇ = sym L̇`, `Δω̇ = skew L̇`,
-    /// `ṙ = (I − ½Δω)⁻¹ Δω̇ ½(I + r)`, `½ṙ = (I − ¼Δω)⁻¹ Δω̇ ¼(I + ½r)`.
-    fn hw_dot(&self, l_dot: &M3<f64>) -> HwDot {
+    /// The Hughes–Winget rates of `L̇` (eqs 54–55, 58): `Δε̇ = sym L̇` and the axial vector
+    /// `ω` of `Δω̇ = skew L̇ = [ω]×` (the rotation rates follow from `ω` through
+    /// [`Self::strain_rot`](LayerKeep) and [`Self::frame_rate`]).
+    fn rates(l_dot: &M3<f64>) -> (M3<f64>, V3) {
         let lt = l_dot.transpose();
-        let domega_dot = (l_dot - lt) * 0.5;
-        HwDot {
-            deps_dot: (l_dot + lt) * 0.5,
-            r_dot: self.r1 * domega_dot * self.s1,
-            r_half_dot: self.r2 * domega_dot * self.s2,
-        }
+        let omega = V3::new(
+            (l_dot[(2, 1)] - l_dot[(1, 2)]) * 0.5,
+            (l_dot[(0, 2)] - l_dot[(2, 0)]) * 0.5,
+            (l_dot[(1, 0)] - l_dot[(0, 1)]) * 0.5,
+        );
+        ((l_dot + lt) * 0.5, omega)
     }
 
-    /// `Δε̇ˡ = Ȧ Δε Aᵀ + A Δε̇ Aᵀ + A Δε Ȧᵀ` (eq 50, [`crate::kinematics::local_strain_increment_dot`]); `Δε` is
+    /// `Qₙ ṙᵀ` for the spin rate `ω` (eqs 51, 54–55).
+    fn frame_rate(&self, omega: &V3) -> M3<f64> {
+        self.frame_rot[0] * omega[0] + self.frame_rot[1] * omega[1] + self.frame_rot[2] * omega[2]
+    }
+
+    /// `Δε̇ˡ = Ȧ Δε Aᵀ + A Δε̇ Aᵀ + A Δε Ȧᵀ` (eq 50, [`crate::kinematics::local_strain_increment_dot`])
+    /// with `Ȧ Δε Aᵀ = history + Σ ω_i strain_rot[i]` (`history = Q̇ₙ ½rᵀ Δε Aᵀ`); `Δε` is
     /// symmetric, so the last term is the transpose of the first.
-    fn strain_dot(&self, a_dot: &M3<f64>, deps_dot: &M3<f64>) -> M3<f64> {
-        let t = a_dot * self.c;
+    fn strain_dot(&self, history: &M3<f64>, omega: &V3, deps_dot: &M3<f64>) -> M3<f64> {
+        let t = history
+            + self.strain_rot[0] * omega[0]
+            + self.strain_rot[1] * omega[1]
+            + self.strain_rot[2] * omega[2];
         t + t.transpose() + self.a * deps_dot * self.a.transpose()
     }
 
     /// The `Δq̇` column of [`LayerData::apply`] (`J̇ⁿ = 0`, `ż = ṫ = 0`, no history or
     /// material seeds): `ⁿ⁺¹(Q̇, σ̇, α̇, ė^p)`.
-    fn increment_history_dot(
-        &self,
-        q_n: &M3<f64>,
-        half_t: f64,
-        z: f64,
-        sums: &SeedSums,
-    ) -> PointHistory<f64> {
+    fn increment_history_dot(&self, half_t: f64, z: f64, sums: &SeedSums) -> PointHistory<f64> {
         let g_dot = M3::from_columns(&[
             sums.g_u[0] + sums.g_d[0] * z,
             sums.g_u[1] + sums.g_d[1] * z,
@@ -1256,13 +1258,13 @@ impl LayerKeep {
         ]);
         // L̇ = F½⁻¹ Ġ Jⁿ⁻¹ F½⁻¹ (eqs 56–57).
         let l_dot = self.f_half_inv * g_dot * self.jn_inv_f;
-        let hw = self.hw_dot(&l_dot);
+        let (deps_dot, omega) = Self::rates(&l_dot);
         // Eq 50 with Ȧ = Qₙ ½ṙᵀ.
-        let deps_l_dot = self.strain_dot(&(q_n * hw.r_half_dot.transpose()), &hw.deps_dot);
+        let deps_l_dot = self.strain_dot(&M3::zeros(), &omega, &deps_dot);
         let mat_dot = self.material.strain(&strain_to_vec5(&deps_l_dot));
         // Eq 51 with Q̇ₙ = 0.
         PointHistory {
-            frame: q_n * hw.r_dot.transpose(),
+            frame: self.frame_rate(&omega),
             material: mat_dot,
         }
     }
