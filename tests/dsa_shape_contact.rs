@@ -430,7 +430,7 @@ fn check_kernel(
         // Central differences of contacts rebuilt on the surface moved by ±h: truncation
         // ~h² |f‴| and round-off ~ε |f| / h, relative to max|ḟ| (measured ≤ 2.5e-9 with the
         // steps chosen per parameter); 1e-6 still fails a missing term: each of V⁰,
-        // ζ t/2 ṅ⁰ and the face areas is ≥ 2e-3 of some ḟ (asserted by the caller).
+        // ζ t/2 ṅ⁰ and the face areas is > 1e-3 of some ḟ (asserted by the caller).
         assert!(
             e_cd < 1e-6,
             "{label} {name}: hand vs central differences {e_cd:e}"
