@@ -226,6 +226,7 @@ fn force_f64(
         penalty: contact.penalty() + s * seed.penalty,
         offsets: &offsets,
         rotations: &rotations,
+        initial: None,
     };
     let qs: Vec<f64> = q
         .iter()
@@ -265,6 +266,7 @@ fn force_dual(
         penalty: Dual64::new(contact.penalty(), seed.penalty),
         offsets: &offsets,
         rotations: &rotations,
+        initial: None,
     };
     let qd: Vec<Dual64> = q
         .iter()
@@ -381,6 +383,7 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
             penalty: seed.penalty,
             particles: &seed.particles,
             increment: &seed.increment,
+            initial: None,
         };
         let hand = contact.force_dot(&model, &q, t, &cs).unwrap();
         let dual = force_dual(&model, &contact, &q, t, seed);
@@ -568,6 +571,7 @@ fn tool_rotation_sensitivity_matches_dual_and_central_differences() {
             penalty: 0.0,
             particles: &seed.particles,
             increment: &seed.increment,
+            initial: None,
         };
         let hand = contact.force_dot(&model, &q, t, &cs).unwrap();
         let dual = force_dual(&model, &contact, &q, t, seed);
@@ -629,6 +633,7 @@ fn tool_rotation_sensitivity_matches_dual_and_central_differences() {
             penalty: 0.0,
             particles: &particles,
             increment: &increment,
+            initial: None,
         };
         let hand = contact.force_dot(&model, &q, t, &cs).unwrap();
         let e = max_abs(&hand) / scale_rx;

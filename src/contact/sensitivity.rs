@@ -16,11 +16,20 @@
 //! - the **thickness** `ṫ` (slave faces at `ζ t/2`, initial face areas) and the **penalty**
 //!   `ω̇` (`ω = c E/t` makes it design-dependent);
 //! - the **shell state**: the committed particle states' dots `ū̇, ḋ, ė` (the history
-//!   dependence) and the increment's `Δq̇`.
+//!   dependence) and the increment's `Δq̇`;
+//! - the **design velocity of the initial geometry** (a shape design variable,
+//!   [`ContactSeeds::initial`]): at every in-plane point `V⁰ = ∂x̄⁰/∂τ` and the dots
+//!   `ẋ⁰,α, ṅ⁰, ṅ⁰,α` of [`crate::sensitivity::shape::ShapeVelocity`]. The discretisation lives
+//!   on the surface's parameter domain (shape functions and weights do not move), so the
+//!   paper's updated design velocity of the slave point (eq 74, `ⁿV = V⁰ + ⁿu̇` on the
+//!   current configuration) is `V⁰ + ζ t/2 ṅ⁰` from the initial geometry plus the state
+//!   terms below (the particles' `ḋ⁰ = ḋ = ṅ(ξ_I)` of the initial state cancel in
+//!   `d_J − d⁰_J` until the director turns).
 //!
 //! **Slave point.** `x = x̄ + ζ t/2 d`, `x̄ = x̄⁰ + Σ Ψ_J (ū_J + Δū_J)`,
 //! `d = n⁰ + Σ Ψ_J (d_J(α_J) − d⁰_J)` (`docs/contact.md` §4), so
-//! `ẋ = Σ Ψ_J (ū̇_J + Δū̇_J) + ζ ṫ/2 d + ζ t/2 Σ Ψ_J (ḋ_J(α_J) − ḋ⁰_J)` with `ḋ_J(α)` the
+//! `ẋ = V⁰ + Σ Ψ_J (ū̇_J + Δū̇_J) + ζ ṫ/2 d + ζ t/2 (ṅ⁰ + Σ Ψ_J (ḋ_J(α_J) − ḋ⁰_J))`
+//! (`V⁰ = ṅ⁰ = 0` but for a shape variable) with `ḋ_J(α)` the
 //! directional derivative of Rodrigues' rotation `d(α) = dⁿ + f1 c + f2 θ×c`
 //! (`θ = α1 e1 + α2 e2`, `c = θ×dⁿ`, `x = θ·θ`) in all of `dⁿ, e1, e2, α`:
 //! `ḋ = ḋⁿ + f1' ẋ c + f1 ċ + f2' ẋ θ×c + f2 (θ̇×c + θ×ċ)`, `θ̇ = α̇_β e_β + α_β ė_β`,
@@ -38,7 +47,12 @@
 //! Weingarten's `n,β = −(b m⁻¹)_βγ x^c,γ` (the curvature term of eqs 77, 83).
 //! **Force (eq 83's `b'_N` with the state terms):** `f = −ω w g n`
 //! (eq 70), so `ḟ = −(ω̇ w g + ω ẇ g + ω w ġ) n − ω w g ṅ`, with `ẇ` the derivative of
-//! the initial face area `w |x⁰,1 × x⁰,2|`, `x⁰,α = x̄⁰,α + ζ t/2 n⁰,α`, in `t`.
+//! the initial face area `w |x⁰,1 × x⁰,2|`, `x⁰,α = x̄⁰,α + ζ t/2 n⁰,α`:
+//! `ẇ = w_q (c/|c|)·ċ` with `c = x⁰,1 × x⁰,2`,
+//! `ċ = ẋ⁰,1 × x⁰,2 + x⁰,1 × ẋ⁰,2`, `ẋ⁰,α = ẋ̄⁰,α + ζ t/2 ṅ⁰,α + ζ ṫ/2 n⁰,α` (`w_q` the
+//! quadrature weight, design-free). With a shape variable `V⁰` enters `ẋ` (so eq 78's
+//! `ġ = n·(ẋ − V^c)` and eq 80's right-hand side `x^c,α·(ẋ − V^c)`): the slave point moves
+//! relative to the tool with the sheet's design velocity, eq 74's `V` in eqs 78–83.
 //!
 //! **Generalised force.** `f_J = Ψ_J Σ f`, `m_Jβ = Ψ_J (∂d_J/∂α_β)·Σ ζ t/2 f`, so
 //! `ṁ_Jβ = Ψ_J [(∂d_J/∂α_β)˙·Σ ζ t/2 f + (∂d_J/∂α_β)·Σ (ζ ṫ/2 f + ζ t/2 ḟ)]`, where the
@@ -52,7 +66,7 @@
 //! Verified against the dual-number evaluation [`ShellContact::force_with`] and central
 //! differences (`tests/dsa_contact.rs`).
 
-use super::shell::{neighbour_state, ShellContact, SiteEval};
+use super::shell::{neighbour_state, InitialGeometry, ShellContact, SiteEval};
 use crate::shell::model::ShellModel;
 use crate::shell::point::{director_first_derivatives, ParticleState, DOFS_PER_PARTICLE};
 use crate::shell::rotation::rodrigues_coefficient_derivatives;
@@ -89,6 +103,12 @@ pub struct ContactSeeds<'a> {
     pub particles: &'a [ParticleState<f64>],
     /// The derivative of the increment `Δq̇` (generalised DOFs).
     pub increment: &'a [f64],
+    /// The design velocity of the initial geometry at every in-plane point (a shape design
+    /// variable; `None`: the geometry does not move): `V⁰ = ∂x̄⁰/∂τ` as `positions` and the
+    /// [`crate::shell::point::SurfacePoint`] dots `ẋ⁰,α, ṅ⁰, ṅ⁰,α` as `surfaces` (those of
+    /// [`crate::sensitivity::shape::ShapeVelocity`]). The slave point moves by `V⁰ + ζ t/2 ṅ⁰`
+    /// and the face area changes (module documentation).
+    pub initial: Option<InitialGeometry<'a, f64>>,
 }
 
 /// Rodrigues' rotated director `d(α)` of [`crate::shell::rotation::rotate_director`]: its
@@ -168,6 +188,9 @@ impl ShellContact {
                     return Err(ShellError::Dimension { expected, got });
                 }
             }
+            if let Some(g) = &sd.initial {
+                g.check(model)?;
+            }
         }
         let surfaces: Vec<_> = self.tools().iter().map(|tl| tl.surface.clone()).collect();
         let evals = self.evaluate(model, q, load, &surfaces)?;
@@ -228,19 +251,35 @@ impl ShellContact {
                 da.push(director_first_derivatives(st, [x[3], x[4]]));
                 da_dot.push(dad);
             }
-            // d = n⁰ + Σ Ψ (d_J − d⁰_J); n⁰ is design-free for these variables.
+            // d = n⁰ + Σ Ψ (d_J − d⁰_J); a shape variable moves x̄⁰ by V⁰ and turns n⁰ (eq 74).
             let d = site.n0 + d;
+            let initial = seeds
+                .initial
+                .as_ref()
+                .map(|g| (g.positions[site.point], g.surfaces[site.point]));
+            if let Some((v0, sf_dot)) = &initial {
+                xbar_dot += v0;
+                d_dot += sf_dot.n;
+            }
             let mut msum = V3::zeros();
             let (mut fsum_dot, mut msum_dot) = (V3::zeros(), V3::zeros());
             for (fe, tool, cp) in active {
                 let zh = fe.zh;
                 let zh_dot = fe.zeta * 0.5 * seeds.thickness;
-                // Face area w |a1 × a2|, a_α = x̄⁰,α + ζ t/2 n⁰,α.
+                // Face area w |a1 × a2|, a_α = x̄⁰,α + ζ t/2 n⁰,α;
+                // ȧ_α = ẋ⁰,α + ζ t/2 ṅ⁰,α + ζ ṫ/2 n⁰,α.
                 let sf = &p.surface;
                 let a1 = sf.x_a[0] + sf.n_a[0] * zh;
                 let a2 = sf.x_a[1] + sf.n_a[1] * zh;
                 let cr = a1.cross(&a2);
-                let cr_dot = (sf.n_a[0] * zh_dot).cross(&a2) + a1.cross(&(sf.n_a[1] * zh_dot));
+                let mut tan_dot = [sf.n_a[0] * zh_dot, sf.n_a[1] * zh_dot];
+                if let Some((_, sf_dot)) = &initial {
+                    for (ad, (xd, nd)) in tan_dot.iter_mut().zip(sf_dot.x_a.iter().zip(&sf_dot.n_a))
+                    {
+                        *ad += xd + nd * zh;
+                    }
+                }
+                let cr_dot = tan_dot[0].cross(&a2) + a1.cross(&tan_dot[1]);
                 let w_dot = cr.dot(&cr_dot) / cr.norm() * p.weight;
                 let w = fe.area;
                 // Relative velocity of the slave point to the tool point,

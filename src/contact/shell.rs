@@ -39,7 +39,9 @@ use crate::geometry::Surface;
 use crate::scalar::Real;
 use crate::shell::load::{ExternalLoad, GatherMap, GenericLoad, LoadScaling};
 use crate::shell::model::ShellModel;
-use crate::shell::point::{director_first_derivatives, ParticleState, DOFS_PER_PARTICLE};
+use crate::shell::point::{
+    director_first_derivatives, ParticleState, SurfacePoint, DOFS_PER_PARTICLE,
+};
 use crate::shell::rotation::{director_derivatives, rotate_director};
 use crate::shell::ShellError;
 use nalgebra::{DMatrix, Vector3};
@@ -170,6 +172,43 @@ pub struct ContactInputs<'a, T> {
     /// its pivot before its motion, `x^c = c + R(θ(t)) R(φ) R_φ₀ (X − c) + a(t)`
     /// ([`crate::contact::ToolPath::motion_with`]; zero: the tools as built).
     pub rotations: &'a [V3<T>],
+    /// The initial geometry of the in-plane points in `T` (shape design variables: the slave
+    /// sites move with the design velocity of the mid-surface, eq 74's `V⁰`); `None`: the
+    /// sites as built from the surface ([`ShellContact::new`]).
+    pub initial: Option<InitialGeometry<'a, T>>,
+}
+
+/// The initial geometry of a model's in-plane points as the contact's slave sites use it, in
+/// scalar `T` ([`ContactInputs::initial`]); for [`super::ContactSeeds::initial`] its design
+/// derivatives (`V⁰ = ∂x̄⁰/∂τ` and the [`SurfacePoint`] dots of
+/// [`crate::sensitivity::shape::ShapeVelocity`]).
+///
+/// With it, a site at in-plane point `k` puts its slave point at
+/// `x = x̄⁰ + Σ Ψ_J (ū_J + Δū_J) + ζ t/2 d`, `d = n⁰ + Σ Ψ_J (d_J(α_J) − d⁰_J)`, and weighs it by
+/// the initial face area `w |x⁰,1 × x⁰,2|`, `x⁰,α = x̄⁰,α + ζ t/2 n⁰,α`, with `x̄⁰ =
+/// positions[k]` and `x̄⁰,α, n⁰, n⁰,α` from `surfaces[k]` (the module documentation's
+/// definitions, evaluated on the given geometry instead of the one the contact was built on).
+#[derive(Clone, Copy, Debug)]
+pub struct InitialGeometry<'a, T> {
+    /// Per in-plane point (as `ShellModel::points`): the initial mid-surface position `x̄⁰`.
+    pub positions: &'a [V3<T>],
+    /// Per in-plane point: `x̄⁰,α`, `n⁰`, `n⁰,α`.
+    pub surfaces: &'a [SurfacePoint<T>],
+}
+
+impl<T> InitialGeometry<'_, T> {
+    /// Both lists hold one entry per in-plane point of `model`.
+    pub(super) fn check(&self, model: &ShellModel) -> Result<(), ShellError> {
+        for got in [self.positions.len(), self.surfaces.len()] {
+            if got != model.points.len() {
+                return Err(ShellError::Dimension {
+                    expected: model.points.len(),
+                    got,
+                });
+            }
+        }
+        Ok(())
+    }
 }
 
 /// The committed state of shape-function particle `j` from the real particles' `particles`: an
@@ -358,6 +397,7 @@ impl ShellContact {
             penalty: T::cst(self.penalty),
             offsets: &offsets,
             rotations: &offsets,
+            initial: None,
         };
         self.evaluate_with(model, &inputs, q, t, surfaces)
     }
@@ -387,21 +427,31 @@ impl ShellContact {
                 .iter()
                 .map(|&j| neighbour_state(model, j, inputs.particles))
                 .collect();
-            let mut xbar = site.x0.map(T::cst);
-            let mut d = site.n0.map(T::cst);
+            // The initial geometry: given in `T` (shape design variables) or the sites' own.
+            let (x0, sf) = match &inputs.initial {
+                Some(g) => (g.positions[site.point], g.surfaces[site.point]),
+                None => (
+                    site.x0.map(T::cst),
+                    SurfacePoint {
+                        n: site.n0.map(T::cst),
+                        ..p.surface.lift()
+                    },
+                ),
+            };
+            let mut xbar = x0;
+            let mut d = sf.n;
             for (n, (s, st)) in p.shape.iter().zip(&parts).enumerate() {
                 let x = &local[DOFS_PER_PARTICLE * n..DOFS_PER_PARTICLE * (n + 1)];
                 xbar += (st.u + V3::new(x[0], x[1], x[2])) * T::cst(s.psi);
                 let dj = rotate_director(&st.d, &st.e[0], &st.e[1], [x[3], x[4]]);
                 d += (dj - st.d0) * T::cst(s.psi);
             }
-            let sf = &p.surface;
             let mut faces = Vec::with_capacity(site.faces.len());
             for &(zeta, _) in &site.faces {
                 // ζ t/2 and the initial face area w |x⁰,1 × x⁰,2| (module documentation).
                 let zh = inputs.thickness * (zeta * 0.5);
-                let a1 = sf.x_a[0].map(T::cst) + sf.n_a[0].map(T::cst) * zh;
-                let a2 = sf.x_a[1].map(T::cst) + sf.n_a[1].map(T::cst) * zh;
+                let a1 = sf.x_a[0] + sf.n_a[0] * zh;
+                let a2 = sf.x_a[1] + sf.n_a[1] * zh;
                 let area = a1.cross(&a2).norm() * p.weight;
                 let xs = xbar + d * zh;
                 let mut contacts = Vec::with_capacity(self.tools.len());
@@ -471,7 +521,10 @@ impl ShellContact {
     /// translation added to its path (tool-position design variables, eq 76 with a constant
     /// `V^c`) and each tool's rotation `R(φ)` of the tool as built composed into its motion
     /// (tool-rotation design variables: the moved point, its tangents and curvatures and the
-    /// normal all turn, eq 76 with `V^c = ȧ + Ω (x^c − p)`). Eqs 68–70 evaluated through
+    /// normal all turn, eq 76 with `V^c = ȧ + Ω (x^c − p)`) and, when given, the initial
+    /// geometry of the in-plane points ([`ContactInputs::initial`]: a shape design variable
+    /// moves the slave points with `V⁰ + ζ t/2 ṅ⁰` and changes the face areas, eq 74).
+    /// Eqs 68–70 evaluated through
     /// [`closest_point`], whose final Newton correction in `T` carries the projection
     /// sensitivity of eq (80). Not tracked.
     pub fn force_with<T: Real>(
@@ -496,6 +549,9 @@ impl ShellContact {
                     got,
                 });
             }
+        }
+        if let Some(g) = &inputs.initial {
+            g.check(model)?;
         }
         let surfaces: Vec<Surface<T>> = self.tools.iter().map(|tl| tl.surface.lift()).collect();
         let evals = self.evaluate_with(model, inputs, q, t, &surfaces)?;

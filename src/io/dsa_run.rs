@@ -229,28 +229,9 @@ pub fn validate(case: &ShellCase, methods: &[DsaMethod]) -> Result<DsaSpec, DsaE
     spec.methods = methods.to_vec();
     check_tool_names(&case.path, &case.tools, &spec)?;
     if methods.contains(&DsaMethod::Dual) || methods.contains(&DsaMethod::Continuum) {
+        // Shape variables with contact are carried by both methods: the slave sites take the
+        // design velocity of the initial geometry (`contact::shell::InitialGeometry`).
         dual_loads(case)?;
-        if !case.tools.is_empty() {
-            // The contact points sit on the initial geometry held as data: neither method
-            // carries a shape variable's design velocity into the contact.
-            if let Some((k, e)) = spec.design.iter().enumerate().find(|(_, e)| {
-                matches!(
-                    e.variable.kind,
-                    crate::sensitivity::DesignKind::Shape { .. }
-                )
-            }) {
-                return Err(DsaError::Case(CaseError::Invalid {
-                    path: case.path.clone(),
-                    key: format!("design[{k}].kind"),
-                    value: format!("{:?}", kind_name(&e.variable)),
-                    expected: "a thickness, material or tool variable in a case with [[tool]]s: \
-                               shape variables with contact are not supported by the continuum \
-                               and dual methods (finite differences alone, --methods fd, can \
-                               run them)"
-                        .into(),
-                }));
-            }
-        }
     }
     Ok(spec)
 }

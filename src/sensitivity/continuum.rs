@@ -107,6 +107,9 @@ pub struct SensitivityState {
     pub unknowns: Vec<f64>,
     /// Design velocity of the initial geometry at every in-plane point (shape variables).
     pub surface: Option<Vec<SurfacePoint<f64>>>,
+    /// Design velocity `V⁰ = ẋ̄⁰` of the mid-surface point at every in-plane point (shape
+    /// variables, with [`Self::surface`]): where the contact's slave points sit (eq 74).
+    pub position: Option<Vec<Vector3<f64>>>,
     /// `ṫ`.
     pub thickness: f64,
     /// `Ė, ν̇, k̇, σ̇0, Ḣ, β̇`.
@@ -167,14 +170,7 @@ impl SensitivityState {
                 s.particles = v.particles;
                 s.history = v.history;
                 s.surface = Some(v.points);
-                if !s.tools.is_empty() {
-                    // The contact points sit on the initial geometry given as data: the
-                    // contact does not carry the design velocity.
-                    return Err(DesignError::Unsupported {
-                        name: var.name.clone(),
-                        method: "continuum method with contact (shape variable)",
-                    });
-                }
+                s.position = Some(v.positions);
             }
             DesignKind::Tool { tool, axis } => {
                 let names = contact_tools(loads);
@@ -249,6 +245,7 @@ impl SensitivityState {
             history: vec![zero_history(); model.history.len()],
             unknowns: vec![0.0; problem.n_dofs()],
             surface: None,
+            position: None,
             thickness: 0.0,
             material: MaterialParams::zero(),
             tools: vec![Default::default(); contact_tools(loads).len()],
@@ -481,6 +478,7 @@ impl ContinuumDsa {
                     history,
                     unknowns: s.unknowns.iter().zip(dq).map(|(a, d)| a + d).collect(),
                     surface: s.surface.clone(),
+                    position: s.position.clone(),
                     thickness: s.thickness,
                     material: s.material,
                     tools: s.tools.clone(),
@@ -527,8 +525,12 @@ impl ContinuumDsa {
 /// The contact force's derivative (`b'_N`, eqs 78–83, `ShellContact::force_dots`: the slave
 /// projections evaluated once for all variables) for every state's seeds restricted to `group`:
 /// the committed particle dots (group `history`), the tool translations (group `tool`), the
-/// thickness (the contact faces at `±t/2`: group `load`) and the penalty's `ω = c E/t`
-/// dependence (`Ė`: group `material`, `ṫ`: group `load`). `None` without contact.
+/// thickness (the contact faces at `±t/2`: group `load`), the penalty's `ω = c E/t`
+/// dependence (`Ė`: group `material`, `ṫ`: group `load`) and a shape variable's design
+/// velocity of the slave sites' initial geometry (`V⁰`, `ẋ⁰,α, ṅ⁰, ṅ⁰,α`: group `load`, the
+/// loads' share of the geometry seeds, as [`super::terms`] splits the dual residual:
+/// `design` is the internal force's share, `load` the external force's). `None` without
+/// contact.
 fn contact_dots(
     model: &ShellModel,
     loads: &[DualLoad],
@@ -546,6 +548,19 @@ fn contact_dots(
     };
     let on = |g: TermGroup| group.is_none_or(|x| x == g);
     let increment = vec![0.0; dq.len()];
+    if states
+        .iter()
+        .any(|s| s.surface.is_some() != s.position.is_some())
+    {
+        return Err(SensitivityError::Shell(
+            crate::shell::ShellError::InvalidInput(
+                "continuum sensitivity with contact: a shape design velocity needs both the \
+                 surface dots (`SensitivityState::surface`) and the mid-surface points' \
+                 (`SensitivityState::position`), one of them is missing"
+                    .into(),
+            ),
+        ));
+    }
     let seeds: Vec<ContactSeeds> = states
         .iter()
         .map(|s| {
@@ -579,6 +594,15 @@ fn contact_dots(
                     &zero.particles
                 },
                 increment: &increment,
+                initial: match (on(TermGroup::Load), &s.surface, &s.position) {
+                    (true, Some(surfaces), Some(positions)) => {
+                        Some(crate::contact::shell::InitialGeometry {
+                            positions,
+                            surfaces,
+                        })
+                    }
+                    _ => None,
+                },
             }
         })
         .collect();

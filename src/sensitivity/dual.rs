@@ -64,7 +64,12 @@
 //! vectors, the initial frames. The follower pressure (`x̄⁰,α`) and gravity (the initial area
 //! element) are evaluated on the dual surfaces (`Pressure::force_with_surfaces`,
 //! `Gravity::force_with_surfaces`); point forces, monitors, essential conditions, shape
-//! functions and quadrature weights live on the parameter domain and do not move.
+//! functions and quadrature weights live on the parameter domain and do not move. With
+//! contact, the group's dual mid-surface points `x̄⁰` ([`DualState::positions`]) and its
+//! surfaces are the initial geometry of the slave points
+//! ([`crate::contact::shell::InitialGeometry`] in [`ContactInputs::initial`]): the slave
+//! point `x̄⁰ + Σ Ψ (ū + Δū) + ζ t/2 (n⁰ + Σ Ψ (d − d⁰))` and the initial face areas carry
+//! the design velocity (eq 74's `V⁰` in eqs 78–83).
 //!
 //! **Constraint scales.** The rows' scales `k_c` (`E t`, `E t³/12`) are a numerical balance
 //! set when the problem is built; they are held fixed here. The generalised DOFs do not depend
@@ -75,6 +80,7 @@ use super::shape::dual_geometry;
 use super::{
     validate_design, validate_design_on, Design, DesignError, DesignKind, DesignVariable, Monitor,
 };
+use crate::contact::shell::InitialGeometry;
 use crate::contact::{ContactInputs, ShellContact};
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
@@ -218,6 +224,11 @@ pub struct DualState<D> {
     /// Initial geometry per quadrature point (as `ShellModel::points`), seeded with the
     /// group's shape design variables (constants without any).
     pub surfaces: Vec<SurfacePoint<D>>,
+    /// The mid-surface position `x̄⁰` per quadrature point, seeded with the group's shape
+    /// design variables (`None` without any: the contact's slave sites as built). With
+    /// [`Self::surfaces`] it is the initial geometry of the contact's slave points
+    /// ([`crate::contact::shell::InitialGeometry`]).
+    pub positions: Option<Vec<Vector3<D>>>,
     /// Per tool of the contact load (empty without one): the translation added to its path,
     /// value 0 (the problem's tools are at the design's position), seeded for tool variables.
     pub tool_offsets: Vec<Vector3<D>>,
@@ -360,20 +371,6 @@ impl<D: DesignDual> DualShellProblem<D> {
             Some(s) => validate_design_on(&variables, &problem.model, s, 0.0)?,
             None => validate_design(&variables, &problem.model, 0.0)?,
         }
-        if loads.iter().any(|l| matches!(l, DualLoad::Contact(_))) {
-            // The contact points sit on the initial geometry held as data (f64): a shape
-            // variable's design velocity would be missed there.
-            if let Some(v) = variables
-                .iter()
-                .find(|v| matches!(v.kind, DesignKind::Shape { .. }))
-            {
-                return Err(DesignError::Unsupported {
-                    name: v.name.clone(),
-                    method: "dual-number reference with contact (shape variable)",
-                }
-                .into());
-            }
-        }
         if let Some((index, &value)) = problem.state().iter().enumerate().find(|(_, v)| **v != 0.0)
         {
             return Err(SensitivityError::NotInitial { index, value });
@@ -450,19 +447,20 @@ impl<D: DesignDual> DualShellProblem<D> {
                     }
                 }
                 let m = design.material.to_array();
-                let (particles, history, surfaces) = match surface {
+                let (particles, history, surfaces, positions) = match surface {
                     Some(s) if shape => {
                         let g = dual_geometry::<D>(model, s, &s_parts).map_err(|e| {
                             SensitivityError::Shell(ShellError::InvalidInput(format!(
                                 "dual geometry of the shape design variables: {e}"
                             )))
                         })?;
-                        (g.particles, g.history, g.points)
+                        (g.particles, g.history, g.points, Some(g.positions))
                     }
                     _ => (
                         model.particles.iter().map(|p| p.lift()).collect(),
                         model.history.iter().map(|h| h.lift()).collect(),
                         model.points.iter().map(|p| p.surface.lift()).collect(),
+                        None,
                     ),
                 };
                 Ok(DualState {
@@ -476,6 +474,7 @@ impl<D: DesignDual> DualShellProblem<D> {
                     thickness: D::from_parts(design.thickness, &t_parts),
                     unknowns: problem.state().iter().map(|&v| D::cst(v)).collect(),
                     surfaces,
+                    positions,
                     tool_offsets: tool_parts
                         .iter()
                         .map(|p| Vector3::from_fn(|c, _| D::from_parts(0.0, &p[c])))
@@ -642,6 +641,10 @@ impl<D: DesignDual> DualShellProblem<D> {
                     penalty,
                     offsets: &g.tool_offsets,
                     rotations: &g.tool_rotations,
+                    initial: g.positions.as_ref().map(|x| InitialGeometry {
+                        positions: x,
+                        surfaces: &g.surfaces,
+                    }),
                 };
                 c.contact.force_with(model, &inputs, dq, factor, f)
             }
@@ -721,6 +724,7 @@ impl<D: DesignDual> DualShellProblem<D> {
                 thickness: g.thickness,
                 unknowns,
                 surfaces: g.surfaces.clone(),
+                positions: g.positions.clone(),
                 tool_offsets: g.tool_offsets.clone(),
                 tool_rotations: g.tool_rotations.clone(),
             });

@@ -13,7 +13,10 @@
 //!   eqs 38–43;
 //! - per particle, the initial director `d⁰ = n(ξ_I)` and the lamina vectors `e₁, e₂` built
 //!   from it ([`lamina_vectors_dot`]);
-//! - per point and layer, the initial lamina frame ([`SurfacePoint::initial_frame_dot`]).
+//! - per point and layer, the initial lamina frame ([`SurfacePoint::initial_frame_dot`]);
+//! - per quadrature point, the mid-surface point's own velocity `V⁰ = ẋ̄⁰`, where the
+//!   contact's slave points sit (`contact::shell::InitialGeometry`; eq 74's `V⁰` in the
+//!   contact terms of eqs 78–83).
 //!
 //! Everything here is `f64` code with the derivatives written out; `tests/dsa_shape.rs`
 //! compares it with a `Dual64` evaluation of the f64 code path and with central differences.
@@ -115,6 +118,9 @@ pub struct ShapeVelocity {
     pub parameter: usize,
     /// Per quadrature point (as `ShellModel::points`): `ẋ⁰,α`, `ṅ⁰`, `ṅ⁰,α`.
     pub points: Vec<SurfacePoint<f64>>,
+    /// Per quadrature point: `V⁰ = ẋ̄⁰`, the design velocity of the mid-surface point itself
+    /// (the contact's slave points sit there, `contact::shell::InitialGeometry`).
+    pub positions: Vec<V3>,
     /// Per real particle (as `ShellModel::particles`): `u̇ = 0`, `ḋ⁰ = ḋ = ṅ(ξ_I)`, `ė1, ė2`.
     pub particles: Vec<ParticleState<f64>>,
     /// Per point and layer (as `ShellModel::history`): the initial frame's derivative,
@@ -151,7 +157,7 @@ impl ShapeVelocity {
         parameter: usize,
     ) -> Result<Self, GeometryError> {
         check_model(model, surface)?;
-        let points = model
+        let (points, positions): (Vec<_>, Vec<_>) = model
             .points
             .iter()
             .map(|p| {
@@ -159,9 +165,11 @@ impl ShapeVelocity {
                 let s = surface.eval(u, v);
                 s.normal()?;
                 let sd = surface.design_velocity(parameter, u, v)?;
-                Ok(SurfacePoint::from_derivs_dot(&s, &sd))
+                Ok((SurfacePoint::from_derivs_dot(&s, &sd), sd.x))
             })
-            .collect::<Result<Vec<_>, GeometryError>>()?;
+            .collect::<Result<Vec<_>, GeometryError>>()?
+            .into_iter()
+            .unzip();
         let particles = model
             .particle_uv
             .iter()
@@ -199,6 +207,7 @@ impl ShapeVelocity {
         Ok(ShapeVelocity {
             parameter,
             points,
+            positions,
             particles,
             history,
         })
@@ -226,15 +235,17 @@ pub fn dual_geometry<D: DesignDual>(
         })
         .collect();
     let s = surface.with_design_parameters::<D>(&p)?;
-    let points = model
+    let (points, positions): (Vec<_>, Vec<_>) = model
         .points
         .iter()
         .map(|q| {
             let sd = s.eval(D::cst(q.uv[0]), D::cst(q.uv[1]));
             sd.normal()?;
-            Ok(SurfacePoint::from_derivs(&sd))
+            Ok((SurfacePoint::from_derivs(&sd), sd.x))
         })
-        .collect::<Result<Vec<_>, GeometryError>>()?;
+        .collect::<Result<Vec<_>, GeometryError>>()?
+        .into_iter()
+        .unzip();
     let particles = model
         .particle_uv
         .iter()
@@ -264,6 +275,7 @@ pub fn dual_geometry<D: DesignDual>(
         .collect();
     Ok(DualGeometry {
         points,
+        positions,
         particles,
         history,
     })
@@ -274,6 +286,8 @@ pub fn dual_geometry<D: DesignDual>(
 pub struct DualGeometry<D> {
     /// Per quadrature point.
     pub points: Vec<SurfacePoint<D>>,
+    /// Per quadrature point: the mid-surface position `x̄⁰`.
+    pub positions: Vec<Vector3<D>>,
     /// Per real particle (initial states).
     pub particles: Vec<ParticleState<D>>,
     /// Per point and layer (initial histories).

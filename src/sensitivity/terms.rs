@@ -116,23 +116,25 @@ fn seeds_of(g: &DualState<Dual64>) -> SensitivityState {
             .collect(),
         history: g.history.iter().map(history_parts).collect(),
         unknowns: g.unknowns.iter().map(|x| x.eps).collect(),
-        surface: g
-            .surfaces
-            .iter()
-            .any(|p| {
+        // With a shape variable's positions (`Some`) the surface dots are kept too, zero or
+        // not: the contact takes both (a translation of the sheet moves x̄⁰ alone).
+        surface: (g.positions.is_some()
+            || g.surfaces.iter().any(|p| {
                 p.n.iter().any(|x| x.eps != 0.0)
                     || p.x_a.iter().any(|v| v.iter().any(|x| x.eps != 0.0))
-            })
-            .then(|| {
-                g.surfaces
-                    .iter()
-                    .map(|p| SurfacePoint {
-                        x_a: p.x_a.map(|v| pv(&v)),
-                        n: pv(&p.n),
-                        n_a: p.n_a.map(|v| pv(&v)),
-                    })
-                    .collect()
-            }),
+            }))
+        .then(|| {
+            g.surfaces
+                .iter()
+                .map(|p| SurfacePoint {
+                    x_a: p.x_a.map(|v| pv(&v)),
+                    n: pv(&p.n),
+                    n_a: p.n_a.map(|v| pv(&v)),
+                })
+                .collect()
+        }),
+        // V⁰ of the contact's slave sites, with the surface dots (a shape variable's group).
+        position: g.positions.as_ref().map(|x| x.iter().map(pv).collect()),
         thickness: g.thickness.eps,
         material: MaterialParams::from_array(g.material.to_array().map(|x| x.eps)),
         // Tool translations and rotations both feed the `Tool` group (V^c, eq 76).
@@ -188,6 +190,9 @@ fn masked(g: &DualState<Dual64>, group: TermGroup) -> DualState<Dual64> {
             p.x_a = p.x_a.map(|v| v.map(|x| c(&x)));
             p.n = p.n.map(|x| c(&x));
             p.n_a = p.n_a.map(|v| v.map(|x| c(&x)));
+        }
+        for x in m.positions.iter_mut().flatten() {
+            *x = x.map(|v| c(&v));
         }
     }
     if group != TermGroup::Tool {
@@ -377,6 +382,7 @@ impl Breakdown {
                     history,
                     unknowns: s.unknowns.iter().zip(dqd).map(|(a, d)| a + d).collect(),
                     surface: s.surface.clone(),
+                    position: s.position.clone(),
                     thickness: s.thickness,
                     material: s.material,
                     tools: s.tools.clone(),
