@@ -184,6 +184,19 @@ fn dsa(case: &Case, out: &Path, methods: Option<&[String]>, terms: Option<usize>
         fmt(result.time_dual_run),
         fmt(result.time_fd)
     );
+    if let (Some(t), Some(dsa)) = (result.continuum_stages, result.time_continuum) {
+        let nv = result.variables.len().max(1) as f64;
+        println!(
+            "continuum DSA per design variable: {:.2} % of the analysis; stages: right-hand sides \
+             {:.3} s, solve {:.3} s, history update {:.3} s, monitors {:.3} s, load check {:.3} s",
+            100.0 * dsa / result.time_analysis / nv,
+            t.rhs,
+            t.solve,
+            t.update,
+            t.record,
+            t.check
+        );
+    }
     let json = dsa_run::to_json(c, &result);
     let path = out.join("sensitivity.json");
     let text = match serde_json::to_string_pretty(&json) {

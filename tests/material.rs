@@ -6,7 +6,7 @@ use nalgebra::DMatrix;
 use proptest::prelude::*;
 use shelldsa::material::{
     consistent_tangent, elastic_matrix, material_sensitivity, return_map, von_mises,
-    yield_function, MaterialError, MaterialParams, MaterialState, Vec5,
+    yield_function, MaterialError, MaterialParams, MaterialSensitivity, MaterialState, Vec5,
 };
 use shelldsa::scalar::Real;
 use shelldsa::verification::{check, CheckOptions, Differentiable, StepSize, Tolerance};
@@ -263,6 +263,45 @@ fn consistent_tangent_equals_dual_and_fd_plastic() {
         let d = elastic_matrix(&m);
         let eta = out.state.stress - out.state.back_stress;
         assert!(eta.dot(&(dep * eta)) < eta.dot(&(d * eta)));
+    }
+}
+
+/// The compact strain map kept per layer point by the continuum DSA's history update
+/// (`MaterialSensitivity::strain_map`) gives the strain part of `material_sensitivity` (history
+/// and parameter seeds zero), on both branches, and its stress part is `D^ep Δε̇` (eq 48).
+/// Tolerance: the two forms associate the products differently (`(ΞD)Δε̇` against
+/// `Ξ(DΔε̇)`), a few ulps of the largest entry; 1e-13 relative leaves room for that only.
+#[test]
+fn strain_map_equals_the_strain_part_of_the_sensitivity() {
+    let ddeps = Vec5::new(3e-5, -2e-5, 1e-5, 4e-6, -7e-6);
+    for beta in [0.0, 0.5, 1.0] {
+        let m = steel(beta);
+        let n = loaded_state(&m);
+        for (deps, plastic) in [
+            (Vec5::new(4e-4, -1e-4, 3e-4, 2e-4, -1e-4), true),
+            (Vec5::new(-1e-5, 1e-5, 0.0, 0.0, 0.0), false),
+        ] {
+            let out = return_map(&m, &n, &deps).unwrap();
+            assert_eq!(out.plastic, plastic);
+            let map = MaterialSensitivity::new(&m, &deps, &out).strain_map();
+            let got = map.apply(&elastic_matrix(&m), &ddeps);
+            let want = material_sensitivity(
+                &m,
+                &deps,
+                &out,
+                &MaterialParams::zero(),
+                &MaterialState::zero(),
+                &ddeps,
+            );
+            let scale = want.stress.amax();
+            assert!((got.stress - want.stress).amax() <= 1e-13 * scale);
+            assert!((got.stress - consistent_tangent(&m, &out) * ddeps).amax() <= 1e-12 * scale);
+            assert!(
+                (got.back_stress - want.back_stress).amax()
+                    <= 1e-13 * scale.max(want.back_stress.amax())
+            );
+            assert!((got.eps_p - want.eps_p).abs() <= 1e-13 * want.eps_p.abs().max(1e-30));
+        }
     }
 }
 

@@ -210,6 +210,8 @@ pub struct DsaResult {
     pub time_continuum: Option<f64>,
     /// Wall time of the whole run with the continuum hook (analysis + DSA, s).
     pub time_continuum_run: Option<f64>,
+    /// The continuum DSA's time by stage.
+    pub continuum_stages: Option<crate::sensitivity::continuum::ContinuumTiming>,
     /// The dual reference's own time inside its run (s).
     pub time_dual: Option<f64>,
     /// Wall time of the whole run with the dual hook (analysis + reference, s).
@@ -294,6 +296,7 @@ pub fn run(
     // (2a) The continuum DSA.
     let mut continuum: Option<Vec<Vec<Vec<f64>>>> = None; // [variable][step][monitor]
     let (mut time_continuum, mut time_continuum_run) = (None, None);
+    let mut continuum_stages = None;
     let mut continuum_value_difference = None;
     if spec.methods.contains(&DsaMethod::Continuum) {
         let (problem, newton, loads) = method_problem(&analysis, case, &base)?;
@@ -320,6 +323,7 @@ pub fn run(
         ));
         time_continuum = Some(r.dsa.as_secs_f64());
         time_continuum_run = Some(r.total.as_secs_f64());
+        continuum_stages = Some(r.timing);
         progress(&format!(
             "continuum: {} variable(s), DSA {:.3} s in a run of {:.2} s",
             vars.len(),
@@ -499,6 +503,7 @@ pub fn run(
         time_analysis,
         time_continuum,
         time_continuum_run,
+        continuum_stages,
         time_dual,
         time_dual_run,
         time_fd,
@@ -638,6 +643,13 @@ pub fn to_json(case: &ShellCase, r: &DsaResult) -> Value {
         },
         "dual_run_total_s": r.time_dual_run,
         "continuum_run_total_s": r.time_continuum_run,
+        "continuum_stages_s": r.continuum_stages.map_or(Value::Null, |t| json!({
+            "rhs": t.rhs,
+            "solve": t.solve,
+            "update": t.update,
+            "record": t.record,
+            "check": t.check,
+        })),
         "variables": variables,
     })
 }

@@ -18,7 +18,7 @@ pub use params::{MaterialError, MaterialParams};
 pub use params::{N_PARAMS, PARAM_NAMES};
 pub use sensitivity::{
     elastic_matrix_derivative, material_sensitivity, material_sensitivity_terms,
-    MaterialSensitivity, MaterialSensitivityTerms,
+    MaterialSensitivity, MaterialSensitivityTerms, StrainMap,
 };
 
 use crate::scalar::Real;

@@ -49,7 +49,9 @@ use crate::kinematics::{
     frame_update, global_stress, hughes_winget, local_strain_increment, mid_step_gradient,
     strain_to_vec5, stress_from_vec5, M3,
 };
-use crate::material::{return_map, MaterialParams, MaterialSensitivity};
+use crate::material::{
+    elastic_matrix, return_map, Mat5, MaterialParams, MaterialSensitivity, StrainMap,
+};
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 
@@ -316,6 +318,44 @@ impl SeedSums {
     }
 }
 
+impl SeedSums {
+    /// [`SeedSums::new`] for several seed sets at once into `out` (one per item of `surfaces`):
+    /// the neighbour loop outside, the seed sets inside, so each neighbour's shape data is read
+    /// once; every seed set's sums are added in neighbour order, as [`SeedSums::new`] does
+    /// (the same floating-point results). `nb(s, i)`: seed set `s`'s data of neighbour `i`.
+    fn fill_all<'p, 's>(
+        out: &mut Vec<SeedSums>,
+        shape: &[ShapeData],
+        surfaces: impl Iterator<Item = Option<&'s SurfacePoint<f64>>>,
+        nb: impl Fn(usize, usize) -> (&'p ParticleState<f64>, V3, V3),
+    ) {
+        out.clear();
+        out.extend(surfaces.map(|sp| match sp {
+            Some(sp) => SeedSums {
+                xa: sp.x_a,
+                da: sp.n_a,
+                d: sp.n,
+                ..Default::default()
+            },
+            None => SeedSums::default(),
+        }));
+        for (i, sh) in shape.iter().enumerate() {
+            for (s, acc) in out.iter_mut().enumerate() {
+                let (p, du, dd) = nb(s, i);
+                let ddir = p.d - p.d0;
+                for a in 0..2 {
+                    acc.xa[a] += p.u * sh.dpsi[a];
+                    acc.da[a] += ddir * sh.dpsi[a];
+                    acc.g_u[a] += du * sh.dpsi[a];
+                    acc.g_d[a] += dd * sh.dpsi[a];
+                }
+                acc.d += ddir * sh.psi;
+                acc.g_d3 += dd * sh.psi;
+            }
+        }
+    }
+}
+
 /// Value sums at one in-plane point (f64, layer-independent): `x̄,α = x⁰,α + Σ Ψ_I,α ū_I`,
 /// `d,α = n⁰,α + Σ Ψ_I,α (d_I − d⁰_I)`, `d = n⁰ + Σ Ψ_I (d_I − d⁰_I)`, `Σ Ψ_I,α Δū_I`,
 /// `Σ Ψ_I,α Δd_I`, `Σ Ψ_I Δd_I`: the layers' `Jⁿ` and `G` (and the factors of `ż`, `ṫ/2`).
@@ -443,6 +483,8 @@ struct LayerData {
     jinv_t: M3<f64>,
     jinv_t_w: M3<f64>,
     p: M3<f64>,
+    /// The return-map sensitivity's seed-independent factors (eqs 44–49).
+    material: MaterialSensitivity,
     keep: LayerKeep,
 }
 
@@ -473,6 +515,7 @@ impl LayerData {
         let sigma_l = stress_from_vec5(&res.history.material.stress);
         let jinv_t = k.j1_inv.transpose();
         let c = k.inc.deps * a.transpose();
+        let material = MaterialSensitivity::new(inp.material, &deps_l, &res.return_map);
         // The rotation rates are linear in the spin rate's axial vector ω (Δω̇ = [ω]×,
         // eqs 54–55): ṙ = Σ ω_i (I − ½Δω)⁻¹ E_i ½(I + r), ½ṙ = Σ ω_i (I − ¼Δω)⁻¹ E_i ¼(I + ½r)
         // with E_i = [e_i]×, so the terms Qₙ ½ṙᵀ Δε Aᵀ (eq 50) and Qₙ ṙᵀ (eq 51) are
@@ -497,13 +540,14 @@ impl LayerData {
             jinv_t,
             jinv_t_w: jinv_t * (k.det1 * inp.weight),
             p: k.p,
+            material,
             keep: LayerKeep {
                 f_half_inv,
                 jn_inv_f: k.jn_inv * f_half_inv,
                 a,
                 strain_rot,
                 frame_rot,
-                material: MaterialSensitivity::new(inp.material, &deps_l, &res.return_map),
+                material: material.strain_map(),
             },
         })
     }
@@ -541,7 +585,7 @@ impl LayerData {
         // Δε̇ˡ with the history frame's sensitivity (eq 50): Ȧ = Q̇ₙ ½rᵀ + Qₙ ½ṙᵀ.
         let deps_l_dot = k.strain_dot(&(history_dot.frame * self.r_half_t_c), &omega, &deps_dot);
         // Return-map sensitivity (eqs 44–49).
-        let mat_dot = k.material.apply(
+        let mat_dot = self.material.apply(
             material_dot,
             &history_dot.material,
             &strain_to_vec5(&deps_l_dot),
@@ -634,6 +678,46 @@ fn add_rows_dot(
         o[2] += f_dot[2];
         o[3] += dad[0].dot(&m) + da[0].dot(&m_dot);
         o[4] += dad[1].dot(&m) + da[1].dot(&m_dot);
+    }
+}
+
+/// [`add_rows_dot`] for several seed sets at once (`t_dot` and `dots` one per seed set,
+/// `out` seed-major, `5 n` per seed set): the neighbour loop outside, so each neighbour's shape
+/// data and the seed-independent moment `m_I` are formed once; the same floating-point results.
+#[allow(clippy::too_many_arguments)]
+fn add_rows_dot_all(
+    shape: &[ShapeData],
+    d_alpha: &[[V3; 2]],
+    d_alpha_dot: impl Fn(usize, usize) -> [V3; 2],
+    half_t: f64,
+    t_dot: impl Iterator<Item = f64>,
+    val: &StressSums,
+    dots: &[StressSums],
+    out: &mut [f64],
+) {
+    let nr = DOFS_PER_PARTICLE * shape.len();
+    let half_t_dot: Vec<f64> = t_dot.map(|t| t * 0.5).collect();
+    let p3 = val.p.column(2);
+    for (i, (sh, da)) in shape.iter().zip(d_alpha).enumerate() {
+        let [t0, t1] = sh.dpsi_test;
+        let m = val.pz.column(0) * t0 + val.pz.column(1) * t1 + p3 * (half_t * sh.psi);
+        let mz = val.pzeta.column(0) * t0 + val.pzeta.column(1) * t1;
+        for (s, (dot, &htd)) in dots.iter().zip(&half_t_dot).enumerate() {
+            let dad = d_alpha_dot(s, i);
+            let pd3 = dot.p.column(2);
+            let f_dot = dot.p.column(0) * t0 + dot.p.column(1) * t1;
+            let m_dot = dot.pz.column(0) * t0
+                + dot.pz.column(1) * t1
+                + mz * htd
+                + pd3 * (half_t * sh.psi)
+                + p3 * (htd * sh.psi);
+            let o = &mut out[s * nr + DOFS_PER_PARTICLE * i..s * nr + DOFS_PER_PARTICLE * (i + 1)];
+            o[0] += f_dot[0];
+            o[1] += f_dot[1];
+            o[2] += f_dot[2];
+            o[3] += dad[0].dot(&m) + da[0].dot(&m_dot);
+            o[4] += dad[1].dot(&m) + da[1].dot(&m_dot);
+        }
     }
 }
 
@@ -947,117 +1031,121 @@ impl ShellModel {
             .collect();
         // Per in-plane point: the f64 layers once, every seed set on each; results flat
         // (seed-major) so that a point allocates two vectors whatever the number of seed sets.
-        type PointOut = (Vec<f64>, Vec<PointHistory<f64>>, Vec<LayerKeep>);
-        let per_point = (0..self.points.len())
+        // The trial histories' derivatives are written in place: per seed set, point-major, each
+        // point writing its own layers' slots (no per-point buffers to copy afterwards).
+        let zero_history = PointHistory {
+            frame: M3::zeros(),
+            material: crate::material::MaterialState::zero(),
+        };
+        let mut hist_out: Vec<Vec<PointHistory<f64>>> = (0..ns)
+            .map(|_| vec![zero_history; self.history.len()])
+            .collect();
+        let mut slots: Vec<Vec<&mut [PointHistory<f64>]>> = (0..self.points.len())
+            .map(|_| Vec::with_capacity(ns))
+            .collect();
+        for h in hist_out.iter_mut() {
+            for (slot, chunk) in slots.iter_mut().zip(h.chunks_exact_mut(nl)) {
+                slot.push(chunk);
+            }
+        }
+        type PointOut = (Vec<f64>, Vec<LayerKeep>);
+        let per_point = slots
             .into_par_iter()
-            .map_init(Scratch::default, |sc, k| -> Result<PointOut, ShellError> {
-                let p = &self.points[k];
-                let nb = &p.neighbours;
-                let nr = D * nb.len();
-                sc.parts.clear();
-                sc.parts.extend(nb.iter().map(|&j| per[j].0));
-                let inc = &mut sc.inc;
-                inc.du.clear();
-                inc.du.extend(
-                    nb.iter()
-                        .map(|&j| V3::new(per[j].1[0], per[j].1[1], per[j].1[2])),
-                );
-                inc.dd.clear();
-                inc.dd.extend(nb.iter().map(|&j| per[j].2));
-                inc.d_alpha.clear();
-                inc.d_alpha.extend(nb.iter().map(|&j| per[j].3));
-                let values = ValueSums::new(&p.surface, &p.shape, &sc.parts, inc);
-                sc.sums.clear();
-                sc.sums.extend(seeds.iter().enumerate().map(|(s, sd)| {
-                    let base = s * n_sf;
-                    SeedSums::new(&p.shape, sd.surface.map(|sp| &sp[k]), |i| {
-                        let d = &per_dot[base + nb[i]];
-                        (&d.0, d.1, d.2)
-                    })
-                }));
-                let mut residuals = vec![0.0; ns * nr];
-                let mut histories = Vec::with_capacity(ns * nl);
-                histories.resize(
-                    ns * nl,
-                    PointHistory {
-                        frame: M3::zeros(),
-                        material: crate::material::MaterialState::zero(),
-                    },
-                );
-                sc.dots.clear();
-                sc.dots.resize(ns, StressSums::zero());
-                let mut kept = Vec::with_capacity(if keep { nl } else { 0 });
-                let mut val = StressSums::zero();
-                for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
-                    let inp = PointInput {
-                        surface: &p.surface,
-                        zeta,
-                        thickness: self.thickness,
-                        weight: p.weight * wz,
-                        shape: &p.shape,
-                        particles: &sc.parts,
-                        material: &self.material,
-                        history: &self.history[k * nl + l],
-                    };
-                    let res = values.layer(&inp)?;
-                    let layer = LayerData::new(&inp, &res)?;
-                    if keep {
-                        kept.push(layer.keep);
+            .enumerate()
+            .map_init(
+                Scratch::default,
+                |sc, (k, mut hist)| -> Result<PointOut, ShellError> {
+                    let p = &self.points[k];
+                    let nb = &p.neighbours;
+                    let nr = D * nb.len();
+                    sc.parts.clear();
+                    sc.parts.extend(nb.iter().map(|&j| per[j].0));
+                    let inc = &mut sc.inc;
+                    inc.du.clear();
+                    inc.du.extend(
+                        nb.iter()
+                            .map(|&j| V3::new(per[j].1[0], per[j].1[1], per[j].1[2])),
+                    );
+                    inc.dd.clear();
+                    inc.dd.extend(nb.iter().map(|&j| per[j].2));
+                    inc.d_alpha.clear();
+                    inc.d_alpha.extend(nb.iter().map(|&j| per[j].3));
+                    let values = ValueSums::new(&p.surface, &p.shape, &sc.parts, inc);
+                    SeedSums::fill_all(
+                        &mut sc.sums,
+                        &p.shape,
+                        seeds.iter().map(|sd| sd.surface.map(|sp| &sp[k])),
+                        |s, i| {
+                            let d = &per_dot[s * n_sf + nb[i]];
+                            (&d.0, d.1, d.2)
+                        },
+                    );
+                    let mut residuals = vec![0.0; ns * nr];
+                    sc.dots.clear();
+                    sc.dots.resize(ns, StressSums::zero());
+                    let mut kept = Vec::with_capacity(if keep { nl } else { 0 });
+                    let mut val = StressSums::zero();
+                    for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
+                        let inp = PointInput {
+                            surface: &p.surface,
+                            zeta,
+                            thickness: self.thickness,
+                            weight: p.weight * wz,
+                            shape: &p.shape,
+                            particles: &sc.parts,
+                            material: &self.material,
+                            history: &self.history[k * nl + l],
+                        };
+                        let res = values.layer(&inp)?;
+                        let layer = LayerData::new(&inp, &res)?;
+                        if keep {
+                            kept.push(layer.keep);
+                        }
+                        val.add_value(&layer.p, layer.z, zeta);
+                        for (s, (sd, acc)) in seeds.iter().zip(sc.dots.iter_mut()).enumerate() {
+                            hist[s][l] = layer.apply(
+                                &values,
+                                &sc.sums[s],
+                                sd.thickness,
+                                &sd.material,
+                                &sd.history[k * nl + l],
+                                acc,
+                            );
+                        }
                     }
-                    val.add_value(&layer.p, layer.z, zeta);
-                    for (s, (sd, acc)) in seeds.iter().zip(sc.dots.iter_mut()).enumerate() {
-                        histories[s * nl + l] = layer.apply(
-                            &values,
-                            &sc.sums[s],
-                            sd.thickness,
-                            &sd.material,
-                            &sd.history[k * nl + l],
-                            acc,
-                        );
-                    }
-                }
-                let half_t = self.thickness * 0.5;
-                for (s, ((sd, r), dot)) in seeds
-                    .iter()
-                    .zip(residuals.chunks_exact_mut(nr))
-                    .zip(&sc.dots)
-                    .enumerate()
-                {
-                    let base = s * n_sf;
-                    add_rows_dot(
+                    add_rows_dot_all(
                         &p.shape,
                         &sc.inc.d_alpha,
-                        |i| per_dot[base + nb[i]].3,
-                        half_t,
-                        sd.thickness,
+                        |s, i| per_dot[s * n_sf + nb[i]].3,
+                        self.thickness * 0.5,
+                        seeds.iter().map(|sd| sd.thickness),
                         &val,
-                        dot,
-                        r,
+                        &sc.dots,
+                        &mut residuals,
                     );
-                }
-                Ok((residuals, histories, kept))
-            })
+                    Ok((residuals, kept))
+                },
+            )
             .collect::<Result<Vec<_>, ShellError>>()?;
         let mut layers = Vec::with_capacity(if keep { self.points.len() } else { 0 });
-        let per_point: Vec<(Vec<f64>, Vec<PointHistory<f64>>)> = per_point
+        let residuals: Vec<Vec<f64>> = per_point
             .into_iter()
-            .map(|(residuals, histories, kept)| {
+            .map(|(residuals, kept)| {
                 if keep {
                     layers.push(kept);
                 }
-                (residuals, histories)
+                residuals
             })
             .collect();
         // Seed sets in parallel, each summed in point order (deterministic).
-        let out: Vec<InternalForceDot> = (0..ns)
+        let out: Vec<InternalForceDot> = hist_out
             .into_par_iter()
-            .map(|s| {
+            .enumerate()
+            .map(|(s, h)| {
                 let mut f = vec![0.0; self.n_dofs()];
-                let mut h = Vec::with_capacity(self.history.len());
-                for (k, (residuals, histories)) in per_point.iter().enumerate() {
+                for (k, r) in residuals.iter().enumerate() {
                     let nr = D * self.points[k].neighbours.len();
-                    self.scatter_local(k, &residuals[s * nr..(s + 1) * nr], &mut f);
-                    h.extend_from_slice(&histories[s * nl..(s + 1) * nl]);
+                    self.scatter_local(k, &r[s * nr..(s + 1) * nr], &mut f);
                 }
                 (f, h)
             })
@@ -1148,39 +1236,37 @@ impl ShellModel {
             })
             .collect();
         let half_t = self.thickness * 0.5;
-        let per_point: Vec<Vec<PointHistory<f64>>> = (0..self.points.len())
-            .into_par_iter()
-            .map(|k| {
-                let p = &self.points[k];
-                let nb = &p.neighbours;
-                let mut out = Vec::with_capacity(ns * nl);
-                for s in 0..ns {
-                    let base = s * n_sf;
-                    // Σ Ψ,α Δū̇, Σ Ψ,α Δḋ, Σ Ψ Δḋ (the other sums of SeedSums are zero).
-                    let mut sums = SeedSums::default();
-                    for (sh, &j) in p.shape.iter().zip(nb) {
-                        let (du, dd) = &per_dot[base + j];
-                        for a in 0..2 {
-                            sums.g_u[a] += du * sh.dpsi[a];
-                            sums.g_d[a] += dd * sh.dpsi[a];
-                        }
-                        sums.g_d3 += dd * sh.psi;
-                    }
-                    for (l, &(zeta, _)) in self.thickness_rule.iter().enumerate() {
-                        out.push(lin.layers[k][l].increment_history_dot(
-                            half_t,
-                            half_t * zeta,
-                            &sums,
-                        ));
-                    }
-                }
-                out
-            })
+        let d = elastic_matrix(&self.material);
+        // Added in place: per in-plane point, its layers' slots of every seed set.
+        let mut slots: Vec<Vec<&mut [PointHistory<f64>]>> = (0..self.points.len())
+            .map(|_| Vec::with_capacity(ns))
             .collect();
-        histories.par_iter_mut().enumerate().for_each(|(s, h)| {
-            for (k, hs) in per_point.iter().enumerate() {
-                for (l, d) in hs[s * nl..(s + 1) * nl].iter().enumerate() {
-                    add_history(&mut h[k * nl + l], d);
+        for h in histories.iter_mut() {
+            for (slot, chunk) in slots.iter_mut().zip(h.chunks_exact_mut(nl)) {
+                slot.push(chunk);
+            }
+        }
+        slots.into_par_iter().enumerate().for_each(|(k, mut hist)| {
+            let p = &self.points[k];
+            let nb = &p.neighbours;
+            for (s, h) in hist.iter_mut().enumerate() {
+                let base = s * n_sf;
+                // Σ Ψ,α Δū̇, Σ Ψ,α Δḋ, Σ Ψ Δḋ (the other sums of SeedSums are zero).
+                let mut sums = SeedSums::default();
+                for (sh, &j) in p.shape.iter().zip(nb) {
+                    let (du, dd) = &per_dot[base + j];
+                    for a in 0..2 {
+                        sums.g_u[a] += du * sh.dpsi[a];
+                        sums.g_d[a] += dd * sh.dpsi[a];
+                    }
+                    sums.g_d3 += dd * sh.psi;
+                }
+                for (l, (&(zeta, _), hl)) in
+                    self.thickness_rule.iter().zip(h.iter_mut()).enumerate()
+                {
+                    let inc =
+                        lin.layers[k][l].increment_history_dot(&d, half_t, half_t * zeta, &sums);
+                    add_history(hl, &inc);
                 }
             }
         });
@@ -1214,8 +1300,8 @@ struct LayerKeep {
     strain_rot: [M3<f64>; 3],
     /// `Qₙ ṙ_iᵀ` for `ω = e_i` (eqs 51, 54–55): `Qₙ ṙᵀ = Σ ω_i frame_rot[i]`.
     frame_rot: [M3<f64>; 3],
-    /// The return-map sensitivity's seed-independent factors (eqs 44–49).
-    material: MaterialSensitivity,
+    /// The return-map sensitivity's strain part (eqs 44–49, 48).
+    material: StrainMap,
 }
 
 impl LayerKeep {
@@ -1250,7 +1336,13 @@ impl LayerKeep {
 
     /// The `Δq̇` column of [`LayerData::apply`] (`J̇ⁿ = 0`, `ż = ṫ = 0`, no history or
     /// material seeds): `ⁿ⁺¹(Q̇, σ̇, α̇, ė^p)`.
-    fn increment_history_dot(&self, half_t: f64, z: f64, sums: &SeedSums) -> PointHistory<f64> {
+    fn increment_history_dot(
+        &self,
+        d: &Mat5<f64>,
+        half_t: f64,
+        z: f64,
+        sums: &SeedSums,
+    ) -> PointHistory<f64> {
         let g_dot = M3::from_columns(&[
             sums.g_u[0] + sums.g_d[0] * z,
             sums.g_u[1] + sums.g_d[1] * z,
@@ -1261,7 +1353,7 @@ impl LayerKeep {
         let (deps_dot, omega) = Self::rates(&l_dot);
         // Eq 50 with Ȧ = Qₙ ½ṙᵀ.
         let deps_l_dot = self.strain_dot(&M3::zeros(), &omega, &deps_dot);
-        let mat_dot = self.material.strain(&strain_to_vec5(&deps_l_dot));
+        let mat_dot = self.material.apply(d, &strain_to_vec5(&deps_l_dot));
         // Eq 51 with Q̇ₙ = 0.
         PointHistory {
             frame: self.frame_rate(&omega),
