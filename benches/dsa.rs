@@ -8,7 +8,8 @@
 //!
 //! `cargo bench --bench dsa` (≈ 10 min on 2 cores); one case:
 //! `cargo bench --bench dsa -- hemisphere-plastic-dsa` (or `cylindrical-bending-dsa`). The
-//! percentages alone (no criterion samples): `cargo bench --bench dsa -- nomatch`.
+//! percentages alone (no criterion samples): `cargo bench --bench dsa -- nomatch`; one case's
+//! percentages: `DSA_BENCH_CASE=hemisphere cargo bench --bench dsa -- nomatch`.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use shelldsa::io::dsa_case::{dual_contact, dual_loads};
@@ -112,7 +113,10 @@ impl Setup {
 }
 
 fn bench(c: &mut Criterion) {
-    for rel in CASES {
+    // `DSA_BENCH_CASE=hemisphere` (a substring of the case directory) restricts the run to the
+    // matching cases (the percentages are computed before criterion's own filter applies).
+    let only = std::env::var("DSA_BENCH_CASE").unwrap_or_default();
+    for rel in CASES.into_iter().filter(|r| r.contains(&only)) {
         let s = Setup::new(rel);
         let name = rel.split('/').nth(1).unwrap();
         // The methods' own time per variable against the plain analysis, best of 3 each (the

@@ -823,8 +823,13 @@ pub struct ModelSeeds<'a> {
     pub dofs: &'a [f64],
 }
 
-/// Per-thread buffers of [`ShellModel::internal_force_dots`], reused from point to point.
+/// The number of fixed point chunks of [`ShellModel::internal_force_dots`] (a few per
+/// thread for load balance; each holds one force vector per seed set).
+const POINT_CHUNKS: usize = 32;
+
+/// Per-chunk buffers of [`ShellModel::internal_force_dots`], reused from point to point.
 struct Scratch {
+    residuals: Vec<f64>,
     parts: Vec<ParticleState<f64>>,
     inc: PointIncrement<f64>,
     sums: Vec<SeedSums>,
@@ -834,6 +839,7 @@ struct Scratch {
 impl Default for Scratch {
     fn default() -> Self {
         Scratch {
+            residuals: Vec::new(),
             parts: Vec::new(),
             inc: PointIncrement {
                 du: Vec::new(),
@@ -1048,13 +1054,23 @@ impl ShellModel {
                 slot.push(chunk);
             }
         }
-        type PointOut = (Vec<f64>, Vec<LayerKeep>);
-        let per_point = slots
+        // Points in fixed contiguous chunks: each chunk sums its rows into its own per-seed
+        // force vectors (small, cache-resident) in point order, and the chunks are summed in
+        // chunk order: deterministic and independent of the number of threads, without a
+        // per-point row buffer to store and read back.
+        let n_dofs = self.n_dofs();
+        let chunk_len = self.points.len().div_ceil(POINT_CHUNKS).max(1);
+        type ChunkOut = (Vec<f64>, Vec<Vec<LayerKeep>>);
+        let per_chunk = slots
             .into_par_iter()
             .enumerate()
-            .map_init(
-                Scratch::default,
-                |sc, (k, mut hist)| -> Result<PointOut, ShellError> {
+            .chunks(chunk_len)
+            .map(|items| -> Result<ChunkOut, ShellError> {
+                let mut sc = Scratch::default();
+                let sc = &mut sc;
+                let mut acc = vec![0.0; ns * n_dofs];
+                let mut kept_chunk = Vec::with_capacity(if keep { items.len() } else { 0 });
+                for (k, mut hist) in items {
                     let p = &self.points[k];
                     let nb = &p.neighbours;
                     let nr = D * nb.len();
@@ -1080,7 +1096,9 @@ impl ShellModel {
                             (&d.0, d.1, d.2)
                         },
                     );
-                    let mut residuals = vec![0.0; ns * nr];
+                    let residuals = &mut sc.residuals;
+                    residuals.clear();
+                    residuals.resize(ns * nr, 0.0);
                     sc.dots.clear();
                     sc.dots.resize(ns, StressSums::zero());
                     let mut kept = Vec::with_capacity(if keep { nl } else { 0 });
@@ -1121,31 +1139,34 @@ impl ShellModel {
                         seeds.iter().map(|sd| sd.thickness),
                         &val,
                         &sc.dots,
-                        &mut residuals,
+                        residuals,
                     );
-                    Ok((residuals, kept))
-                },
-            )
+                    for (s, r) in residuals.chunks_exact(nr).enumerate() {
+                        self.scatter_local(k, r, &mut acc[s * n_dofs..(s + 1) * n_dofs]);
+                    }
+                    if keep {
+                        kept_chunk.push(kept);
+                    }
+                }
+                Ok((acc, kept_chunk))
+            })
             .collect::<Result<Vec<_>, ShellError>>()?;
         let mut layers = Vec::with_capacity(if keep { self.points.len() } else { 0 });
-        let residuals: Vec<Vec<f64>> = per_point
-            .into_iter()
-            .map(|(residuals, kept)| {
-                if keep {
-                    layers.push(kept);
-                }
-                residuals
-            })
-            .collect();
-        // Seed sets in parallel, each summed in point order (deterministic).
+        let mut accs = Vec::with_capacity(per_chunk.len());
+        for (acc, kept) in per_chunk {
+            accs.push(acc);
+            layers.extend(kept);
+        }
+        // Seed sets in parallel, each the sum of the chunks in chunk order.
         let out: Vec<InternalForceDot> = hist_out
             .into_par_iter()
             .enumerate()
             .map(|(s, h)| {
-                let mut f = vec![0.0; self.n_dofs()];
-                for (k, r) in residuals.iter().enumerate() {
-                    let nr = D * self.points[k].neighbours.len();
-                    self.scatter_local(k, &r[s * nr..(s + 1) * nr], &mut f);
+                let mut f = vec![0.0; n_dofs];
+                for acc in &accs {
+                    for (fi, a) in f.iter_mut().zip(&acc[s * n_dofs..(s + 1) * n_dofs]) {
+                        *fi += a;
+                    }
                 }
                 (f, h)
             })

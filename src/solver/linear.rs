@@ -507,21 +507,35 @@ impl LinearSolver {
                 perm_fwd,
                 perm_bwd,
             } => {
-                let mut buf = MemBuffer::new(
-                    dense_lu::solve::solve_in_place_scratch::<usize, f64>(self.n, k, par),
-                );
                 // `lu_in_place` wrote `perm_fwd` and its inverse `perm_bwd` in the
                 // factorisation this solve follows (checked again here).
                 let perm = faer::perm::PermRef::new_checked(perm_fwd, perm_bwd, self.n);
-                dense_lu::solve::solve_in_place_with_conj(
-                    lu.as_ref(),
-                    lu.as_ref(),
-                    perm,
-                    Conj::No,
-                    rhs,
-                    par,
-                    MemStack::new(&mut buf),
-                );
+                let solve = |rhs: MatMut<'_, f64>| {
+                    let k = rhs.ncols();
+                    let mut buf = MemBuffer::new(dense_lu::solve::solve_in_place_scratch::<
+                        usize,
+                        f64,
+                    >(self.n, k, par));
+                    dense_lu::solve::solve_in_place_with_conj(
+                        lu.as_ref(),
+                        lu.as_ref(),
+                        perm,
+                        Conj::No,
+                        rhs,
+                        par,
+                        MemStack::new(&mut buf),
+                    );
+                };
+                if k >= 2 && matches!(self.options.parallelism, Parallelism::Sequential) {
+                    // Several right-hand sides (the continuum DSA's design variables): the
+                    // two halves of the columns on two rayon tasks, each a sequential solve.
+                    // The split depends on `k` only, so the result does not depend on the
+                    // number of threads.
+                    let (a, b) = rhs.split_at_col_mut(k / 2);
+                    rayon::join(|| solve(a), || solve(b));
+                } else {
+                    solve(rhs);
+                }
             }
         }
     }
