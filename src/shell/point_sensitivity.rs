@@ -1305,9 +1305,10 @@ fn add_history(a: &mut PointHistory<f64>, b: &PointHistory<f64>) {
 /// The seed-independent factors of one layer point's derivative chain, formed once from the
 /// f64 evaluation and shared by every seed set; kept by the fictitious loads' pass for the
 /// increment-only part of the trial-history derivative
-/// ([`ShellModel::add_increment_history_dots`]): ≈ 1.4 kB per layer point (9 3×3 matrices and
-/// the return-map sensitivity's factors), whatever the number of seed sets; 7 MB on the
-/// 5120 layer points of the hemisphere (`benches/continuum.rs` prints it).
+/// ([`ShellModel::add_increment_history_dots`]): ≈ 1.1 kB per layer point (9 3×3 matrices and
+/// the compact strain part of the return-map sensitivity, [`StrainMap`]), whatever the number
+/// of seed sets; 5.5 MB on the 5120 layer points of the hemisphere (`benches/continuum.rs`
+/// prints it).
 #[derive(Clone, Copy, Debug)]
 struct LayerKeep {
     /// `F½⁻¹ = (I + ½H)⁻¹`.
