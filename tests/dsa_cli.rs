@@ -296,6 +296,11 @@ fn hemisphere_dual_against_fd_through_the_cli() {
     for k in ["analysis", "continuum", "dual", "fd"] {
         assert!(a["timing_s"][k].as_f64().unwrap() > 0.0, "{k}");
     }
+    // The continuum's stages (inside `timing_s`: left out of the bit-identical comparison).
+    let stages = &a["timing_s"]["continuum_stages"];
+    for k in ["rhs", "solve", "update"] {
+        assert!(stages[k].as_f64().unwrap() > 0.0, "{k}");
+    }
     // The hooked run follows the plain analysis: it takes the same iterates (measured: equal
     // bits, 0), and whatever the acceptance path they agree to the Newton tolerance
     // (residual_rtol 1e-8), far inside 1e-6 of the displacements' magnitude.

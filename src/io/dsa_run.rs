@@ -543,7 +543,7 @@ pub const NOTES: [&str; 4] = [
     "timing_s.analysis: wall time of a separate plain run of the analysis (no sensitivity \
      hook), the nominal run of the finite differences; timing_s.continuum and timing_s.dual: \
      each method's own time inside its analysis run with the hook (the whole hooked runs: \
-     continuum_run_total_s, dual_run_total_s); timing_s.fd: all finite-difference re-runs",
+     continuum_run_total_s, dual_run_total_s); timing_s.continuum_stages: the continuum DSA by stage (fictitious loads, solve, history update, monitors, load check; s); timing_s.fd: all finite-difference re-runs",
     "fd_central and fd_step are lists, one entry per step size of the variable's fd_steps \
      (relative steps h/|tau|; fd_step holds the absolute h); fd_flagged[k] marks load steps \
      where the yield status of some layer point differs among the runs at tau-h, tau, tau+h \
@@ -640,16 +640,16 @@ pub fn to_json(case: &ShellCase, r: &DsaResult) -> Value {
             "continuum": r.time_continuum,
             "dual": r.time_dual,
             "fd": r.time_fd,
+            "continuum_stages": r.continuum_stages.map_or(Value::Null, |t| json!({
+                "rhs": t.rhs,
+                "solve": t.solve,
+                "update": t.update,
+                "record": t.record,
+                "check": t.check,
+            })),
         },
         "dual_run_total_s": r.time_dual_run,
         "continuum_run_total_s": r.time_continuum_run,
-        "continuum_stages_s": r.continuum_stages.map_or(Value::Null, |t| json!({
-            "rhs": t.rhs,
-            "solve": t.solve,
-            "update": t.update,
-            "record": t.record,
-            "check": t.check,
-        })),
         "variables": variables,
     })
 }
