@@ -19,6 +19,8 @@
 //!
 //! Run: `cargo test --release --test dsa_shape_contact -- --nocapture`.
 
+#[path = "common/small_bending.rs"]
+mod small_bending;
 use nalgebra::Vector3;
 use num_dual::Dual64;
 use shelldsa::contact::sensitivity::ToolRate;
@@ -28,149 +30,15 @@ use shelldsa::geometry::Surface;
 use shelldsa::io::dsa_case::DsaMethod;
 use shelldsa::io::dsa_run;
 use shelldsa::io::shell_build;
-use shelldsa::io::shell_case::{parse_shell_case, ShellCase};
+use shelldsa::io::shell_case::parse_shell_case;
 use shelldsa::sensitivity::shape::{dual_geometry, ShapeVelocity};
 use shelldsa::shell::load::GenericLoad;
 use shelldsa::shell::model::ShellModel;
 use shelldsa::shell::point::{ParticleState, SurfacePoint};
 use shelldsa::solver::{LinearSolver, Method, SolverOptions};
+use small_bending::{case, max_abs, max_diff, zero_state, Lcg, CASE};
 use std::path::Path;
 use std::sync::Arc;
-
-/// The small bending case of `tests/dsa_contact.rs` (a quarter sheet 30 × 5 × 1 mm, 13 × 3
-/// particles, elastoplastic aluminium, a cylinder punch at x = 0 and a cylinder die at
-/// x = 22, a constant self-weight); `{final}` is the last load factor (1 = 6 mm of stroke),
-/// `{design}` the `[[design]]`/`[dsa]` part.
-const CASE: &str = r#"
-thickness = 1.0
-[problem]
-kind = "shell"
-title = "small punch bending (tests/dsa_contact.rs)"
-[surface]
-type = "rectangle"
-origin = [0.0, 0.0, 0.0]
-edge_u = [30.0, 0.0, 0.0]
-edge_v = [0.0, 5.0, 0.0]
-[particles]
-grid = [13, 3]
-[kernel]
-basis = "quadratic"
-support = 3.0
-[integration]
-cells = "per-particle-spacing"
-subdivide = 1
-gauss = 2
-thickness_points = 5
-thickness_rule = "lobatto"
-vci = "second"
-[material]
-young = 70000.0
-poisson = 0.34
-sigma0 = 184.3
-hardening = 70.0
-beta = 1.0
-[[boundary]]
-kind = "symmetry"
-edge = "u-min"
-normal = [1.0, 0.0, 0.0]
-point = [0.0, 0.0, 0.0]
-[[boundary]]
-kind = "symmetry"
-edge = "v-min"
-normal = [0.0, 1.0, 0.0]
-point = [0.0, 0.0, 0.0]
-[[load]]
-kind = "gravity"
-per_area = [0.0, 0.0, -2.6487e-5]
-scaling = "constant"
-[contact]
-faces = "both"
-penalty = 1000.0
-[[tool]]
-name = "punch"
-side = "positive"
-[tool.surface]
-type = "cylinder-sector"
-origin = [0.0, -5.0, 10.51]
-axis = [0.0, 1.0, 0.0]
-reference = [1.0, 0.0, 0.0]
-radius = 10.0
-angle_deg = [0.0, 135.0]
-length = [0.0, 15.0]
-[tool.path]
-keys = [
-    { t = 0.0, translation = [0.0, 0.0, 0.0] },
-    { t = 1.0, translation = [0.0, 0.0, -6.0] },
-]
-[[tool]]
-name = "die"
-side = "positive"
-[tool.surface]
-type = "cylinder-sector"
-origin = [22.0, -5.0, -10.49]
-axis = [0.0, 1.0, 0.0]
-reference = [-1.0, 0.0, 0.0]
-radius = 10.0
-angle_deg = [-30.0, 150.0]
-length = [0.0, 15.0]
-[tool.path]
-keys = [{ t = 0.0, translation = [0.0, 0.0, 0.0] }]
-[steps]
-initial_step = 0.01
-min_step = 1e-5
-max_step = 0.02
-final_load = {final}
-stops = [0.25]
-max_iterations = 8
-residual_rtol = 1e-10
-[[monitor]]
-name = "center"
-at = [0.0, 0.0]
-[[monitor]]
-name = "edge"
-at = [1.0, 0.0]
-[output]
-vtu = false
-plot = false
-{design}
-"#;
-
-fn case(final_load: f64, design: &str) -> ShellCase {
-    let text = CASE
-        .replace("{final}", &format!("{final_load:?}"))
-        .replace("{design}", design);
-    parse_shell_case(&text, Path::new("tests/dsa_shape_contact.rs")).unwrap()
-}
-
-/// A deterministic pseudo-random sequence in [−1, 1) (an LCG; no dependency).
-struct Lcg(u64);
-
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-    }
-}
-
-fn max_abs(v: &[f64]) -> f64 {
-    v.iter().fold(0.0, |m, x| m.max(x.abs()))
-}
-
-fn max_diff(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).fold(0.0, |m, (x, y)| m.max((x - y).abs()))
-}
-
-fn zero_state() -> ParticleState<f64> {
-    ParticleState {
-        u: Vector3::zeros(),
-        d: Vector3::zeros(),
-        d0: Vector3::zeros(),
-        e: [Vector3::zeros(); 2],
-    }
-}
 
 /// The force of `contact` at `(q, t)` with the model's committed state (`force_generic`: the
 /// slave sites as built).
