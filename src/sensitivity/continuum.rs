@@ -35,10 +35,7 @@
 
 use super::dual::{DualLoad, SensitivityError};
 use super::shape::ShapeVelocity;
-use super::{
-    record_monitors, validate_design, validate_design_on, DesignError, DesignKind, DesignVariable,
-    Monitor,
-};
+use super::{record_monitors, DesignError, DesignKind, DesignVariable, Monitor};
 use crate::contact::ContactSeeds;
 use crate::geometry::Surface;
 use crate::kinematics::M3;
@@ -325,21 +322,7 @@ impl ContinuumDsa {
         loads: Vec<DualLoad>,
         monitors: Vec<Monitor>,
     ) -> Result<Self, SensitivityError> {
-        match surface {
-            Some(s) => validate_design_on(&variables, &problem.model, s, 0.0)?,
-            None => validate_design(&variables, &problem.model, 0.0)?,
-        }
-        if let Some((index, &value)) = problem.state().iter().enumerate().find(|(_, v)| **v != 0.0)
-        {
-            return Err(SensitivityError::NotInitial { index, value });
-        }
-        for m in &monitors {
-            m.value(&problem.model)
-                .map_err(|e| DesignError::InvalidMonitor {
-                    label: m.label.clone(),
-                    detail: e.to_string(),
-                })?;
-        }
+        super::dual::check_method_inputs(problem, surface, &variables, &monitors)?;
         let states = variables
             .iter()
             .map(|v| SensitivityState::initial(problem, &loads, v, surface))

@@ -367,21 +367,7 @@ impl<D: DesignDual> DualShellProblem<D> {
         loads: Vec<DualLoad>,
         monitors: Vec<Monitor>,
     ) -> Result<Self, SensitivityError> {
-        match surface {
-            Some(s) => validate_design_on(&variables, &problem.model, s, 0.0)?,
-            None => validate_design(&variables, &problem.model, 0.0)?,
-        }
-        if let Some((index, &value)) = problem.state().iter().enumerate().find(|(_, v)| **v != 0.0)
-        {
-            return Err(SensitivityError::NotInitial { index, value });
-        }
-        for m in &monitors {
-            m.value(&problem.model)
-                .map_err(|e| DesignError::InvalidMonitor {
-                    label: m.label.clone(),
-                    detail: e.to_string(),
-                })?;
-        }
+        check_method_inputs(&problem, surface, &variables, &monitors)?;
         let contacts: Vec<&DualContact> = loads.iter().filter_map(|l| l.contact()).collect();
         if contacts.len() > 1 {
             return Err(SensitivityError::Shell(ShellError::InvalidInput(format!(
@@ -769,6 +755,32 @@ impl<D: DesignDual> DualShellProblem<D> {
         });
         Ok(())
     }
+}
+
+/// What both sensitivity methods check before the analysis: the design variables are
+/// admissible for the model (and for `surface`, which shape variables need), the problem is at
+/// its initial state, and every monitor can be evaluated.
+pub(crate) fn check_method_inputs(
+    problem: &ShellProblem,
+    surface: Option<&Surface<f64>>,
+    variables: &[DesignVariable],
+    monitors: &[Monitor],
+) -> Result<(), SensitivityError> {
+    match surface {
+        Some(s) => validate_design_on(variables, &problem.model, s, 0.0)?,
+        None => validate_design(variables, &problem.model, 0.0)?,
+    }
+    if let Some((index, &value)) = problem.state().iter().enumerate().find(|(_, v)| **v != 0.0) {
+        return Err(SensitivityError::NotInitial { index, value });
+    }
+    for m in monitors {
+        m.value(&problem.model)
+            .map_err(|e| DesignError::InvalidMonitor {
+                label: m.label.clone(),
+                detail: e.to_string(),
+            })?;
+    }
+    Ok(())
 }
 
 /// Check that `loads` (given to a sensitivity method) are the problem's: equal forces at the
