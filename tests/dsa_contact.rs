@@ -33,7 +33,7 @@ use shelldsa::io::shell_case::parse_shell_case;
 use shelldsa::shell::model::ShellModel;
 use shelldsa::shell::point::ParticleState;
 use shelldsa::solver::{LinearSolver, Method, SolverOptions};
-use small_bending::{case, max_abs, max_diff, zero_state, Lcg, CASE};
+use small_bending::{assert_taylor_rates, case, max_abs, max_diff, zero_state, Lcg, CASE};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -565,18 +565,7 @@ fn check_variable(r: &dsa_run::DsaResult, v: usize) {
     assert!(e < 1e-5, "{name}: dual vs FD {e:e}");
     // The Taylor remainder of the dual derivative falls as h² (the derivative of the discrete
     // response) at every step with at least three unflagged step sizes.
-    let mut fitted = 0;
-    for f in &var.taylor {
-        if f.used.len() >= 3 {
-            let rate = f.rate.unwrap();
-            assert!(
-                (rate - 2.0).abs() < 0.1,
-                "{name}: step {} rate {rate}",
-                f.step + 1
-            );
-            fitted += 1;
-        }
-    }
+    let fitted = assert_taylor_rates(var, name);
     assert!(fitted >= 5, "{name}: {fitted} steps fitted");
 }
 

@@ -36,7 +36,7 @@ use shelldsa::shell::load::GenericLoad;
 use shelldsa::shell::model::ShellModel;
 use shelldsa::shell::point::{ParticleState, SurfacePoint};
 use shelldsa::solver::{LinearSolver, Method, SolverOptions};
-use small_bending::{case, max_abs, max_diff, zero_state, Lcg, CASE};
+use small_bending::{assert_taylor_rates, case, max_abs, max_diff, zero_state, Lcg, CASE};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -543,18 +543,7 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
         // the responses over h) : 1e-5 leaves a factor 4 and is 100 times the 0.1 %.
         let e = dsa_run::max_rel_diff(var, last).expect("comparable components");
         assert!(e < 1e-5, "{name}: continuum vs central differences {e:e}");
-        let mut fitted = 0;
-        for f in &var.taylor {
-            if f.used.len() >= 3 {
-                let rate = f.rate.unwrap();
-                assert!(
-                    (rate - 2.0).abs() < 0.1,
-                    "{name}: step {} rate {rate}",
-                    f.step + 1
-                );
-                fitted += 1;
-            }
-        }
+        let fitted = assert_taylor_rates(var, name);
         println!("`{name}`: {fitted} steps with a Taylor rate");
         assert!(fitted >= 5, "{name}: {fitted} steps fitted");
         // The design moves the sheet.

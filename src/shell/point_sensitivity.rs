@@ -304,21 +304,26 @@ impl SeedSums {
         };
         for (i, sh) in shape.iter().enumerate() {
             let (p, du, dd) = nb(i);
-            let ddir = p.d - p.d0;
-            for a in 0..2 {
-                s.xa[a] += p.u * sh.dpsi[a];
-                s.da[a] += ddir * sh.dpsi[a];
-                s.g_u[a] += du * sh.dpsi[a];
-                s.g_d[a] += dd * sh.dpsi[a];
-            }
-            s.d += ddir * sh.psi;
-            s.g_d3 += dd * sh.psi;
+            s.add(sh, p, du, dd);
         }
         s
     }
 }
 
 impl SeedSums {
+    /// Add neighbour `sh`'s terms: its state sensitivity `p`, `Δū̇` and `Δḋ`.
+    fn add(&mut self, sh: &ShapeData, p: &ParticleState<f64>, du: V3, dd: V3) {
+        let ddir = p.d - p.d0;
+        for a in 0..2 {
+            self.xa[a] += p.u * sh.dpsi[a];
+            self.da[a] += ddir * sh.dpsi[a];
+            self.g_u[a] += du * sh.dpsi[a];
+            self.g_d[a] += dd * sh.dpsi[a];
+        }
+        self.d += ddir * sh.psi;
+        self.g_d3 += dd * sh.psi;
+    }
+
     /// [`SeedSums::new`] for several seed sets at once into `out` (one per item of `surfaces`):
     /// the neighbour loop outside, the seed sets inside, so each neighbour's shape data is read
     /// once; every seed set's sums are added in neighbour order, as [`SeedSums::new`] does
@@ -342,15 +347,7 @@ impl SeedSums {
         for (i, sh) in shape.iter().enumerate() {
             for (s, acc) in out.iter_mut().enumerate() {
                 let (p, du, dd) = nb(s, i);
-                let ddir = p.d - p.d0;
-                for a in 0..2 {
-                    acc.xa[a] += p.u * sh.dpsi[a];
-                    acc.da[a] += ddir * sh.dpsi[a];
-                    acc.g_u[a] += du * sh.dpsi[a];
-                    acc.g_d[a] += dd * sh.dpsi[a];
-                }
-                acc.d += ddir * sh.psi;
-                acc.g_d3 += dd * sh.psi;
+                acc.add(sh, p, du, dd);
             }
         }
     }

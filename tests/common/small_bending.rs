@@ -6,6 +6,7 @@
 #![allow(dead_code)]
 
 use nalgebra::Vector3;
+use shelldsa::io::dsa_run;
 use shelldsa::io::shell_case::{parse_shell_case, ShellCase};
 use shelldsa::shell::point::ParticleState;
 use std::path::Path;
@@ -144,4 +145,23 @@ pub fn max_abs(v: &[f64]) -> f64 {
 
 pub fn max_diff(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).fold(0.0, |m, (x, y)| m.max((x - y).abs()))
+}
+
+/// Asserts the Taylor remainder's rate `2 ± 0.1` (the derivative of the discrete response) at
+/// every step of `var` with at least three unflagged step sizes; returns how many steps were
+/// fitted.
+pub fn assert_taylor_rates(var: &dsa_run::VariableResult, name: &str) -> usize {
+    let mut fitted = 0;
+    for f in &var.taylor {
+        if f.used.len() >= 3 {
+            let rate = f.rate.unwrap();
+            assert!(
+                (rate - 2.0).abs() < 0.1,
+                "{name}: step {} rate {rate}",
+                f.step + 1
+            );
+            fitted += 1;
+        }
+    }
+    fitted
 }
