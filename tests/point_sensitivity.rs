@@ -1056,3 +1056,53 @@ fn model_level_bad_seeds_are_named_errors() {
         "{err}"
     );
 }
+
+/// `internal_force_dots_linearised_into` with recycled buffers (filled with unrelated values,
+/// one of the wrong length, one missing, one too many) gives bit for bit what the fresh call
+/// gives: every entry of a fitting buffer is overwritten, the others are replaced.
+#[test]
+fn recycled_history_buffers_change_nothing() {
+    let (model, q) = committed_model();
+    let mut rng = Rng::new(11);
+    let owned: Vec<OwnedModelSeeds> = GROUPS
+        .iter()
+        .map(|g| model_seeds(&model, g, &q, &mut rng))
+        .collect();
+    let zero_dofs = vec![0.0; q.len()];
+    let views: Vec<ModelSeeds> = owned
+        .iter()
+        .map(|s| ModelSeeds {
+            dofs: &zero_dofs,
+            ..s.view()
+        })
+        .collect();
+    let (fresh, _) = model.internal_force_dots_linearised(&q, &views).unwrap();
+    let n = model.history.len();
+    let junk = |k: usize| -> Vec<PointHistory<f64>> {
+        let mut h = owned[k % owned.len()].history.clone();
+        h.truncate(n);
+        h
+    };
+    // Case 1: one buffer per seed set, one of them one entry short.
+    let mut buffers: Vec<_> = (0..views.len()).map(junk).collect();
+    buffers[1].pop();
+    // Case 2: one buffer too few; case 3: one too many.
+    let cases = [
+        buffers,
+        (0..views.len() - 1).map(junk).collect(),
+        (0..views.len() + 1).map(junk).collect(),
+    ];
+    for (c, buffers) in cases.into_iter().enumerate() {
+        assert!(
+            buffers.iter().any(|b| b.len() == n),
+            "case {c}: some buffer fits"
+        );
+        let (got, _) = model
+            .internal_force_dots_linearised_into(&q, &views, buffers)
+            .unwrap();
+        assert_eq!(got.len(), fresh.len(), "case {c}");
+        for (s, (a, b)) in got.iter().zip(&fresh).enumerate() {
+            assert!(a.0 == b.0 && a.1 == b.1, "case {c}, seed set {s}");
+        }
+    }
+}

@@ -68,6 +68,18 @@ pub fn elastic_matrix_derivative(m: &MaterialParams<f64>, dm: &MaterialParams<f6
     d
 }
 
+/// `D v` for a `D` of [`elastic_matrix`]'s pattern (the in-plane 2 × 2 block and the
+/// diagonal), with only its 7 non-zero entries.
+fn elastic_times(d: &Mat5<f64>, v: &Vec5<f64>) -> Vec5<f64> {
+    Vec5::new(
+        d[(0, 0)] * v[0] + d[(0, 1)] * v[1],
+        d[(1, 0)] * v[0] + d[(1, 1)] * v[1],
+        d[(2, 2)] * v[2],
+        d[(3, 3)] * v[3],
+        d[(4, 4)] * v[4],
+    )
+}
+
 /// Sensitivity of one return mapping, linear in its three inputs:
 /// `dm` (parameter sensitivities), `dn` (history sensitivities `ⁿ(σ̇, α̇, ė^p)`) and `ddeps` (`Δε̇`).
 ///
@@ -201,11 +213,13 @@ impl MaterialSensitivity {
         ddeps: &Vec5<f64>,
     ) -> MaterialState<f64> {
         let (m, deps, out, d) = (&self.m, &self.deps, &self.out, &self.d);
-        // Ḋ only for a material seed (the other seed sets skip its 5 × 5 products; adding the
-        // zero vectors instead gives the same floating-point result).
-        let dd = (*dm != MaterialParams::zero()).then(|| elastic_matrix_derivative(m, dm));
+        // Ḋ only for a seed of E, ν or k, the parameters D depends on (the other seed sets skip
+        // its 5 × 5 products; adding the zero vectors instead gives the same floating-point
+        // result).
+        let elastic_seed = dm.young != 0.0 || dm.poisson != 0.0 || dm.shear_factor != 0.0;
+        let dd = elastic_seed.then(|| elastic_matrix_derivative(m, dm));
         let dd_times = |v: &Vec5<f64>| dd.map_or_else(Vec5::zeros, |dd| dd * v);
-        let dsigma_tr = dn.stress + dd_times(deps) + d * ddeps;
+        let dsigma_tr = dn.stress + dd_times(deps) + elastic_times(d, ddeps);
         let Some(pl) = &self.plastic else {
             // Elastic branch: σ = ⁿσ + D Δε, α and ē^p unchanged.
             return MaterialState {

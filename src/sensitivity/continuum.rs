@@ -301,6 +301,10 @@ pub struct ContinuumDsa {
     states: Vec<SensitivityState>,
     zero: SensitivityState,
     pending: Option<Vec<SensitivityState>>,
+    /// History buffers of replaced states, handed back to the next step's fictitious-load
+    /// pass (`ShellModel::internal_force_dots_linearised_into`): no allocation or zero-fill
+    /// of the trial-history derivatives per step.
+    spare: Vec<Vec<PointHistory<f64>>>,
     records: Vec<ContinuumStepRecord>,
     time: Duration,
     timing: ContinuumTiming,
@@ -335,6 +339,7 @@ impl ContinuumDsa {
             states,
             zero,
             pending: None,
+            spare: Vec::new(),
             records: Vec::new(),
             time: Duration::ZERO,
             timing: ContinuumTiming::default(),
@@ -409,7 +414,7 @@ impl ContinuumDsa {
                 load: step.load,
             },
             None,
-            true,
+            Some(std::mem::take(&mut self.spare)),
         )
         .map_err(fatal)?;
         let (mut histories, lin) = kept.ok_or_else(|| fatal("no linearisation kept"))?;
@@ -478,7 +483,8 @@ impl ContinuumDsa {
             .pending
             .take()
             .ok_or("commit without a converged-step hook")?;
-        self.states = next;
+        let old = std::mem::replace(&mut self.states, next);
+        self.spare = old.into_iter().map(|s| s.history).collect();
         let model = &problem.model;
         let n_q = problem.n_generalised();
         let udot: Vec<Vec<f64>> = self
@@ -670,15 +676,16 @@ pub fn fictitious_loads(
     at: StepState<'_>,
     group: Option<TermGroup>,
 ) -> Result<Vec<Vec<f64>>, SensitivityError> {
-    Ok(fictitious_loads_kept(problem, loads, states, zero, at, group, false)?.0)
+    Ok(fictitious_loads_kept(problem, loads, states, zero, at, group, None)?.0)
 }
 
 /// The trial histories' seed part (one per variable) and the layer data of the step, kept by
 /// [`fictitious_loads_kept`] for the history update.
 type Kept = (Vec<Vec<PointHistory<f64>>>, StepLinearisation);
 
-/// [`fictitious_loads`], with `keep`: also the trial histories' seed part and the layer data
-/// of the step ([`ShellModel::internal_force_dots_linearised`]).
+/// [`fictitious_loads`], with `keep` (`Some`): also the trial histories' seed part, written
+/// into the given buffers where they fit, and the layer data of the step
+/// ([`ShellModel::internal_force_dots_linearised_into`]).
 fn fictitious_loads_kept(
     problem: &ShellProblem,
     loads: &[DualLoad],
@@ -686,7 +693,7 @@ fn fictitious_loads_kept(
     zero: &SensitivityState,
     at: StepState<'_>,
     group: Option<TermGroup>,
-    keep: bool,
+    keep: Option<Vec<Vec<PointHistory<f64>>>>,
 ) -> Result<(Vec<Vec<f64>>, Option<Kept>), SensitivityError> {
     let StepState { du, u, load } = at;
     let model = &problem.model;
@@ -698,18 +705,20 @@ fn fictitious_loads_kept(
         .map(|s| s.seeds(group, &zero_dofs, zero))
         .collect();
     let history_terms = group.is_none_or(|g| g == TermGroup::History);
-    let (dots, lin) = if keep {
-        let (d, l) = model.internal_force_dots_linearised(&du[..n_q], &seeds)?;
-        (d, Some(l))
-    } else {
-        (model.internal_force_dots(&du[..n_q], &seeds)?, None)
+    let keep_histories = keep.is_some();
+    let (dots, lin) = match keep {
+        Some(buffers) => {
+            let (d, l) = model.internal_force_dots_linearised_into(&du[..n_q], &seeds, buffers)?;
+            (d, Some(l))
+        }
+        None => (model.internal_force_dots(&du[..n_q], &seeds)?, None),
     };
     let mut contact =
         contact_dots(model, loads, states, zero, group, &du[..n_q], load)?.map(|v| v.into_iter());
     let mut out = Vec::with_capacity(states.len());
-    let mut histories = Vec::with_capacity(if keep { states.len() } else { 0 });
+    let mut histories = Vec::with_capacity(if keep_histories { states.len() } else { 0 });
     for (s, (f_int, h)) in states.iter().zip(dots) {
-        if keep {
+        if keep_histories {
             histories.push(h);
         }
         let mut r = f_int;
@@ -770,7 +779,9 @@ impl StepObserver<ShellProblem> for ContinuumDsa {
         self.timing.record += t0.elapsed().as_secs_f64();
     }
     fn on_restore(&mut self) {
-        self.pending = None;
+        if let Some(p) = self.pending.take() {
+            self.spare = p.into_iter().map(|s| s.history).collect();
+        }
     }
     fn failure(&self) -> Option<String> {
         self.failure

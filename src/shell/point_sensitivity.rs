@@ -476,8 +476,8 @@ struct LayerData {
     q1: M3<f64>,
     /// `ⁿ⁺¹Qᵀ σˡ`.
     qt_sigma: M3<f64>,
-    /// `J⁻ᵀ` and `w det J J⁻ᵀ`.
-    jinv_t: M3<f64>,
+    /// `ⁿ⁺¹J⁻¹` and `w det J J⁻ᵀ`.
+    jinv: M3<f64>,
     jinv_t_w: M3<f64>,
     p: M3<f64>,
     /// The return-map sensitivity's seed-independent factors (eqs 44–49).
@@ -522,9 +522,16 @@ impl LayerData {
         let (r2, s2) = (resolvent(0.25)?, (M3::identity() + k.inc.r_half) * 0.25);
         let (u, w) = (q_n * s2.transpose(), r2.transpose() * c);
         let (v, r1t) = (q_n * s1.transpose(), r1.transpose());
-        let axis = |i: usize| V3::ith(i, 1.0).cross_matrix();
-        let strain_rot = std::array::from_fn(|i| -(u * axis(i)) * w);
-        let frame_rot = std::array::from_fn(|i| -(v * axis(i)) * r1t);
+        // −(U [e_i]×) W = U:j ⊗ Wk: − U:k ⊗ Wj: for (i, j, k) cyclic ([e_i]× e_j = e_k,
+        // [e_i]× e_k = −e_j): two outer products instead of two matrix products.
+        let rot = |u: &M3<f64>, w: &M3<f64>| -> [M3<f64>; 3] {
+            std::array::from_fn(|i| {
+                let (j, k) = ((i + 1) % 3, (i + 2) % 3);
+                u.column(j) * w.row(k) - u.column(k) * w.row(j)
+            })
+        };
+        let strain_rot = rot(&u, &w);
+        let frame_rot = rot(&v, &r1t);
         Ok(LayerData {
             zeta: inp.zeta,
             half_t,
@@ -534,7 +541,7 @@ impl LayerData {
             r_t: k.inc.r.transpose(),
             q1,
             qt_sigma: q1.transpose() * sigma_l,
-            jinv_t,
+            jinv: k.j1_inv,
             jinv_t_w: jinv_t * (k.det1 * inp.weight),
             p: k.p,
             material,
@@ -595,11 +602,9 @@ impl LayerData {
             x + x.transpose() + self.q1.transpose() * stress_from_vec5(&mat_dot.stress) * self.q1;
         // P = w det(J) σᵍ J⁻ᵀ on J = Jⁿ + G:
         // Ṗ = tr(J⁻¹J̇) P + w det J σ̇ᵍ J⁻ᵀ − P J̇ᵀ J⁻ᵀ.
-        let j1_dot = jn_dot + g_dot;
-        // tr(J⁻¹J̇) = J⁻ᵀ : J̇.
-        let tr = self.jinv_t.dot(&j1_dot);
-        let p_dot =
-            self.p * tr + sigma_g_dot * self.jinv_t_w - self.p * j1_dot.transpose() * self.jinv_t;
+        // With K = J⁻¹J̇: Ṗ = tr(K) P + w det J σ̇ᵍ J⁻ᵀ − P Kᵀ.
+        let kk = self.jinv * (jn_dot + g_dot);
+        let p_dot = self.p * kk.trace() + sigma_g_dot * self.jinv_t_w - self.p * kk.transpose();
         acc.add(&p_dot, z);
         PointHistory {
             frame: q1_dot,
@@ -820,6 +825,15 @@ pub struct ModelSeeds<'a> {
     pub dofs: &'a [f64],
 }
 
+const ZERO_HISTORY: PointHistory<f64> = PointHistory {
+    frame: M3::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+    material: crate::material::MaterialState {
+        stress: crate::material::Vec5::new(0.0, 0.0, 0.0, 0.0, 0.0),
+        back_stress: crate::material::Vec5::new(0.0, 0.0, 0.0, 0.0, 0.0),
+        eps_p: 0.0,
+    },
+};
+
 /// The number of fixed point chunks of [`ShellModel::internal_force_dots`] (a few per
 /// thread for load balance; each holds one force vector per seed set).
 const POINT_CHUNKS: usize = 32;
@@ -956,7 +970,7 @@ impl ShellModel {
         dofs: &[f64],
         seeds: &[ModelSeeds],
     ) -> Result<Vec<InternalForceDot>, ShellError> {
-        Ok(self.force_dots(dofs, seeds, false)?.0)
+        Ok(self.force_dots(dofs, seeds, false, Vec::new())?.0)
     }
 
     /// [`Self::internal_force_dots`], keeping what the increment-only part of the trial-history
@@ -970,7 +984,22 @@ impl ShellModel {
         dofs: &[f64],
         seeds: &[ModelSeeds],
     ) -> Result<(Vec<InternalForceDot>, StepLinearisation), ShellError> {
-        let (out, lin) = self.force_dots(dofs, seeds, true)?;
+        self.internal_force_dots_linearised_into(dofs, seeds, Vec::new())
+    }
+
+    /// [`Self::internal_force_dots_linearised`] writing the trial-history derivatives into
+    /// `buffers` (one per seed set, of any content: every entry is overwritten) when they fit
+    /// (`seeds.len()` buffers of [`ShellModel::history`]'s length), instead of new zeroed
+    /// vectors: a caller stepping through an analysis hands back the previous step's
+    /// histories and saves allocating and zero-filling them. Buffers that do not fit are
+    /// replaced. The same results either way.
+    pub fn internal_force_dots_linearised_into(
+        &self,
+        dofs: &[f64],
+        seeds: &[ModelSeeds],
+        buffers: Vec<Vec<PointHistory<f64>>>,
+    ) -> Result<(Vec<InternalForceDot>, StepLinearisation), ShellError> {
+        let (out, lin) = self.force_dots(dofs, seeds, true, buffers)?;
         Ok((
             out,
             lin.expect("force_dots keeps the linearisation when asked"),
@@ -982,6 +1011,7 @@ impl ShellModel {
         dofs: &[f64],
         seeds: &[ModelSeeds],
         keep: bool,
+        buffers: Vec<Vec<PointHistory<f64>>>,
     ) -> Result<(Vec<InternalForceDot>, Option<StepLinearisation>), ShellError> {
         const D: usize = DOFS_PER_PARTICLE;
         if dofs.len() != self.n_dofs() {
@@ -1036,13 +1066,14 @@ impl ShellModel {
         // (seed-major) so that a point allocates two vectors whatever the number of seed sets.
         // The trial histories' derivatives are written in place: per seed set, point-major, each
         // point writing its own layers' slots (no per-point buffers to copy afterwards).
-        let zero_history = PointHistory {
-            frame: M3::zeros(),
-            material: crate::material::MaterialState::zero(),
-        };
-        let mut hist_out: Vec<Vec<PointHistory<f64>>> = (0..ns)
-            .map(|_| vec![zero_history; self.history.len()])
-            .collect();
+        // (Every slot is written below, so recycled buffers need no zero-fill.)
+        let n_hist = self.history.len();
+        let mut hist_out = buffers;
+        hist_out.truncate(ns);
+        for h in hist_out.iter_mut().filter(|h| h.len() != n_hist) {
+            *h = vec![ZERO_HISTORY; n_hist];
+        }
+        hist_out.resize_with(ns, || vec![ZERO_HISTORY; n_hist]);
         let mut slots: Vec<Vec<&mut [PointHistory<f64>]>> = (0..self.points.len())
             .map(|_| Vec::with_capacity(ns))
             .collect();
