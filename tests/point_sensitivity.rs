@@ -1057,11 +1057,13 @@ fn model_level_bad_seeds_are_named_errors() {
     );
 }
 
-/// `internal_force_dots_linearised_into` with recycled buffers (filled with unrelated values,
-/// one of the wrong length, one missing, one too many) gives bit for bit what the fresh call
-/// gives: every entry of a fitting buffer is overwritten, the others are replaced.
+/// `internal_force_dots_linearised_into` with recycled storage (history buffers filled with
+/// unrelated values, one of the wrong length, one missing, one too many; the layer data of a
+/// linearisation at another increment) gives bit for bit what the fresh call gives, and so
+/// does the history update from its linearisation: every entry of fitting storage is
+/// overwritten, the rest is replaced.
 #[test]
-fn recycled_history_buffers_change_nothing() {
+fn recycled_storage_changes_nothing() {
     let (model, q) = committed_model();
     let mut rng = Rng::new(11);
     let owned: Vec<OwnedModelSeeds> = GROUPS
@@ -1076,19 +1078,31 @@ fn recycled_history_buffers_change_nothing() {
             ..s.view()
         })
         .collect();
-    let (fresh, _) = model.internal_force_dots_linearised(&q, &views).unwrap();
+    let (fresh, lin) = model.internal_force_dots_linearised(&q, &views).unwrap();
+    let dofs_dot: Vec<&[f64]> = owned.iter().map(|s| &s.dofs[..]).collect();
+    let updated =
+        |lin: &shelldsa::shell::point_sensitivity::StepLinearisation,
+         dots: &[shelldsa::shell::point_sensitivity::InternalForceDot]| {
+            let mut h: Vec<_> = dots.iter().map(|d| d.1.clone()).collect();
+            model
+                .add_increment_history_dots(lin, &dofs_dot, &mut h)
+                .unwrap();
+            h
+        };
+    let fresh_updated = updated(&lin, &fresh);
+    // Layer data of another increment, to be overwritten.
+    let q_other: Vec<f64> = q.iter().map(|x| 0.5 * x).collect();
+    let (_, other) = model
+        .internal_force_dots_linearised(&q_other, &views)
+        .unwrap();
     let n = model.history.len();
-    let junk = |k: usize| -> Vec<PointHistory<f64>> {
-        let mut h = owned[k % owned.len()].history.clone();
-        h.truncate(n);
-        h
-    };
-    // Case 1: one buffer per seed set, one of them one entry short.
-    let mut buffers: Vec<_> = (0..views.len()).map(junk).collect();
-    buffers[1].pop();
-    // Case 2: one buffer too few; case 3: one too many.
+    let junk = |k: usize| -> Vec<PointHistory<f64>> { owned[k % owned.len()].history.clone() };
+    // Case 0: one buffer per seed set, one of them one entry short; case 1: one buffer too
+    // few; case 2: one too many.
+    let mut short: Vec<_> = (0..views.len()).map(junk).collect();
+    short[1].pop();
     let cases = [
-        buffers,
+        short,
         (0..views.len() - 1).map(junk).collect(),
         (0..views.len() + 1).map(junk).collect(),
     ];
@@ -1097,12 +1111,17 @@ fn recycled_history_buffers_change_nothing() {
             buffers.iter().any(|b| b.len() == n),
             "case {c}: some buffer fits"
         );
-        let (got, _) = model
-            .internal_force_dots_linearised_into(&q, &views, buffers)
+        let previous = (c != 1).then(|| other.clone());
+        let (got, got_lin) = model
+            .internal_force_dots_linearised_into(&q, &views, buffers, previous)
             .unwrap();
         assert_eq!(got.len(), fresh.len(), "case {c}");
         for (s, (a, b)) in got.iter().zip(&fresh).enumerate() {
             assert!(a.0 == b.0 && a.1 == b.1, "case {c}, seed set {s}");
         }
+        assert!(
+            updated(&got_lin, &got) == fresh_updated,
+            "case {c}: history update"
+        );
     }
 }

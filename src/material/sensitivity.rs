@@ -258,7 +258,7 @@ impl MaterialSensitivity {
 /// an elastic point (`σ̇ = D Δε̇`, with `D` the model's, given to [`Self::apply`]), and for a
 /// plastic one `ΞD`, `g = (θ/f2) (ΞD)ᵀ Pη` (so `λ̇ = g·Δε̇`) and the vectors and scalars of the
 /// update (module docs): ≈ 390 bytes instead of the ≈ 770 of a [`MaterialSensitivity`].
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 pub struct StrainMap {
     plastic: Option<PlasticStrain>,
 }

@@ -305,6 +305,8 @@ pub struct ContinuumDsa {
     /// pass (`ShellModel::internal_force_dots_linearised_into`): no allocation or zero-fill
     /// of the trial-history derivatives per step.
     spare: Vec<Vec<PointHistory<f64>>>,
+    /// The previous step's layer data, whose storage the next step's pass reuses.
+    spare_lin: Option<StepLinearisation>,
     records: Vec<ContinuumStepRecord>,
     time: Duration,
     timing: ContinuumTiming,
@@ -340,6 +342,7 @@ impl ContinuumDsa {
             zero,
             pending: None,
             spare: Vec::new(),
+            spare_lin: None,
             records: Vec::new(),
             time: Duration::ZERO,
             timing: ContinuumTiming::default(),
@@ -414,7 +417,7 @@ impl ContinuumDsa {
                 load: step.load,
             },
             None,
-            Some(std::mem::take(&mut self.spare)),
+            Some((std::mem::take(&mut self.spare), self.spare_lin.take())),
         )
         .map_err(fatal)?;
         let (mut histories, lin) = kept.ok_or_else(|| fatal("no linearisation kept"))?;
@@ -443,7 +446,7 @@ impl ContinuumDsa {
         model
             .add_increment_history_dots(&lin, &dofs_dot, &mut histories)
             .map_err(fatal)?;
-        drop(lin);
+        self.spare_lin = Some(lin);
         let next = self
             .states
             .iter()
@@ -683,6 +686,10 @@ pub fn fictitious_loads(
 /// [`fictitious_loads_kept`] for the history update.
 type Kept = (Vec<Vec<PointHistory<f64>>>, StepLinearisation);
 
+/// Storage handed back to [`fictitious_loads_kept`]: the replaced states' history buffers and
+/// the previous step's layer data.
+type Recycled = (Vec<Vec<PointHistory<f64>>>, Option<StepLinearisation>);
+
 /// [`fictitious_loads`], with `keep` (`Some`): also the trial histories' seed part, written
 /// into the given buffers where they fit, and the layer data of the step
 /// ([`ShellModel::internal_force_dots_linearised_into`]).
@@ -693,7 +700,7 @@ fn fictitious_loads_kept(
     zero: &SensitivityState,
     at: StepState<'_>,
     group: Option<TermGroup>,
-    keep: Option<Vec<Vec<PointHistory<f64>>>>,
+    keep: Option<Recycled>,
 ) -> Result<(Vec<Vec<f64>>, Option<Kept>), SensitivityError> {
     let StepState { du, u, load } = at;
     let model = &problem.model;
@@ -707,8 +714,9 @@ fn fictitious_loads_kept(
     let history_terms = group.is_none_or(|g| g == TermGroup::History);
     let keep_histories = keep.is_some();
     let (dots, lin) = match keep {
-        Some(buffers) => {
-            let (d, l) = model.internal_force_dots_linearised_into(&du[..n_q], &seeds, buffers)?;
+        Some((buffers, previous)) => {
+            let (d, l) =
+                model.internal_force_dots_linearised_into(&du[..n_q], &seeds, buffers, previous)?;
             (d, Some(l))
         }
         None => (model.internal_force_dots(&du[..n_q], &seeds)?, None),

@@ -970,7 +970,7 @@ impl ShellModel {
         dofs: &[f64],
         seeds: &[ModelSeeds],
     ) -> Result<Vec<InternalForceDot>, ShellError> {
-        Ok(self.force_dots(dofs, seeds, false, Vec::new())?.0)
+        Ok(self.force_dots(dofs, seeds, None, Vec::new())?.0)
     }
 
     /// [`Self::internal_force_dots`], keeping what the increment-only part of the trial-history
@@ -984,22 +984,25 @@ impl ShellModel {
         dofs: &[f64],
         seeds: &[ModelSeeds],
     ) -> Result<(Vec<InternalForceDot>, StepLinearisation), ShellError> {
-        self.internal_force_dots_linearised_into(dofs, seeds, Vec::new())
+        self.internal_force_dots_linearised_into(dofs, seeds, Vec::new(), None)
     }
 
     /// [`Self::internal_force_dots_linearised`] writing the trial-history derivatives into
     /// `buffers` (one per seed set, of any content: every entry is overwritten) when they fit
     /// (`seeds.len()` buffers of [`ShellModel::history`]'s length), instead of new zeroed
-    /// vectors: a caller stepping through an analysis hands back the previous step's
-    /// histories and saves allocating and zero-filling them. Buffers that do not fit are
-    /// replaced. The same results either way.
+    /// vectors, and the layer data into the storage of `previous` (a linearisation of this
+    /// model, of any step): a caller stepping through an analysis hands back the previous
+    /// step's histories and linearisation and saves allocating and filling them. Buffers that
+    /// do not fit are replaced. The same results either way.
     pub fn internal_force_dots_linearised_into(
         &self,
         dofs: &[f64],
         seeds: &[ModelSeeds],
         buffers: Vec<Vec<PointHistory<f64>>>,
+        previous: Option<StepLinearisation>,
     ) -> Result<(Vec<InternalForceDot>, StepLinearisation), ShellError> {
-        let (out, lin) = self.force_dots(dofs, seeds, true, buffers)?;
+        let layers = previous.map(|l| l.layers).unwrap_or_default();
+        let (out, lin) = self.force_dots(dofs, seeds, Some(layers), buffers)?;
         Ok((
             out,
             lin.expect("force_dots keeps the linearisation when asked"),
@@ -1010,7 +1013,7 @@ impl ShellModel {
         &self,
         dofs: &[f64],
         seeds: &[ModelSeeds],
-        keep: bool,
+        keep: Option<Vec<LayerKeep>>,
         buffers: Vec<Vec<PointHistory<f64>>>,
     ) -> Result<(Vec<InternalForceDot>, Option<StepLinearisation>), ShellError> {
         const D: usize = DOFS_PER_PARTICLE;
@@ -1068,6 +1071,7 @@ impl ShellModel {
         // point writing its own layers' slots (no per-point buffers to copy afterwards).
         // (Every slot is written below, so recycled buffers need no zero-fill.)
         let n_hist = self.history.len();
+        let keep_layers = keep.is_some();
         let mut hist_out = buffers;
         hist_out.truncate(ns);
         for h in hist_out.iter_mut().filter(|h| h.len() != n_hist) {
@@ -1082,23 +1086,33 @@ impl ShellModel {
                 slot.push(chunk);
             }
         }
+        // The kept layer data, point-major, written in place as the histories (recycled
+        // storage of the right length needs no fill either).
+        let mut layers = keep.unwrap_or_default();
+        if keep_layers {
+            layers.resize(n_hist, LayerKeep::default());
+        }
+        let mut keep_slots: Vec<Option<&mut [LayerKeep]>> = if keep_layers {
+            layers.chunks_exact_mut(nl).map(Some).collect()
+        } else {
+            (0..self.points.len()).map(|_| None).collect()
+        };
         // Points in fixed contiguous chunks: each chunk sums its rows into its own per-seed
         // force vectors (small, cache-resident) in point order, and the chunks are summed in
         // chunk order: deterministic and independent of the number of threads, without a
         // per-point row buffer to store and read back.
         let n_dofs = self.n_dofs();
         let chunk_len = self.points.len().div_ceil(POINT_CHUNKS).max(1);
-        type ChunkOut = (Vec<f64>, Vec<Vec<LayerKeep>>);
         let per_chunk = slots
             .into_par_iter()
+            .zip(keep_slots.par_iter_mut())
             .enumerate()
             .chunks(chunk_len)
-            .map(|items| -> Result<ChunkOut, ShellError> {
+            .map(|items| -> Result<Vec<f64>, ShellError> {
                 let mut sc = Scratch::default();
                 let sc = &mut sc;
                 let mut acc = vec![0.0; ns * n_dofs];
-                let mut kept_chunk = Vec::with_capacity(if keep { items.len() } else { 0 });
-                for (k, mut hist) in items {
+                for (k, (mut hist, kept)) in items {
                     let p = &self.points[k];
                     let nb = &p.neighbours;
                     let nr = D * nb.len();
@@ -1129,7 +1143,6 @@ impl ShellModel {
                     residuals.resize(ns * nr, 0.0);
                     sc.dots.clear();
                     sc.dots.resize(ns, StressSums::zero());
-                    let mut kept = Vec::with_capacity(if keep { nl } else { 0 });
                     let mut val = StressSums::zero();
                     for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
                         let inp = PointInput {
@@ -1144,8 +1157,8 @@ impl ShellModel {
                         };
                         let res = values.layer(&inp)?;
                         let layer = LayerData::new(&inp, &res)?;
-                        if keep {
-                            kept.push(layer.keep);
+                        if let Some(kept) = kept.as_deref_mut() {
+                            kept[l] = layer.keep;
                         }
                         val.add_value(&layer.p, layer.z, zeta);
                         for (s, (sd, acc)) in seeds.iter().zip(sc.dots.iter_mut()).enumerate() {
@@ -1172,19 +1185,12 @@ impl ShellModel {
                     for (s, r) in residuals.chunks_exact(nr).enumerate() {
                         self.scatter_local(k, r, &mut acc[s * n_dofs..(s + 1) * n_dofs]);
                     }
-                    if keep {
-                        kept_chunk.push(kept);
-                    }
                 }
-                Ok((acc, kept_chunk))
+                Ok(acc)
             })
             .collect::<Result<Vec<_>, ShellError>>()?;
-        let mut layers = Vec::with_capacity(if keep { self.points.len() } else { 0 });
-        let mut accs = Vec::with_capacity(per_chunk.len());
-        for (acc, kept) in per_chunk {
-            accs.push(acc);
-            layers.extend(kept);
-        }
+        drop(keep_slots);
+        let accs = per_chunk;
         // Seed sets in parallel, each the sum of the chunks in chunk order.
         let out: Vec<InternalForceDot> = hist_out
             .into_par_iter()
@@ -1199,7 +1205,7 @@ impl ShellModel {
                 (f, h)
             })
             .collect();
-        let lin = keep.then(|| StepLinearisation {
+        let lin = keep_layers.then(|| StepLinearisation {
             particles: per.into_iter().map(|(state, x, _, _)| (state, x)).collect(),
             layers,
         });
@@ -1232,10 +1238,10 @@ impl ShellModel {
             ));
         }
         let nl = self.thickness_rule.len();
-        if lin.layers.len() != self.points.len() || lin.layers.iter().any(|l| l.len() != nl) {
+        if lin.layers.len() != self.history.len() {
             return Err(invalid(
                 "lin.layers",
-                lin.layers.iter().map(Vec::len).sum(),
+                lin.layers.len(),
                 self.history.len(),
                 "one per layer point of the model, per in-plane point",
             ));
@@ -1313,8 +1319,12 @@ impl ShellModel {
                 for (l, (&(zeta, _), hl)) in
                     self.thickness_rule.iter().zip(h.iter_mut()).enumerate()
                 {
-                    let inc =
-                        lin.layers[k][l].increment_history_dot(&d, half_t, half_t * zeta, &sums);
+                    let inc = lin.layers[k * nl + l].increment_history_dot(
+                        &d,
+                        half_t,
+                        half_t * zeta,
+                        &sums,
+                    );
                     add_history(hl, &inc);
                 }
             }
@@ -1337,7 +1347,7 @@ fn add_history(a: &mut PointHistory<f64>, b: &PointHistory<f64>) {
 /// the compact strain part of the return-map sensitivity, [`StrainMap`]), whatever the number
 /// of seed sets; 5.5 MB on the 5120 layer points of the hemisphere (`benches/continuum.rs`
 /// prints it).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 struct LayerKeep {
     /// `F½⁻¹ = (I + ½H)⁻¹`.
     f_half_inv: M3<f64>,
@@ -1419,19 +1429,14 @@ impl LayerKeep {
 #[derive(Clone, Debug)]
 pub struct StepLinearisation {
     particles: Vec<(ParticleState<f64>, [f64; DOFS_PER_PARTICLE])>,
-    /// Per in-plane point, per layer.
-    layers: Vec<Vec<LayerKeep>>,
+    /// Per layer point, point-major (as [`ShellModel::history`]).
+    layers: Vec<LayerKeep>,
 }
 
 impl StepLinearisation {
     /// Heap memory held (bytes).
     pub fn memory_bytes(&self) -> usize {
         self.particles.capacity() * std::mem::size_of::<(ParticleState<f64>, [f64; 5])>()
-            + self.layers.capacity() * std::mem::size_of::<Vec<LayerKeep>>()
-            + self
-                .layers
-                .iter()
-                .map(|l| l.capacity() * std::mem::size_of::<LayerKeep>())
-                .sum::<usize>()
+            + self.layers.capacity() * std::mem::size_of::<LayerKeep>()
     }
 }
