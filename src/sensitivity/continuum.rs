@@ -38,8 +38,7 @@ use super::shape::ShapeVelocity;
 use super::{record_monitors, DesignError, DesignKind, DesignVariable, Monitor};
 use crate::contact::ContactSeeds;
 use crate::geometry::Surface;
-use crate::kinematics::M3;
-use crate::material::{MaterialParams, MaterialState};
+use crate::material::MaterialParams;
 use crate::shell::load::ExternalLoad;
 use crate::shell::model::ShellModel;
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
@@ -129,10 +128,7 @@ pub fn zero_particle() -> ParticleState<f64> {
 
 /// A zero history sensitivity.
 pub fn zero_history() -> PointHistory<f64> {
-    PointHistory {
-        frame: M3::zeros(),
-        material: MaterialState::zero(),
-    }
+    PointHistory::ZERO
 }
 
 impl SensitivityState {

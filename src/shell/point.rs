@@ -138,6 +138,16 @@ pub struct PointHistory<T> {
 }
 
 impl PointHistory<f64> {
+    /// All zero (e.g. a zero history sensitivity).
+    pub const ZERO: Self = PointHistory {
+        frame: M3::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+        material: MaterialState {
+            stress: crate::material::Vec5::new(0.0, 0.0, 0.0, 0.0, 0.0),
+            back_stress: crate::material::Vec5::new(0.0, 0.0, 0.0, 0.0, 0.0),
+            eps_p: 0.0,
+        },
+    };
+
     /// The same history as constants of scalar `T`.
     pub fn lift<T: Real>(&self) -> PointHistory<T> {
         PointHistory {

@@ -825,15 +825,6 @@ pub struct ModelSeeds<'a> {
     pub dofs: &'a [f64],
 }
 
-const ZERO_HISTORY: PointHistory<f64> = PointHistory {
-    frame: M3::new(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
-    material: crate::material::MaterialState {
-        stress: crate::material::Vec5::new(0.0, 0.0, 0.0, 0.0, 0.0),
-        back_stress: crate::material::Vec5::new(0.0, 0.0, 0.0, 0.0, 0.0),
-        eps_p: 0.0,
-    },
-};
-
 /// The number of fixed point chunks of [`ShellModel::internal_force_dots`] (a few per
 /// thread for load balance; each holds one force vector per seed set).
 const POINT_CHUNKS: usize = 32;
@@ -1075,9 +1066,9 @@ impl ShellModel {
         let mut hist_out = buffers;
         hist_out.truncate(ns);
         for h in hist_out.iter_mut().filter(|h| h.len() != n_hist) {
-            *h = vec![ZERO_HISTORY; n_hist];
+            *h = vec![PointHistory::ZERO; n_hist];
         }
-        hist_out.resize_with(ns, || vec![ZERO_HISTORY; n_hist]);
+        hist_out.resize_with(ns, || vec![PointHistory::ZERO; n_hist]);
         let mut slots: Vec<Vec<&mut [PointHistory<f64>]>> = (0..self.points.len())
             .map(|_| Vec::with_capacity(ns))
             .collect();
@@ -1103,7 +1094,7 @@ impl ShellModel {
         // per-point row buffer to store and read back.
         let n_dofs = self.n_dofs();
         let chunk_len = self.points.len().div_ceil(POINT_CHUNKS).max(1);
-        let per_chunk = slots
+        let accs = slots
             .into_par_iter()
             .zip(keep_slots.par_iter_mut())
             .enumerate()
@@ -1189,8 +1180,6 @@ impl ShellModel {
                 Ok(acc)
             })
             .collect::<Result<Vec<_>, ShellError>>()?;
-        drop(keep_slots);
-        let accs = per_chunk;
         // Seed sets in parallel, each the sum of the chunks in chunk order.
         let out: Vec<InternalForceDot> = hist_out
             .into_par_iter()
