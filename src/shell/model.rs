@@ -650,17 +650,8 @@ impl ShellModel {
         }
         let mut history = Vec::with_capacity(nl);
         let mut plastic_layers = 0;
-        for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
-            let inp = PointInput {
-                surface: &p.surface,
-                zeta,
-                thickness: self.thickness,
-                weight: p.weight * wz,
-                shape: &p.shape,
-                particles: &parts,
-                material: &self.material,
-                history: &self.history[k * nl + l],
-            };
+        for l in 0..nl {
+            let inp = self.layer_input(k, l, &parts);
             let res = point_residual_with(&inp, &inc)?;
             for (r, v) in residual.iter_mut().zip(&res.residual) {
                 *r += v;
@@ -679,6 +670,28 @@ impl ShellModel {
             history,
             plastic_layers,
         })
+    }
+
+    /// The f64 input of layer `l` of in-plane point `k` (the model's surface, thickness,
+    /// material and committed history), with the neighbours' states `particles`.
+    pub(crate) fn layer_input<'a>(
+        &'a self,
+        k: usize,
+        l: usize,
+        particles: &'a [ParticleState<f64>],
+    ) -> PointInput<'a, f64> {
+        let p = &self.points[k];
+        let (zeta, wz) = self.thickness_rule[l];
+        PointInput {
+            surface: &p.surface,
+            zeta,
+            thickness: self.thickness,
+            weight: p.weight * wz,
+            shape: &p.shape,
+            particles,
+            material: &self.material,
+            history: &self.history[k * self.thickness_rule.len() + l],
+        }
     }
 
     /// The images among the neighbours of `p`: `(neighbour slot, Q, det Q)`.

@@ -269,7 +269,8 @@ pub fn commit_particle_dot(
 }
 
 /// Layer-independent sums of one seed set at one in-plane point (the neighbour loops of `J̇ⁿ`
-/// and `Ġ`), combined with `z = ζt/2` per layer.
+/// and `Ġ`), combined with `z = ζt/2` per layer. The same sums of the values (without dots)
+/// are the point's [`ValueSums`].
 #[derive(Clone, Copy, Debug, Default)]
 struct SeedSums {
     /// `ẋ⁰,α + Σ Ψ_I,α ū̇_I`.
@@ -293,15 +294,7 @@ impl SeedSums {
         surface: Option<&SurfacePoint<f64>>,
         nb: impl Fn(usize) -> (&'p ParticleState<f64>, V3, V3),
     ) -> Self {
-        let mut s = match surface {
-            Some(sp) => SeedSums {
-                xa: sp.x_a,
-                da: sp.n_a,
-                d: sp.n,
-                ..Default::default()
-            },
-            None => SeedSums::default(),
-        };
+        let mut s = SeedSums::start(surface);
         for (i, sh) in shape.iter().enumerate() {
             let (p, du, dd) = nb(i);
             s.add(sh, p, du, dd);
@@ -311,7 +304,21 @@ impl SeedSums {
 }
 
 impl SeedSums {
-    /// Add neighbour `sh`'s terms: its state sensitivity `p`, `Δū̇` and `Δḋ`.
+    /// The surface's terms alone (`ẋ⁰,α`, `ṅ⁰,α`, `ṅ⁰`; zero without a surface seed).
+    fn start(surface: Option<&SurfacePoint<f64>>) -> Self {
+        match surface {
+            Some(sp) => SeedSums {
+                xa: sp.x_a,
+                da: sp.n_a,
+                d: sp.n,
+                ..Default::default()
+            },
+            None => SeedSums::default(),
+        }
+    }
+
+    /// Add neighbour `sh`'s terms: its state sensitivity `p`, `Δū̇` and `Δḋ` (or, for
+    /// [`ValueSums`], its state, `Δū` and `Δd`).
     fn add(&mut self, sh: &ShapeData, p: &ParticleState<f64>, du: V3, dd: V3) {
         let ddir = p.d - p.d0;
         for a in 0..2 {
@@ -335,15 +342,7 @@ impl SeedSums {
         nb: impl Fn(usize, usize) -> (&'p ParticleState<f64>, V3, V3),
     ) {
         out.clear();
-        out.extend(surfaces.map(|sp| match sp {
-            Some(sp) => SeedSums {
-                xa: sp.x_a,
-                da: sp.n_a,
-                d: sp.n,
-                ..Default::default()
-            },
-            None => SeedSums::default(),
-        }));
+        out.extend(surfaces.map(SeedSums::start));
         for (i, sh) in shape.iter().enumerate() {
             for (s, acc) in out.iter_mut().enumerate() {
                 let (p, du, dd) = nb(s, i);
@@ -356,41 +355,19 @@ impl SeedSums {
 /// Value sums at one in-plane point (f64, layer-independent): `x̄,α = x⁰,α + Σ Ψ_I,α ū_I`,
 /// `d,α = n⁰,α + Σ Ψ_I,α (d_I − d⁰_I)`, `d = n⁰ + Σ Ψ_I (d_I − d⁰_I)`, `Σ Ψ_I,α Δū_I`,
 /// `Σ Ψ_I,α Δd_I`, `Σ Ψ_I Δd_I`: the layers' `Jⁿ` and `G` (and the factors of `ż`, `ṫ/2`).
-#[derive(Clone, Copy, Debug)]
-struct ValueSums {
-    xa: [V3; 2],
-    da: [V3; 2],
-    d: V3,
-    g_u: [V3; 2],
-    g_d: [V3; 2],
-    g_d3: V3,
-}
+/// The same neighbour sums as [`SeedSums`], of the values.
+type ValueSums = SeedSums;
 
 impl ValueSums {
-    fn new(
+    fn of_values(
         s: &SurfacePoint<f64>,
         shape: &[ShapeData],
         particles: &[ParticleState<f64>],
         incr: &PointIncrement<f64>,
     ) -> Self {
-        let mut v = ValueSums {
-            xa: s.x_a,
-            da: s.n_a,
-            d: s.n,
-            g_u: [V3::zeros(); 2],
-            g_d: [V3::zeros(); 2],
-            g_d3: V3::zeros(),
-        };
+        let mut v = SeedSums::start(Some(s));
         for (((sh, p), du), dd) in shape.iter().zip(particles).zip(&incr.du).zip(&incr.dd) {
-            let ddir = p.d - p.d0;
-            for a in 0..2 {
-                v.xa[a] += p.u * sh.dpsi[a];
-                v.da[a] += ddir * sh.dpsi[a];
-                v.g_u[a] += du * sh.dpsi[a];
-                v.g_d[a] += dd * sh.dpsi[a];
-            }
-            v.d += ddir * sh.psi;
-            v.g_d3 += dd * sh.psi;
+            v.add(sh, p, *du, *dd);
         }
         v
     }
@@ -738,7 +715,7 @@ pub fn point_residual_dot(
 ) -> Result<PointDot, ShellError> {
     let n = inp.shape.len();
     check_point_sizes(inp, incr, incr_dot, res, seeds)?;
-    let values = ValueSums::new(inp.surface, inp.shape, inp.particles, incr);
+    let values = ValueSums::of_values(inp.surface, inp.shape, inp.particles, incr);
     let sums = SeedSums::new(inp.shape, seeds.surface, |i| {
         (&seeds.particles[i], incr_dot.du[i], incr_dot.dd[i])
     });
@@ -1119,7 +1096,7 @@ impl ShellModel {
                     inc.dd.extend(nb.iter().map(|&j| per[j].2));
                     inc.d_alpha.clear();
                     inc.d_alpha.extend(nb.iter().map(|&j| per[j].3));
-                    let values = ValueSums::new(&p.surface, &p.shape, &sc.parts, inc);
+                    let values = ValueSums::of_values(&p.surface, &p.shape, &sc.parts, inc);
                     SeedSums::fill_all(
                         &mut sc.sums,
                         &p.shape,
@@ -1135,23 +1112,14 @@ impl ShellModel {
                     sc.dots.clear();
                     sc.dots.resize(ns, StressSums::zero());
                     let mut val = StressSums::zero();
-                    for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
-                        let inp = PointInput {
-                            surface: &p.surface,
-                            zeta,
-                            thickness: self.thickness,
-                            weight: p.weight * wz,
-                            shape: &p.shape,
-                            particles: &sc.parts,
-                            material: &self.material,
-                            history: &self.history[k * nl + l],
-                        };
+                    for l in 0..nl {
+                        let inp = self.layer_input(k, l, &sc.parts);
                         let res = values.layer(&inp)?;
                         let layer = LayerData::new(&inp, &res)?;
                         if let Some(kept) = kept.as_deref_mut() {
                             kept[l] = layer.keep;
                         }
-                        val.add_value(&layer.p, layer.z, zeta);
+                        val.add_value(&layer.p, layer.z, layer.zeta);
                         for (s, (sd, acc)) in seeds.iter().zip(sc.dots.iter_mut()).enumerate() {
                             hist[s][l] = layer.apply(
                                 &values,
