@@ -222,7 +222,7 @@ pub struct DsaResult {
 
 /// Check everything a `dsa` run of `case` with `methods` needs, before any analysis: design
 /// variables present and admissible, loads the dual reference can carry, and, on the built
-/// model, [`validate_design`].
+/// model, [`validate_design`](crate::sensitivity::validate_design).
 pub fn validate(case: &ShellCase, methods: &[DsaMethod]) -> Result<DsaSpec, DsaError> {
     let mut spec = case
         .dsa

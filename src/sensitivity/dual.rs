@@ -22,7 +22,9 @@
 //!
 //! **Dual type.** [`DesignDual`] is implemented for `DualSVec64<N>` (N directions in one pass)
 //! and for `Dual64` (one direction per pass; several passes for several variables). A
-//! [`DualShellProblem<D>`] holds `⌈n_variables / D::DIRECTIONS⌉` dual states ("groups"): one for
+//! [`DualDsa<D>`] (the reference as an observer of the analysis' converged steps, so that it
+//! runs in the same hooked run as any other observer: [`DualShellProblem<D>`] is the problem
+//! with it in its hook) holds `⌈n_variables / D::DIRECTIONS⌉` dual states ("groups"): one for
 //! `DualSVec64<N>` with `N` = the number of variables ([`run_dual`] dispatches `N` = 1..=8),
 //! one per variable for `Dual64`. The vector dual is the default: it shares the value part
 //! (gathers, rotations, inverses, the return map's branch and its local Newton) between the
@@ -56,7 +58,7 @@
 //! history terms, computed rather than derived. The contact's tangent is in the tangent the
 //! driver holds, so the solve is unchanged.
 //!
-//! **Shape design variables** ([`DesignKind::Shape`], [`DualShellProblem::new_on`],
+//! **Shape design variables** ([`DesignKind::Shape`], [`DualDsa::new`],
 //! [`run_dual_on`]): the surface parameter is seeded and the initial geometry of the group is
 //! built in `D` as `ShellModel::new` builds it in `f64` ([`super::shape::dual_geometry`]):
 //! the quadrature points' `x̄⁰,α, n⁰, n⁰,α` ([`DualState::surfaces`], passed to
@@ -90,9 +92,10 @@ use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PA
 use crate::shell::problem::ShellProblem;
 use crate::shell::rotation::rotate_director;
 use crate::shell::ShellError;
+use crate::solver::observe::{Observed, StepObserver};
 use crate::solver::{
     ConvergedStep, ConvergedTangent, FactorisedAt, LinearSolver, NewtonFailure, NewtonReport,
-    NewtonSolver, NonlinearProblem, ProblemError, SolverOptions,
+    NewtonSolver, ProblemError, SolverOptions,
 };
 use nalgebra::Vector3;
 use num_dual::{Derivative, Dual64, DualSVec64};
@@ -304,10 +307,11 @@ pub enum SensitivityError {
     },
 }
 
-/// The shell problem with the dual-number sensitivity reference in its convergence hook.
+/// The dual-number sensitivity reference as an observer of the analysis' converged steps
+/// ([`StepObserver`]): at each converged step it forms the dual residual's right-hand sides,
+/// solves them with the converged tangent and carries its dual states to the next step.
 #[derive(Debug)]
-pub struct DualShellProblem<D: DesignDual> {
-    problem: ShellProblem,
+pub struct DualDsa<D: DesignDual> {
     variables: Vec<DesignVariable>,
     loads: Vec<DualLoad>,
     monitors: Vec<Monitor>,
@@ -316,7 +320,12 @@ pub struct DualShellProblem<D: DesignDual> {
     records: Vec<DualStepRecord>,
     time: Duration,
     failure: Option<String>,
+    /// The model's histories at the start of the step being committed (the yielding count).
+    before: Option<Vec<PointHistory<f64>>>,
 }
+
+/// The shell problem with the dual-number reference in its convergence hook.
+pub type DualShellProblem<D> = Observed<ShellProblem, DualDsa<D>>;
 
 /// `e1 = (t − d (d·t))/|…|`, `e2 = d × e1` (the model's lamina vectors), generic.
 fn lamina_vectors<T: Real>(d: &Vector3<T>, t: &Vector3<T>) -> [Vector3<T>; 2] {
@@ -342,32 +351,22 @@ fn fatal(e: impl std::fmt::Display) -> ProblemError {
     ProblemError::Fatal(format!("dual sensitivity reference: {e}"))
 }
 
-impl<D: DesignDual> DualShellProblem<D> {
-    /// Wrap `problem` (at its initial state): `variables` are validated against its model,
-    /// `loads` must be the problem's loads (checked at every step), `monitors` are recorded at
-    /// every converged step.
-    pub fn new(
-        problem: ShellProblem,
-        variables: Vec<DesignVariable>,
-        loads: Vec<DualLoad>,
-        monitors: Vec<Monitor>,
-    ) -> Result<Self, SensitivityError> {
-        Self::new_on(problem, None, variables, loads, monitors)
-    }
-
-    /// [`DualShellProblem::new`] for a problem whose model was built on `surface` (`None`:
-    /// no shape design variables allowed). A shape design variable seeds its surface
+impl<D: DesignDual> DualDsa<D> {
+    /// The reference for `problem` (at its initial state, its model built on `surface`;
+    /// `None`: no shape design variables allowed): `variables` are validated against its
+    /// model, `loads` must be the problem's loads (checked at every step), `monitors` are
+    /// recorded at every converged step. A shape design variable seeds its surface
     /// parameter: the group's initial geometry (quadrature-point surfaces, particle directors
     /// and lamina vectors, initial frames) is built in `D` from the seeded surface
     /// ([`dual_geometry`]), exactly as `ShellModel::new` builds it in `f64`.
-    pub fn new_on(
-        problem: ShellProblem,
+    pub fn new(
+        problem: &ShellProblem,
         surface: Option<&Surface<f64>>,
         variables: Vec<DesignVariable>,
         loads: Vec<DualLoad>,
         monitors: Vec<Monitor>,
     ) -> Result<Self, SensitivityError> {
-        check_method_inputs(&problem, surface, &variables, &monitors)?;
+        check_method_inputs(problem, surface, &variables, &monitors)?;
         let contacts: Vec<&DualContact> = loads.iter().filter_map(|l| l.contact()).collect();
         if contacts.len() > 1 {
             return Err(SensitivityError::Shell(ShellError::InvalidInput(format!(
@@ -472,8 +471,7 @@ impl<D: DesignDual> DualShellProblem<D> {
                 })
             })
             .collect::<Result<Vec<_>, SensitivityError>>()?;
-        Ok(DualShellProblem {
-            problem,
+        Ok(DualDsa {
             variables,
             loads,
             monitors,
@@ -482,12 +480,8 @@ impl<D: DesignDual> DualShellProblem<D> {
             records: Vec::new(),
             time: Duration::ZERO,
             failure: None,
+            before: None,
         })
-    }
-
-    /// The wrapped problem.
-    pub fn problem(&self) -> &ShellProblem {
-        &self.problem
     }
 
     /// The design variables.
@@ -523,11 +517,12 @@ impl<D: DesignDual> DualShellProblem<D> {
     /// `load` ([`Self::add_dual_load`] of every load).
     pub(crate) fn dual_external(
         &self,
+        problem: &ShellProblem,
         g: &DualState<D>,
         dq: &[D],
         load: f64,
     ) -> Result<Vec<D>, ShellError> {
-        let n_q = self.problem.n_generalised();
+        let n_q = problem.n_generalised();
         let q_shift: Vec<D> = dq
             .iter()
             .enumerate()
@@ -542,7 +537,7 @@ impl<D: DesignDual> DualShellProblem<D> {
             .collect();
         let mut f_ext = vec![D::zero(); n_q];
         for l in &self.loads {
-            self.add_dual_load(l, g, dq, &q_shift, load, &mut f_ext)?;
+            Self::add_dual_load(&problem.model, l, g, dq, &q_shift, load, &mut f_ext)?;
         }
         Ok(f_ext)
     }
@@ -551,13 +546,14 @@ impl<D: DesignDual> DualShellProblem<D> {
     /// unknowns `u` and load `load`.
     pub(crate) fn dual_residual(
         &self,
+        problem: &ShellProblem,
         g: &DualState<D>,
         dq: &[D],
         u: &[f64],
         load: f64,
     ) -> Result<Vec<D>, ShellError> {
-        let model = &self.problem.model;
-        let n_q = self.problem.n_generalised();
+        let model = &problem.model;
+        let n_q = problem.n_generalised();
         let (f_int, _) = model.internal_force_with_surfaces(
             &g.particles,
             &g.history,
@@ -568,7 +564,7 @@ impl<D: DesignDual> DualShellProblem<D> {
         )?;
         let mut r = f_int;
         r.resize(u.len(), D::zero());
-        let f_ext = self.dual_external(g, dq, load)?;
+        let f_ext = self.dual_external(problem, g, dq, load)?;
         for (ri, fi) in r.iter_mut().zip(&f_ext) {
             *ri -= *fi;
         }
@@ -578,11 +574,10 @@ impl<D: DesignDual> DualShellProblem<D> {
             .zip(&g.unknowns)
             .map(|(&v, c)| *c + D::cst(v - c.value()))
             .collect();
-        for (c, (row, &k)) in self
-            .problem
+        for (c, (row, &k)) in problem
             .constraints()
             .iter()
-            .zip(self.problem.constraint_scales())
+            .zip(problem.constraint_scales())
             .enumerate()
         {
             let mu = ud[n_q + c];
@@ -602,7 +597,7 @@ impl<D: DesignDual> DualShellProblem<D> {
     /// particle states, thickness, penalty and tool offsets and the increment `dq`; dead point forces
     /// carry no derivative and are left out.
     fn add_dual_load(
-        &self,
+        model: &crate::shell::model::ShellModel,
         l: &DualLoad,
         g: &DualState<D>,
         dq: &[D],
@@ -610,7 +605,6 @@ impl<D: DesignDual> DualShellProblem<D> {
         factor: f64,
         f: &mut [D],
     ) -> Result<(), ShellError> {
-        let model = &self.problem.model;
         match l {
             DualLoad::Pressure(p) => p.force_with_surfaces(model, &g.surfaces, q_shift, factor, f),
             // A dead load per unit initial area: its derivative is the area element's (zero
@@ -634,30 +628,34 @@ impl<D: DesignDual> DualShellProblem<D> {
                 };
                 c.contact.force_with(model, &inputs, dq, factor, f)
             }
-            DualLoad::Constant(inner) => self.add_dual_load(inner, g, dq, q_shift, 1.0, f),
+            DualLoad::Constant(inner) => Self::add_dual_load(model, inner, g, dq, q_shift, 1.0, f),
             DualLoad::PointForce(_) => Ok(()),
         }
     }
 
-    fn hook(&mut self, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
+    fn hook(
+        &mut self,
+        problem: &ShellProblem,
+        step: &ConvergedStep<'_>,
+    ) -> Result<(), ProblemError> {
         if step.factorised_at != FactorisedAt::Converged {
             return Err(fatal(
-                "the solver's tangent is not the converged one (the problem must declare \
+                "the solver's tangent is not the converged one (the observer must ask for \
                  ConvergedTangent::Required)",
             ));
         }
         let n = step.u.len();
-        let n_q = self.problem.n_generalised();
-        let committed = self.problem.state();
+        let n_q = problem.n_generalised();
+        let committed = problem.state();
         let du: Vec<f64> = step.u.iter().zip(committed).map(|(a, b)| a - b).collect();
-        check_loads(&self.problem, &self.loads, &du[..n_q], step.load)?;
+        check_loads(problem, &self.loads, &du[..n_q], step.load)?;
         let dq_const: Vec<D> = du[..n_q].iter().map(|&v| D::cst(v)).collect();
         // 1. Right-hand sides of all variables, column-major n × n_variables.
         let nv = self.variables.len();
         let mut b = vec![0.0; n * nv];
         for g in &self.groups {
             let r = self
-                .dual_residual(g, &dq_const, step.u, step.load)
+                .dual_residual(problem, g, &dq_const, step.u, step.load)
                 .map_err(fatal)?;
             for k in 0..g.count {
                 let col = &mut b[(g.first + k) * n..(g.first + k + 1) * n];
@@ -683,7 +681,7 @@ impl<D: DesignDual> DualShellProblem<D> {
                     D::from_parts(du[i], &parts)
                 })
                 .collect();
-            let model = &self.problem.model;
+            let model = &problem.model;
             let (_, history) = model
                 .internal_force_with_surfaces(
                     &g.particles,
@@ -720,19 +718,24 @@ impl<D: DesignDual> DualShellProblem<D> {
     }
 
     /// After the analysis' commit: adopt the pending dual state and record the monitors.
-    fn record(&mut self, load: f64, plastic_points: usize) -> Result<(), String> {
+    fn record(
+        &mut self,
+        problem: &ShellProblem,
+        load: f64,
+        plastic_points: usize,
+    ) -> Result<(), String> {
         let next = self
             .pending
             .take()
             .ok_or("commit without a converged-step hook")?;
         self.groups = next;
-        let model = &self.problem.model;
+        let model = &problem.model;
         let mut mismatch = 0.0_f64;
         for g in &self.groups {
             mismatch = mismatch.max(value_mismatch(model, g));
         }
         let nv = self.variables.len();
-        let n_q = self.problem.n_generalised();
+        let n_q = problem.n_generalised();
         // ū̇ of the real particles as generalised vectors, one per variable.
         let mut udot = vec![vec![0.0; n_q]; nv];
         for g in &self.groups {
@@ -886,68 +889,44 @@ pub fn yielding_points(before: &[PointHistory<f64>], after: &[PointHistory<f64>]
         .count()
 }
 
-impl<D: DesignDual> NonlinearProblem for DualShellProblem<D> {
-    fn n_dofs(&self) -> usize {
-        self.problem.n_dofs()
+impl<D: DesignDual> StepObserver<ShellProblem> for DualDsa<D> {
+    /// The reference solves with the tangent at the converged state.
+    fn converged_tangent(&self, _problem: ConvergedTangent) -> ConvergedTangent {
+        ConvergedTangent::Required
     }
-    fn residual(&mut self, u: &[f64], load: f64, r: &mut [f64]) -> Result<(), ProblemError> {
-        self.problem.residual(u, load, r)
-    }
-    fn tangent(&mut self, u: &[f64], load: f64, values: &mut [f64]) -> Result<(), ProblemError> {
-        self.problem.tangent(u, load, values)
-    }
-    fn residual_and_tangent(
+    fn on_converged(
         &mut self,
-        u: &[f64],
-        load: f64,
-        r: &mut [f64],
-        values: &mut [f64],
+        problem: &ShellProblem,
+        step: &ConvergedStep<'_>,
     ) -> Result<(), ProblemError> {
-        self.problem.residual_and_tangent(u, load, r, values)
-    }
-    fn essential(&self, load: f64) -> Vec<(usize, f64)> {
-        self.problem.essential(load)
-    }
-    fn force_norm(&self, load: f64) -> f64 {
-        self.problem.force_norm(load)
-    }
-    fn residual_scale(&self) -> f64 {
-        self.problem.residual_scale()
-    }
-    fn on_converged(&mut self, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
         if let Some(f) = &self.failure {
             return Err(fatal(f));
         }
         let t0 = Instant::now();
-        let out = self.hook(step);
+        let out = self.hook(problem, step);
         self.time += t0.elapsed();
         out
     }
-    /// The reference solves with the tangent at the converged state.
-    fn converged_tangent(&self) -> ConvergedTangent {
-        ConvergedTangent::Required
+    fn before_commit(&mut self, problem: &ShellProblem, _u: &[f64], _load: f64) {
+        self.before = Some(problem.model.history.clone());
     }
-    fn commit(&mut self, u: &[f64], load: f64) {
-        let before = self.problem.model.history.clone();
-        self.problem.commit(u, load);
-        let plastic = yielding_points(&before, &self.problem.model.history);
+    fn after_commit(&mut self, problem: &ShellProblem, _u: &[f64], load: f64) {
+        let plastic = self
+            .before
+            .take()
+            .map_or(0, |before| yielding_points(&before, &problem.model.history));
         let t0 = Instant::now();
-        if let Err(e) = self.record(load, plastic) {
-            // `commit` cannot fail: the next hook (or the caller, `failure()`) reports it.
+        if let Err(e) = self.record(problem, load, plastic) {
+            // A commit cannot fail: the next hook (or the caller, `failure()`) reports it.
             self.failure.get_or_insert(e);
         }
         self.time += t0.elapsed();
     }
-    fn restore(&mut self) {
+    fn on_restore(&mut self) {
         self.pending = None;
-        self.problem.restore();
     }
-}
-
-impl<D: DesignDual> DualShellProblem<D> {
-    /// A failure of the reference after a commit (reported by the next step's hook too).
-    pub fn failure(&self) -> Option<&str> {
-        self.failure.as_deref()
+    fn failure(&self) -> Option<String> {
+        self.failure.clone()
     }
 }
 
@@ -997,22 +976,24 @@ fn drive<D: DesignDual>(
     let t0 = Instant::now();
     let pattern = problem.pattern().clone();
     let mut linear = LinearSolver::new(&pattern, crate::solver::Method::auto(&pattern), solver)?;
-    let mut p = DualShellProblem::<D>::new_on(problem, surface, variables, loads, monitors)?;
-    let u0 = p.problem().state().to_vec();
+    let dsa = DualDsa::<D>::new(&problem, surface, variables, loads, monitors)?;
+    let mut p: DualShellProblem<D> = Observed::new(problem, dsa);
+    let u0 = p.problem.state().to_vec();
     let report = newton
         .run(&mut p, &pattern, &mut linear, &u0)
         .map_err(SensitivityError::Newton)?;
-    if let Some(f) = p.failure() {
+    if let Some(f) = p.observer.failure() {
         return Err(SensitivityError::Shell(ShellError::InvalidInput(format!(
             "dual sensitivity reference: {f}"
         ))));
     }
+    let dsa = p.observer;
     Ok(DualRun {
-        variables: p.variables.clone(),
-        records: p.records.clone(),
+        variables: dsa.variables,
+        records: dsa.records,
         report,
         total: t0.elapsed(),
-        reference: p.time(),
+        reference: dsa.time,
     })
 }
 
@@ -1034,7 +1015,7 @@ pub fn run_dual(
 }
 
 /// [`run_dual`] for a problem whose model was built on `surface`, which admits shape design
-/// variables ([`DualShellProblem::new_on`]).
+/// variables ([`DualDsa::new`]).
 #[allow(clippy::too_many_arguments)] // run_dual's arguments and the surface
 pub fn run_dual_on(
     problem: ShellProblem,

@@ -2,8 +2,8 @@
 //! (`shelldsa dsa --terms STEP`): which group of the fictitious load, of which equation, at
 //! which step and particle or integration point, disagrees.
 //!
-//! The analysis runs with the dual reference ([`DualShellProblem`] with `Dual64`, one dual
-//! state per variable) in its hook; at the chosen converged step, *before* the dual update,
+//! The analysis runs with the dual reference ([`DualDsa`] with `Dual64`, one dual state per
+//! variable) in its hook, inside the breakdown's observer; at the chosen converged step, *before* the dual update,
 //! the observer takes the dual reference's committed sensitivities `ⁿṡ` as the continuum
 //! method's seeds (so that errors accumulated over earlier steps do not mix in) and compares,
 //! for every design variable and every [`TermGroup`]:
@@ -17,7 +17,7 @@
 //!   point, parameter coordinates and layer).
 
 use super::continuum::{fictitious_loads, SensitivityState, StepState, TermGroup};
-use super::dual::{DualLoad, DualShellProblem, DualState, SensitivityError};
+use super::dual::{DualDsa, DualLoad, DualState, SensitivityError};
 use super::DesignVariable;
 use crate::contact::sensitivity::ToolRate;
 use crate::geometry::Surface;
@@ -27,7 +27,8 @@ use crate::shell::point_sensitivity::{commit_particle_dot, ModelSeeds};
 use crate::shell::problem::ShellProblem;
 use crate::solver::observe::{Observed, StepObserver};
 use crate::solver::{
-    ConvergedStep, LinearSolver, NewtonSolver, NonlinearProblem, ProblemError, SolverOptions,
+    ConvergedStep, ConvergedTangent, LinearSolver, NewtonSolver, NonlinearProblem, ProblemError,
+    SolverOptions,
 };
 use num_dual::Dual64;
 
@@ -258,6 +259,8 @@ impl FieldAcc {
 /// The observer of the breakdown at one step.
 #[derive(Debug)]
 struct Breakdown {
+    /// The dual reference (its hooks run first).
+    dual: DualDsa<Dual64>,
     /// 0-based converged step.
     step: usize,
     loads: Vec<DualLoad>,
@@ -274,10 +277,10 @@ fn fatal(e: impl std::fmt::Display) -> ProblemError {
 impl Breakdown {
     fn at_step(
         &mut self,
-        dp: &DualShellProblem<Dual64>,
+        problem: &ShellProblem,
         step: &ConvergedStep<'_>,
     ) -> Result<(), SensitivityError> {
-        let problem = dp.problem();
+        let dp = &self.dual;
         let model = &problem.model;
         let n = step.u.len();
         let n_q = problem.n_generalised();
@@ -312,8 +315,8 @@ impl Breakdown {
                 // loads' share is the Load group: split R = f_int − f_ext.
                 let d: Vec<f64> = match group {
                     Some(TermGroup::Design) | Some(TermGroup::Load) => {
-                        let r = dp.dual_residual(&gm, &dq, step.u, step.load)?;
-                        let f = dp.dual_external(&gm, &dq, step.load)?;
+                        let r = dp.dual_residual(problem, &gm, &dq, step.u, step.load)?;
+                        let f = dp.dual_external(problem, &gm, &dq, step.load)?;
                         let mut d: Vec<f64> = if group == Some(TermGroup::Load) {
                             vec![0.0; r.len()]
                         } else {
@@ -329,7 +332,7 @@ impl Breakdown {
                         d
                     }
                     _ => dp
-                        .dual_residual(&gm, &dq, step.u, step.load)?
+                        .dual_residual(problem, &gm, &dq, step.u, step.load)?
                         .iter()
                         .map(|x| x.eps)
                         .collect(),
@@ -402,11 +405,12 @@ impl Breakdown {
         Ok(())
     }
 
-    fn after(&mut self, dp: &DualShellProblem<Dual64>) {
+    fn after(&mut self, problem: &ShellProblem) {
         let Some((_, next)) = self.pending.take() else {
             return;
         };
-        let model = &dp.problem().model;
+        let dp = &self.dual;
+        let model = &problem.model;
         let nl = model.thickness_rule.len();
         let first = self.out.len() - next.len();
         for (v, (c, g)) in next.iter().zip(dp.groups()).enumerate() {
@@ -454,27 +458,36 @@ impl Breakdown {
     }
 }
 
-impl StepObserver<DualShellProblem<Dual64>> for Breakdown {
+impl StepObserver<ShellProblem> for Breakdown {
+    fn converged_tangent(&self, problem: ConvergedTangent) -> ConvergedTangent {
+        self.dual.converged_tangent(problem)
+    }
     fn on_converged(
         &mut self,
-        problem: &DualShellProblem<Dual64>,
+        problem: &ShellProblem,
         step: &ConvergedStep<'_>,
     ) -> Result<(), ProblemError> {
+        self.dual.on_converged(problem, step)?;
         if step.step == self.step {
             self.at_step(problem, step).map_err(fatal)?;
         }
         Ok(())
     }
-    fn after_commit(&mut self, problem: &DualShellProblem<Dual64>, _u: &[f64], _load: f64) {
+    fn before_commit(&mut self, problem: &ShellProblem, u: &[f64], load: f64) {
+        self.dual.before_commit(problem, u, load);
+    }
+    fn after_commit(&mut self, problem: &ShellProblem, u: &[f64], load: f64) {
+        self.dual.after_commit(problem, u, load);
         self.after(problem);
     }
     fn on_restore(&mut self) {
+        self.dual.on_restore();
         if self.pending.take().is_some() {
             self.out.retain(|b| b.step != self.step + 1);
         }
     }
     fn failure(&self) -> Option<String> {
-        self.failure.clone()
+        self.failure.clone().or_else(|| self.dual.failure())
     }
 }
 
@@ -499,16 +512,16 @@ pub fn breakdown(
     }
     let pattern = problem.pattern().clone();
     let mut linear = LinearSolver::new(&pattern, crate::solver::Method::auto(&pattern), solver)?;
-    let dp =
-        DualShellProblem::<Dual64>::new_on(problem, surface, variables, loads.clone(), Vec::new())?;
+    let dual = DualDsa::<Dual64>::new(&problem, surface, variables, loads.clone(), Vec::new())?;
     let obs = Breakdown {
+        dual,
         step: step - 1,
         loads,
         pending: None,
         out: Vec::new(),
         failure: None,
     };
-    let mut p = Observed::new(dp, obs);
+    let mut p = Observed::new(problem, obs);
     let u0 = vec![0.0; p.n_dofs()];
     let report = newton
         .run(&mut p, &pattern, &mut linear, &u0)
