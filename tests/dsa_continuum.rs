@@ -2,7 +2,8 @@
 //! against the dual-number reference on the yielding clamped plate (`tests/common/plate.rs`:
 //! follower pressure, clamped edges, 5 steps, plastic in steps 4–5) for thickness and five
 //! material parameters, term group by term group at a plastic step, bit-identical on a
-//! re-run, and equal with serial and parallel assembly.
+//! re-run, equal with serial and parallel assembly, and bit-identical when both methods
+//! observe one analysis.
 //!
 //! Tolerances. Both methods solve eq (65) with the same factorised tangent; their right-hand
 //! sides are the same derivative computed two ways (hand-derived chain against dual-number
@@ -212,4 +213,44 @@ fn continuum_is_repeatable_and_thread_independent() {
         worst <= 1e-10 * big,
         "serial vs parallel {worst:e} of {big:e}"
     );
+}
+
+/// Both methods observing one hooked run (`run_continuum_and_dual`, what `shelldsa dsa` runs
+/// when both are asked for) give the same derivatives, bit for bit, as each method in its own
+/// run: the observers share the analysis and its converged tangent and do not touch each
+/// other's state, and each run follows the same Newton path.
+#[test]
+fn one_run_for_both_methods_equals_a_run_each() {
+    let d = nominal_design();
+    let (c, du) = shelldsa::sensitivity::run_continuum_and_dual(
+        Plate::problem(&d),
+        None,
+        variables(),
+        vec![DualLoad::Pressure(Plate::pressure())],
+        Plate::monitors(),
+        &driver(STEPS),
+        SolverOptions::default(),
+        DualMode::Vector,
+    )
+    .unwrap();
+    let (c1, d1) = (continuum(), dual());
+    assert_eq!(c.records.len(), c1.records.len());
+    assert_eq!(du.records.len(), d1.records.len());
+    for (a, b) in c.records.iter().zip(&c1.records) {
+        assert_eq!(a.load, b.load);
+        assert_eq!(a.values, b.values, "continuum monitors, step {}", a.step);
+        assert_eq!(
+            a.derivatives, b.derivatives,
+            "continuum derivatives, step {}",
+            a.step
+        );
+    }
+    for (a, b) in du.records.iter().zip(&d1.records) {
+        assert_eq!(
+            a.derivatives, b.derivatives,
+            "dual derivatives, step {}",
+            a.step
+        );
+    }
+    assert_eq!(c.report.attempts.len(), c1.report.attempts.len());
 }

@@ -22,7 +22,7 @@ use crate::sensitivity::continuum::run_continuum;
 use crate::sensitivity::dual::{run_dual_on, DualLoad, DualMode, SensitivityError};
 use crate::sensitivity::fd::{self, fit_rate, Analysis, RunResponse, TaylorFit, TaylorRow};
 use crate::sensitivity::terms::{breakdown, TermBreakdown};
-use crate::sensitivity::{validate_design_on, Design, DesignVariable};
+use crate::sensitivity::{run_continuum_and_dual, validate_design_on, Design, DesignVariable};
 use crate::shell::problem::ShellProblem;
 use crate::shell::ShellError;
 use crate::solver::NewtonSolver;
@@ -293,14 +293,33 @@ pub fn run(
         CaseAnalysis { case: &replay_case }
     };
 
-    // (2a) The continuum DSA.
-    let mut continuum: Option<Vec<Vec<Vec<f64>>>> = None; // [variable][step][monitor]
-    let (mut time_continuum, mut time_continuum_run) = (None, None);
-    let mut continuum_stages = None;
-    let mut continuum_value_difference = None;
-    if spec.methods.contains(&DsaMethod::Continuum) {
+    // (2) The continuum DSA and the dual reference: both observe one hooked run when both are
+    // asked for (they share the analysis and its converged tangents), else each its own.
+    let dual_mode = if vars.len() <= 8 {
+        DualMode::Vector
+    } else {
+        DualMode::PerVariable
+    };
+    let (want_continuum, want_dual) = (
+        spec.methods.contains(&DsaMethod::Continuum),
+        spec.methods.contains(&DsaMethod::Dual),
+    );
+    let (continuum_run, dual_run) = if want_continuum && want_dual {
         let (problem, newton, loads) = method_problem(&analysis, case, &base)?;
-        let r = run_continuum(
+        let (c, d) = run_continuum_and_dual(
+            problem,
+            Some(&case.surface),
+            vars.clone(),
+            loads,
+            monitors.clone(),
+            &newton,
+            analysis.solver(),
+            dual_mode,
+        )?;
+        (Some(c), Some(d))
+    } else if want_continuum {
+        let (problem, newton, loads) = method_problem(&analysis, case, &base)?;
+        let c = run_continuum(
             problem,
             Some(&case.surface),
             vars.clone(),
@@ -309,6 +328,30 @@ pub fn run(
             &newton,
             analysis.solver(),
         )?;
+        (Some(c), None)
+    } else if want_dual {
+        let (problem, newton, loads) = method_problem(&analysis, case, &base)?;
+        let d = run_dual_on(
+            problem,
+            Some(&case.surface),
+            vars.clone(),
+            loads,
+            monitors.clone(),
+            &newton,
+            analysis.solver(),
+            dual_mode,
+        )?;
+        (None, Some(d))
+    } else {
+        (None, None)
+    };
+
+    // (2a) The continuum DSA.
+    let mut continuum: Option<Vec<Vec<Vec<f64>>>> = None; // [variable][step][monitor]
+    let (mut time_continuum, mut time_continuum_run) = (None, None);
+    let mut continuum_stages = None;
+    let mut continuum_value_difference = None;
+    if let Some(r) = continuum_run {
         let loads: Vec<f64> = r.records.iter().map(|s| s.load).collect();
         if loads != nominal.loads {
             return Err(DsaError::Inconsistent(format!(
@@ -340,23 +383,7 @@ pub fn run(
     let mut dual: Option<Vec<Vec<Vec<f64>>>> = None; // [variable][step][monitor]
     let (mut time_dual, mut time_dual_run, mut dual_value_difference) = (None, None, None);
     let mut dual_state_mismatch = None;
-    if spec.methods.contains(&DsaMethod::Dual) {
-        let (problem, newton, loads) = method_problem(&analysis, case, &base)?;
-        let mode = if vars.len() <= 8 {
-            DualMode::Vector
-        } else {
-            DualMode::PerVariable
-        };
-        let r = run_dual_on(
-            problem,
-            Some(&case.surface),
-            vars.clone(),
-            loads,
-            monitors.clone(),
-            &newton,
-            analysis.solver(),
-            mode,
-        )?;
+    if let Some(r) = dual_run {
         let loads: Vec<f64> = r.records.iter().map(|s| s.load).collect();
         if loads != nominal.loads {
             return Err(DsaError::Inconsistent(format!(
@@ -543,7 +570,8 @@ pub const NOTES: [&str; 4] = [
     "timing_s.analysis: wall time of a separate plain run of the analysis (no sensitivity \
      hook), the nominal run of the finite differences; timing_s.continuum and timing_s.dual: \
      each method's own time inside its analysis run with the hook (the whole hooked runs: \
-     continuum_run_total_s, dual_run_total_s); timing_s.continuum_stages: the continuum DSA by stage (fictitious loads, solve, history update, monitors, load check; s); timing_s.fd: all finite-difference re-runs",
+     continuum_run_total_s, dual_run_total_s; with both methods asked for, one run observed \
+     by both, so the two totals are the same run's); timing_s.continuum_stages: the continuum DSA by stage (fictitious loads, solve, history update, monitors, load check; s); timing_s.fd: all finite-difference re-runs",
     "fd_central and fd_step are lists, one entry per step size of the variable's fd_steps \
      (relative steps h/|tau|; fd_step holds the absolute h); fd_flagged[k] marks load steps \
      where the yield status of some layer point differs among the runs at tau-h, tau, tau+h \

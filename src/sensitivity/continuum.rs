@@ -362,6 +362,18 @@ impl ContinuumDsa {
     pub fn time(&self) -> Duration {
         self.time
     }
+    /// The run's result, once the analysis it observed has ended with `report` after `total`.
+    pub fn into_run(self, report: NewtonReport, total: Duration) -> ContinuumRun {
+        ContinuumRun {
+            variables: self.variables,
+            records: self.records,
+            states: self.states,
+            report,
+            total,
+            dsa: self.time,
+            timing: self.timing,
+        }
+    }
     /// The same, by stage.
     pub fn timing(&self) -> ContinuumTiming {
         self.timing
@@ -847,14 +859,5 @@ pub fn run_continuum(
             crate::shell::ShellError::InvalidInput(f),
         ));
     }
-    let dsa = obs.observer;
-    Ok(ContinuumRun {
-        variables: dsa.variables,
-        records: dsa.records,
-        states: dsa.states,
-        report,
-        total: t0.elapsed(),
-        dsa: dsa.time,
-        timing: dsa.timing,
-    })
+    Ok(obs.observer.into_run(report, t0.elapsed()))
 }

@@ -504,6 +504,17 @@ impl<D: DesignDual> DualDsa<D> {
         self.time
     }
 
+    /// The run's result, once the analysis it observed has ended with `report` after `total`.
+    pub fn into_run(self, report: NewtonReport, total: Duration) -> DualRun {
+        DualRun {
+            variables: self.variables,
+            records: self.records,
+            report,
+            total,
+            reference: self.time,
+        }
+    }
+
     /// The sensitivity `du/dτ_v` of the committed unknowns `[q, μ]` for variable `v`.
     pub fn unknown_sensitivity(&self, v: usize) -> Option<Vec<f64>> {
         let g = self
@@ -926,7 +937,9 @@ impl<D: DesignDual> StepObserver<ShellProblem> for DualDsa<D> {
         self.pending = None;
     }
     fn failure(&self) -> Option<String> {
-        self.failure.clone()
+        self.failure
+            .as_ref()
+            .map(|f| format!("dual sensitivity reference: {f}"))
     }
 }
 
@@ -983,18 +996,9 @@ fn drive<D: DesignDual>(
         .run(&mut p, &pattern, &mut linear, &u0)
         .map_err(SensitivityError::Newton)?;
     if let Some(f) = p.observer.failure() {
-        return Err(SensitivityError::Shell(ShellError::InvalidInput(format!(
-            "dual sensitivity reference: {f}"
-        ))));
+        return Err(SensitivityError::Shell(ShellError::InvalidInput(f)));
     }
-    let dsa = p.observer;
-    Ok(DualRun {
-        variables: dsa.variables,
-        records: dsa.records,
-        report,
-        total: t0.elapsed(),
-        reference: dsa.time,
-    })
+    Ok(p.observer.into_run(report, t0.elapsed()))
 }
 
 /// Run the analysis of `problem` with the dual reference of `variables` in its convergence

@@ -717,3 +717,75 @@ pub enum DesignError {
         method: &'static str,
     },
 }
+
+/// The continuum DSA and the dual-number reference in the same analysis: one hooked run with
+/// both observers (`(ContinuumDsa, DualDsa<D>)`, the continuum's hooks first) instead of one
+/// run each. The two methods share the analysis, its converged tangents and its load levels,
+/// and each still times only its own work (`ContinuumRun::dsa`, `DualRun::reference`); both
+/// results carry the one run's report and total time. The dual scalar follows `mode` as in
+/// [`dual::run_dual_on`].
+#[allow(clippy::too_many_arguments)] // run_dual_on's arguments
+pub fn run_continuum_and_dual(
+    problem: crate::shell::problem::ShellProblem,
+    surface: Option<&Surface<f64>>,
+    variables: Vec<DesignVariable>,
+    loads: Vec<dual::DualLoad>,
+    monitors: Vec<Monitor>,
+    newton: &crate::solver::NewtonSolver,
+    solver: crate::solver::SolverOptions,
+    mode: dual::DualMode,
+) -> Result<(continuum::ContinuumRun, dual::DualRun), dual::SensitivityError> {
+    fn drive<D: dual::DesignDual>(
+        problem: crate::shell::problem::ShellProblem,
+        surface: Option<&Surface<f64>>,
+        variables: Vec<DesignVariable>,
+        loads: Vec<dual::DualLoad>,
+        monitors: Vec<Monitor>,
+        newton: &crate::solver::NewtonSolver,
+        solver: crate::solver::SolverOptions,
+    ) -> Result<(continuum::ContinuumRun, dual::DualRun), dual::SensitivityError> {
+        use crate::solver::observe::{Observed, StepObserver};
+        let t0 = std::time::Instant::now();
+        let pattern = problem.pattern().clone();
+        let mut linear = crate::solver::LinearSolver::new(
+            &pattern,
+            crate::solver::Method::auto(&pattern),
+            solver,
+        )?;
+        let c = continuum::ContinuumDsa::new(
+            &problem,
+            surface,
+            variables.clone(),
+            loads.clone(),
+            monitors.clone(),
+        )?;
+        let d = dual::DualDsa::<D>::new(&problem, surface, variables, loads, monitors)?;
+        let mut obs = Observed::new(problem, (c, d));
+        let u0 = obs.problem.state().to_vec();
+        let report = newton
+            .run(&mut obs, &pattern, &mut linear, &u0)
+            .map_err(dual::SensitivityError::Newton)?;
+        if let Some(f) = obs.observer.failure() {
+            return Err(dual::SensitivityError::Shell(ShellError::InvalidInput(f)));
+        }
+        let total = t0.elapsed();
+        let (c, d) = obs.observer;
+        Ok((c.into_run(report.clone(), total), d.into_run(report, total)))
+    }
+    macro_rules! vector {
+        ($($n:literal),*) => {
+            match variables.len() {
+                $($n => drive::<num_dual::DualSVec64<$n>>(
+                    problem, surface, variables, loads, monitors, newton, solver,
+                ),)*
+                count => Err(dual::SensitivityError::TooManyVariables { count, max: 8 }),
+            }
+        };
+    }
+    match mode {
+        dual::DualMode::PerVariable => {
+            drive::<num_dual::Dual64>(problem, surface, variables, loads, monitors, newton, solver)
+        }
+        dual::DualMode::Vector => vector!(1, 2, 3, 4, 5, 6, 7, 8),
+    }
+}
