@@ -304,44 +304,28 @@ pub fn run(
         spec.methods.contains(&DsaMethod::Continuum),
         spec.methods.contains(&DsaMethod::Dual),
     );
-    let (continuum_run, dual_run) = if want_continuum && want_dual {
+    let (continuum_run, dual_run) = if want_continuum || want_dual {
         let (problem, newton, loads) = method_problem(&analysis, case, &base)?;
-        let (c, d) = run_continuum_and_dual(
-            problem,
-            Some(&case.surface),
-            vars.clone(),
-            loads,
-            monitors.clone(),
-            &newton,
-            analysis.solver(),
-            dual_mode,
-        )?;
-        (Some(c), Some(d))
-    } else if want_continuum {
-        let (problem, newton, loads) = method_problem(&analysis, case, &base)?;
-        let c = run_continuum(
-            problem,
-            Some(&case.surface),
-            vars.clone(),
-            loads,
-            monitors.clone(),
-            &newton,
-            analysis.solver(),
-        )?;
-        (Some(c), None)
-    } else if want_dual {
-        let (problem, newton, loads) = method_problem(&analysis, case, &base)?;
-        let d = run_dual_on(
-            problem,
-            Some(&case.surface),
-            vars.clone(),
-            loads,
-            monitors.clone(),
-            &newton,
-            analysis.solver(),
-            dual_mode,
-        )?;
-        (None, Some(d))
+        let (surface, solver) = (Some(&case.surface), analysis.solver());
+        let (vars, monitors) = (vars.clone(), monitors.clone());
+        match (want_continuum, want_dual) {
+            (true, true) => {
+                let (c, d) = run_continuum_and_dual(
+                    problem, surface, vars, loads, monitors, &newton, solver, dual_mode,
+                )?;
+                (Some(c), Some(d))
+            }
+            (true, false) => {
+                let c = run_continuum(problem, surface, vars, loads, monitors, &newton, solver)?;
+                (Some(c), None)
+            }
+            _ => {
+                let d = run_dual_on(
+                    problem, surface, vars, loads, monitors, &newton, solver, dual_mode,
+                )?;
+                (None, Some(d))
+            }
+        }
     } else {
         (None, None)
     };
