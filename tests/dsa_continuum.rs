@@ -22,13 +22,18 @@ use shelldsa::sensitivity::dual::{run_dual, DualLoad, DualMode, DualRun};
 use shelldsa::sensitivity::terms::breakdown;
 use shelldsa::solver::SolverOptions;
 
+/// The plate's loads as the sensitivity methods take them (the follower pressure).
+fn loads() -> Vec<DualLoad> {
+    vec![DualLoad::Pressure(Plate::pressure())]
+}
+
 fn continuum() -> ContinuumRun {
     let d = nominal_design();
     run_continuum(
         Plate::problem(&d),
         None,
         variables(),
-        vec![DualLoad::Pressure(Plate::pressure())],
+        loads(),
         Plate::monitors(),
         &driver(STEPS),
         SolverOptions::default(),
@@ -41,7 +46,7 @@ fn dual() -> DualRun {
     run_dual(
         Plate::problem(&d),
         variables(),
-        vec![DualLoad::Pressure(Plate::pressure())],
+        loads(),
         Plate::monitors(),
         &driver(STEPS),
         SolverOptions::default(),
@@ -121,7 +126,7 @@ fn term_groups_match_the_dual_reference_at_a_plastic_step() {
         Plate::problem(&d),
         None,
         variables(),
-        vec![DualLoad::Pressure(Plate::pressure())],
+        loads(),
         &driver(STEPS),
         SolverOptions::default(),
         STEPS,
@@ -226,7 +231,7 @@ fn one_run_for_both_methods_equals_a_run_each() {
         Plate::problem(&d),
         None,
         variables(),
-        vec![DualLoad::Pressure(Plate::pressure())],
+        loads(),
         Plate::monitors(),
         &driver(STEPS),
         SolverOptions::default(),
