@@ -50,9 +50,9 @@ use crate::kinematics::{
     strain_to_vec5, stress_from_vec5, M3,
 };
 use crate::material::{
-    elastic_matrix, return_map, Mat5, MaterialParams, MaterialSensitivity, StrainMap,
+    elastic_matrix, return_map, Mat5, MaterialParams, MaterialSensitivity, StrainMap, Vec5,
 };
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, SMatrix, Vector3};
 use rayon::prelude::*;
 
 type V3 = Vector3<f64>;
@@ -330,25 +330,86 @@ impl SeedSums {
         self.d += ddir * sh.psi;
         self.g_d3 += dd * sh.psi;
     }
+}
 
-    /// [`SeedSums::new`] for several seed sets at once into `out` (one per item of `surfaces`):
-    /// the neighbour loop outside, the seed sets inside, so each neighbour's shape data is read
-    /// once; every seed set's sums are added in neighbour order, as [`SeedSums::new`] does
-    /// (the same floating-point results). `nb(s, i)`: seed set `s`'s data of neighbour `i`.
-    fn fill_all<'p, 's>(
+/// One shape-function particle's data of one seed set, as the neighbour loops read it: `row`
+/// = `[ū̇, Δū̇, ḋ − ḋ⁰, Δḋ]` (the terms of [`SeedSums::add`], in the order of [`FlatSums`]) and
+/// `(∂d/∂α_β)˙`.
+#[derive(Clone, Copy, Debug)]
+struct NeighbourDot {
+    row: [f64; 12],
+    d_alpha: [V3; 2],
+}
+
+/// [`SeedSums`] in flat form, for the loop over the neighbours of a point and several seed
+/// sets: `a[α] = Σ Ψ_I,α row_I` (the sums `x̄,α, Σ Ψ,α Δū, d,α, Σ Ψ,α Δd` of the rows of
+/// [`NeighbourDot`]) and `psi = Σ Ψ_I row_I[6..12]` (`d`, `Σ Ψ Δd`). The same operations in the
+/// same order as [`SeedSums::add`] (the same floating-point results), on fixed-size arrays.
+#[derive(Clone, Copy, Debug, Default)]
+struct FlatSums {
+    a: [[f64; 12]; 2],
+    psi: [f64; 6],
+}
+
+impl FlatSums {
+    /// The surface's terms alone ([`SeedSums::start`]).
+    fn start(surface: Option<&SurfacePoint<f64>>) -> Self {
+        let mut f = FlatSums::default();
+        if let Some(sp) = surface {
+            for a in 0..2 {
+                f.a[a][0..3].copy_from_slice(sp.x_a[a].as_slice());
+                f.a[a][6..9].copy_from_slice(sp.n_a[a].as_slice());
+            }
+            f.psi[0..3].copy_from_slice(sp.n.as_slice());
+        }
+        f
+    }
+
+    #[inline]
+    fn add(&mut self, sh: &ShapeData, row: &[f64; 12]) {
+        for (a, acc) in self.a.iter_mut().enumerate() {
+            let w = sh.dpsi[a];
+            for (x, r) in acc.iter_mut().zip(row) {
+                *x += r * w;
+            }
+        }
+        for (x, r) in self.psi.iter_mut().zip(&row[6..]) {
+            *x += r * sh.psi;
+        }
+    }
+
+    fn sums(&self) -> SeedSums {
+        let v = |s: &[f64]| V3::new(s[0], s[1], s[2]);
+        SeedSums {
+            xa: [v(&self.a[0][0..3]), v(&self.a[1][0..3])],
+            g_u: [v(&self.a[0][3..6]), v(&self.a[1][3..6])],
+            da: [v(&self.a[0][6..9]), v(&self.a[1][6..9])],
+            g_d: [v(&self.a[0][9..12]), v(&self.a[1][9..12])],
+            d: v(&self.psi[0..3]),
+            g_d3: v(&self.psi[3..6]),
+        }
+    }
+
+    /// The sums of several seed sets at once into `out` (one per item of `surfaces`): the
+    /// neighbour loop outside, the seed sets inside, so each neighbour's shape data is read
+    /// once; every seed set's sums are added in neighbour order, as [`SeedSums::new`] does.
+    /// `row(s, i)`: seed set `s`'s row of neighbour `i`.
+    fn fill_all<'s, 'r>(
         out: &mut Vec<SeedSums>,
         shape: &[ShapeData],
         surfaces: impl Iterator<Item = Option<&'s SurfacePoint<f64>>>,
-        nb: impl Fn(usize, usize) -> (&'p ParticleState<f64>, V3, V3),
+        row: impl Fn(usize, usize) -> &'r [f64; 12],
+        scratch: &mut Vec<FlatSums>,
     ) {
-        out.clear();
-        out.extend(surfaces.map(SeedSums::start));
+        scratch.clear();
+        scratch.extend(surfaces.map(FlatSums::start));
         for (i, sh) in shape.iter().enumerate() {
-            for (s, acc) in out.iter_mut().enumerate() {
-                let (p, du, dd) = nb(s, i);
-                acc.add(sh, p, du, dd);
+            for (s, acc) in scratch.iter_mut().enumerate() {
+                acc.add(sh, row(s, i));
             }
         }
+        out.clear();
+        out.extend(scratch.iter().map(FlatSums::sums));
     }
 }
 
@@ -447,10 +508,13 @@ struct LayerData {
     half_t: f64,
     z: f64,
     h: M3<f64>,
-    /// `½rᵀ Δε Aᵀ` and `rᵀ` (the `Q̇ₙ` terms of eqs 50–51).
-    r_half_t_c: M3<f64>,
+    /// `2 · ½rᵀ Δε Aᵀ` (the `Q̇ₙ` term of eq 50, doubled for `Δε̇ˡ`'s symmetric part) and `rᵀ`
+    /// (the `Q̇ₙ` term of eq 51).
+    r_half_t_c2: M3<f64>,
     r_t: M3<f64>,
-    q1: M3<f64>,
+    /// `ⁿ⁺¹Qᵀ E_k ⁿ⁺¹Q` for the five unit stresses `E_k` of [`stress_from_vec5`] (rows: the
+    /// symmetric entries `00, 11, 22, 01, 12, 02`): `ⁿ⁺¹Qᵀ σ̇ˡ ⁿ⁺¹Q = B σ̇ˡ` (eq 42).
+    b: SMatrix<f64, 6, 5>,
     /// `ⁿ⁺¹Qᵀ σˡ`.
     qt_sigma: M3<f64>,
     /// `ⁿ⁺¹J⁻¹` and `w det J J⁻ᵀ`.
@@ -462,75 +526,122 @@ struct LayerData {
     keep: LayerKeep,
 }
 
+/// `strain_to_vec5(A B)` without the product's unused (2, 2) entry.
+fn vec5_of_product(a: &M3<f64>, b: &M3<f64>) -> Vec5<f64> {
+    let e =
+        |i: usize, j: usize| a[(i, 0)] * b[(0, j)] + a[(i, 1)] * b[(1, j)] + a[(i, 2)] * b[(2, j)];
+    Vec5::new(
+        e(0, 0),
+        e(1, 1),
+        e(0, 1) + e(1, 0),
+        e(1, 2) + e(2, 1),
+        e(2, 0) + e(0, 2),
+    )
+}
+
+/// The axial vector of `skew M` (`skew M = [ω]×`).
+fn axial(m: &M3<f64>) -> V3 {
+    V3::new(
+        (m[(2, 1)] - m[(1, 2)]) * 0.5,
+        (m[(0, 2)] - m[(2, 0)]) * 0.5,
+        (m[(1, 0)] - m[(0, 1)]) * 0.5,
+    )
+}
+
 impl LayerData {
-    fn new(inp: &PointInput<f64>, res: &PointResult<f64>) -> Result<Self, ShellError> {
+    fn new(inp: &PointInput<f64>, res: &PointResult<f64>) -> Self {
         let k = &res.kinematics;
-        let singular = |what: &str| {
-            ShellError::InvalidInput(format!(
-                "res: {what} of the given point result is singular (not from \
-                 point_residual_with?)"
-            ))
-        };
-        let f_half = M3::identity() + k.h * 0.5;
-        // The f64 evaluation succeeded, so I + ½H passed the kinematics' determinant check,
-        // and I − aΔω (Δω skew) has determinant 1 + a²|ω|² ≥ 1.
-        let f_half_inv = f_half.try_inverse().ok_or_else(|| singular("I + ½H"))?;
-        let resolvent = |a: f64| {
-            (M3::identity() - k.inc.domega * a)
-                .try_inverse()
-                .ok_or_else(|| singular("I − aΔω"))
-        };
+        // F½⁻¹ = (I + ½H)⁻¹ = I − ½H F½⁻¹ = I − ½L (eq 57: L = H F½⁻¹), with L = Δε + Δω.
+        let f_half_inv = M3::identity() - (k.inc.deps + k.inc.domega) * 0.5;
         let q_n = inp.history.frame;
         let r_half_t = k.inc.r_half.transpose();
         let a = q_n * r_half_t;
-        let deps_l = strain_to_vec5(&local_strain_increment(&q_n, &k.inc.r_half, &k.inc.deps));
+        let c = k.inc.deps * a.transpose();
+        // Δεˡ = A Δε Aᵀ (eq 50's value, kinematics::local_strain_increment).
+        let deps_l = strain_to_vec5(&(a * c));
         let half_t = inp.thickness * 0.5;
         let q1 = res.history.frame;
         let sigma_l = stress_from_vec5(&res.history.material.stress);
         let jinv_t = k.j1_inv.transpose();
-        let c = k.inc.deps * a.transpose();
         let material = MaterialSensitivity::new(inp.material, &deps_l, &res.return_map);
         // The rotation rates are linear in the spin rate's axial vector ω (Δω̇ = [ω]×,
         // eqs 54–55): ṙ = Σ ω_i (I − ½Δω)⁻¹ E_i ½(I + r), ½ṙ = Σ ω_i (I − ¼Δω)⁻¹ E_i ¼(I + ½r)
         // with E_i = [e_i]×, so the terms Qₙ ½ṙᵀ Δε Aᵀ (eq 50) and Qₙ ṙᵀ (eq 51) are
         // Σ ω_i of per-layer matrices, formed once here for every seed set:
-        // (R E_i S)ᵀ = −Sᵀ E_i Rᵀ.
-        let (r1, s1) = (resolvent(0.5)?, (M3::identity() + k.inc.r) * 0.5);
-        let (r2, s2) = (resolvent(0.25)?, (M3::identity() + k.inc.r_half) * 0.25);
+        // (R E_i S)ᵀ = −Sᵀ E_i Rᵀ. The resolvents follow from the Cayley transforms of the f64
+        // evaluation: r = 2(I − ½Δω)⁻¹ − I, ½r = 2(I − ¼Δω)⁻¹ − I (eqs 23, 31).
+        let (r1, s1) = (
+            (M3::identity() + k.inc.r) * 0.5,
+            (M3::identity() + k.inc.r) * 0.5,
+        );
+        let (r2, s2) = (
+            (M3::identity() + k.inc.r_half) * 0.5,
+            (M3::identity() + k.inc.r_half) * 0.25,
+        );
         let (u, w) = (q_n * s2.transpose(), r2.transpose() * c);
         let (v, r1t) = (q_n * s1.transpose(), r1.transpose());
         // −(U [e_i]×) W = U:j ⊗ Wk: − U:k ⊗ Wj: for (i, j, k) cyclic ([e_i]× e_j = e_k,
         // [e_i]× e_k = −e_j): two outer products instead of two matrix products.
-        let rot = |u: &M3<f64>, w: &M3<f64>| -> [M3<f64>; 3] {
-            std::array::from_fn(|i| {
-                let (j, k) = ((i + 1) % 3, (i + 2) % 3);
-                u.column(j) * w.row(k) - u.column(k) * w.row(j)
-            })
+        let frame_rot = std::array::from_fn(|i| {
+            let (j, k) = ((i + 1) % 3, (i + 2) % 3);
+            v.column(j) * r1t.row(k) - v.column(k) * r1t.row(j)
+        });
+        // Of the strain term only `strain_to_vec5` of its symmetric part enters (`Δε̇ˡ`), doubled:
+        // the five entries of `2 (X + Xᵀ)/2`-form, `2 · strain_to_vec5(X)`, with `X` the outer
+        // products' difference.
+        let strain_rot5 = std::array::from_fn(|i| {
+            let (j, k) = ((i + 1) % 3, (i + 2) % 3);
+            let e = |p: usize, q: usize| u[(p, j)] * w[(k, q)] - u[(p, k)] * w[(j, q)];
+            Vec5::new(
+                e(0, 0),
+                e(1, 1),
+                e(0, 1) + e(1, 0),
+                e(1, 2) + e(2, 1),
+                e(2, 0) + e(0, 2),
+            ) * 2.0
+        });
+        // B's columns: Qᵀ E_k Q = q_i ⊗ q_j (+ q_j ⊗ q_i), q_i the rows of ⁿ⁺¹Q.
+        let qr: [V3; 3] = std::array::from_fn(|i| q1.row(i).transpose());
+        let sym = |x: &V3, y: &V3| {
+            nalgebra::Vector6::new(
+                x[0] * y[0] + y[0] * x[0],
+                x[1] * y[1] + y[1] * x[1],
+                x[2] * y[2] + y[2] * x[2],
+                x[0] * y[1] + y[0] * x[1],
+                x[1] * y[2] + y[1] * x[2],
+                x[0] * y[2] + y[0] * x[2],
+            )
         };
-        let strain_rot = rot(&u, &w);
-        let frame_rot = rot(&v, &r1t);
-        Ok(LayerData {
+        let b = SMatrix::<f64, 6, 5>::from_columns(&[
+            sym(&qr[0], &qr[0]) * 0.5,
+            sym(&qr[1], &qr[1]) * 0.5,
+            sym(&qr[0], &qr[1]),
+            sym(&qr[1], &qr[2]),
+            sym(&qr[2], &qr[0]),
+        ]);
+        let jn_inv_f = k.jn_inv * f_half_inv;
+        LayerData {
             zeta: inp.zeta,
             half_t,
             z: half_t * inp.zeta,
             h: k.h,
-            r_half_t_c: r_half_t * c,
+            r_half_t_c2: r_half_t * c * 2.0,
             r_t: k.inc.r.transpose(),
-            q1,
+            b,
             qt_sigma: q1.transpose() * sigma_l,
             jinv: k.j1_inv,
             jinv_t_w: jinv_t * (k.det1 * inp.weight),
             p: k.p,
             material,
             keep: LayerKeep {
-                f_half_inv,
-                jn_inv_f: k.jn_inv * f_half_inv,
+                a_f: a * f_half_inv,
+                f_a: jn_inv_f * a.transpose(),
                 a,
-                strain_rot,
+                strain_rot5,
                 frame_rot,
                 material: material.strain_map(),
             },
-        })
+        }
     }
 
     /// The layer's `Ṗ` for one seed set, added into `acc` (with its `z`-moment), and the trial
@@ -560,23 +671,39 @@ impl LayerData {
             sums.g_d3 * half_t + values.g_d3 * half_t_dot,
         ]);
         // Ḣ = Ġ Jⁿ⁻¹ − G Jⁿ⁻¹ J̇ⁿ Jⁿ⁻¹ = (Ġ − H J̇ⁿ) Jⁿ⁻¹ (the −H ∇ⁿV term of eqs 39–40), and
-        // L̇ = F½⁻¹ Ḣ F½⁻¹ (eqs 56–57, kinematics::mid_step_gradient_dot).
-        let l_dot = k.f_half_inv * (g_dot - self.h * jn_dot) * k.jn_inv_f;
-        let (deps_dot, omega) = LayerKeep::rates(&l_dot);
+        // L̇ = F½⁻¹ Ḣ F½⁻¹ (eqs 56–57), seen in the rotated frame (LayerKeep::rates).
+        let (deps_dot_l, omega) = k.rates(&(g_dot - self.h * jn_dot));
         // Δε̇ˡ with the history frame's sensitivity (eq 50): Ȧ = Q̇ₙ ½rᵀ + Qₙ ½ṙᵀ.
-        let deps_l_dot = k.strain_dot(&(history_dot.frame * self.r_half_t_c), &omega, &deps_dot);
-        // Return-map sensitivity (eqs 44–49).
-        let mat_dot = self.material.apply(
-            material_dot,
-            &history_dot.material,
-            &strain_to_vec5(&deps_l_dot),
+        let deps_l_dot = k.strain_dot(
+            &vec5_of_product(&history_dot.frame, &self.r_half_t_c2),
+            &omega,
+            &deps_dot_l,
         );
+        // Return-map sensitivity (eqs 44–49).
+        let mat_dot = self
+            .material
+            .apply(material_dot, &history_dot.material, &deps_l_dot);
         // ⁿ⁺¹Q̇ = Q̇ₙ rᵀ + Qₙ ṙᵀ (eq 51) and σ̇ᵍ = Q̇ᵀσˡQ + Qᵀσ̇ˡQ + QᵀσˡQ̇ (eq 42; σˡ is
-        // symmetric, so the first term is the transpose of the last).
+        // symmetric, so the first term is the transpose of the last; Qᵀσ̇ˡQ = B σ̇ˡ).
         let q1_dot = history_dot.frame * self.r_t + k.frame_rate(&omega);
         let x = self.qt_sigma * q1_dot;
-        let sigma_g_dot =
-            x + x.transpose() + self.q1.transpose() * stress_from_vec5(&mat_dot.stress) * self.q1;
+        let s = self.b * mat_dot.stress;
+        let (s01, s12, s02) = (
+            x[(0, 1)] + x[(1, 0)] + s[3],
+            x[(1, 2)] + x[(2, 1)] + s[4],
+            x[(0, 2)] + x[(2, 0)] + s[5],
+        );
+        let sigma_g_dot = M3::new(
+            x[(0, 0)] * 2.0 + s[0],
+            s01,
+            s02,
+            s01,
+            x[(1, 1)] * 2.0 + s[1],
+            s12,
+            s02,
+            s12,
+            x[(2, 2)] * 2.0 + s[2],
+        );
         // P = w det(J) σᵍ J⁻ᵀ on J = Jⁿ + G:
         // Ṗ = tr(J⁻¹J̇) P + w det J σ̇ᵍ J⁻ᵀ − P J̇ᵀ J⁻ᵀ.
         // With K = J⁻¹J̇: Ṗ = tr(K) P + w det J σ̇ᵍ J⁻ᵀ − P Kᵀ.
@@ -660,28 +787,30 @@ fn add_rows_dot(
     }
 }
 
-/// [`add_rows_dot`] for several seed sets at once (`t_dot` and `dots` one per seed set,
-/// `out` seed-major, `5 n` per seed set): the neighbour loop outside, so each neighbour's shape
-/// data and the seed-independent moment `m_I` are formed once; the same floating-point results.
+/// [`add_rows_dot`] for several seed sets at once (`half_t_dot` and `dots` one per seed set):
+/// the neighbour loop outside, so each neighbour's shape data and the seed-independent moment
+/// `m_I` are formed once; the same floating-point results. Neighbour `i`'s rows of every seed
+/// set (`rows[s]`, 5 each) go to `emit(i, rows)`.
 #[allow(clippy::too_many_arguments)]
 fn add_rows_dot_all(
     shape: &[ShapeData],
     d_alpha: &[[V3; 2]],
     d_alpha_dot: impl Fn(usize, usize) -> [V3; 2],
     half_t: f64,
-    t_dot: impl Iterator<Item = f64>,
+    half_t_dot: &[f64],
     val: &StressSums,
     dots: &[StressSums],
-    out: &mut [f64],
+    rows: &mut Vec<[f64; DOFS_PER_PARTICLE]>,
+    mut emit: impl FnMut(usize, &[[f64; DOFS_PER_PARTICLE]]),
 ) {
-    let nr = DOFS_PER_PARTICLE * shape.len();
-    let half_t_dot: Vec<f64> = t_dot.map(|t| t * 0.5).collect();
     let p3 = val.p.column(2);
+    rows.clear();
+    rows.resize(dots.len(), [0.0; DOFS_PER_PARTICLE]);
     for (i, (sh, da)) in shape.iter().zip(d_alpha).enumerate() {
         let [t0, t1] = sh.dpsi_test;
         let m = val.pz.column(0) * t0 + val.pz.column(1) * t1 + p3 * (half_t * sh.psi);
         let mz = val.pzeta.column(0) * t0 + val.pzeta.column(1) * t1;
-        for (s, (dot, &htd)) in dots.iter().zip(&half_t_dot).enumerate() {
+        for (s, ((dot, &htd), o)) in dots.iter().zip(half_t_dot).zip(rows.iter_mut()).enumerate() {
             let dad = d_alpha_dot(s, i);
             let pd3 = dot.p.column(2);
             let f_dot = dot.p.column(0) * t0 + dot.p.column(1) * t1;
@@ -690,13 +819,15 @@ fn add_rows_dot_all(
                 + mz * htd
                 + pd3 * (half_t * sh.psi)
                 + p3 * (htd * sh.psi);
-            let o = &mut out[s * nr + DOFS_PER_PARTICLE * i..s * nr + DOFS_PER_PARTICLE * (i + 1)];
-            o[0] += f_dot[0];
-            o[1] += f_dot[1];
-            o[2] += f_dot[2];
-            o[3] += dad[0].dot(&m) + da[0].dot(&m_dot);
-            o[4] += dad[1].dot(&m) + da[1].dot(&m_dot);
+            *o = [
+                f_dot[0],
+                f_dot[1],
+                f_dot[2],
+                dad[0].dot(&m) + da[0].dot(&m_dot),
+                dad[1].dot(&m) + da[1].dot(&m_dot),
+            ];
         }
+        emit(i, rows);
     }
 }
 
@@ -719,7 +850,7 @@ pub fn point_residual_dot(
     let sums = SeedSums::new(inp.shape, seeds.surface, |i| {
         (&seeds.particles[i], incr_dot.du[i], incr_dot.dd[i])
     });
-    let layer = LayerData::new(inp, res)?;
+    let layer = LayerData::new(inp, res);
     let mut dot = StressSums::zero();
     let history = layer.apply(
         &values,
@@ -808,17 +939,18 @@ const POINT_CHUNKS: usize = 32;
 
 /// Per-chunk buffers of [`ShellModel::internal_force_dots`], reused from point to point.
 struct Scratch {
-    residuals: Vec<f64>,
+    rows: Vec<[f64; DOFS_PER_PARTICLE]>,
     parts: Vec<ParticleState<f64>>,
     inc: PointIncrement<f64>,
     sums: Vec<SeedSums>,
+    flat: Vec<FlatSums>,
     dots: Vec<StressSums>,
 }
 
 impl Default for Scratch {
     fn default() -> Self {
         Scratch {
-            residuals: Vec::new(),
+            rows: Vec::new(),
             parts: Vec::new(),
             inc: PointIncrement {
                 du: Vec::new(),
@@ -826,6 +958,7 @@ impl Default for Scratch {
                 d_alpha: Vec::new(),
             },
             sums: Vec::new(),
+            flat: Vec::new(),
             dots: Vec::new(),
         }
     }
@@ -1012,7 +1145,7 @@ impl ShellModel {
                 Ok((state, x, inc.dd[0], inc.d_alpha[0]))
             })
             .collect::<Result<_, ShellError>>()?;
-        let per_dot: Vec<(ParticleState<f64>, V3, V3, [V3; 2])> = (0..ns * n_sf)
+        let per_dot: Vec<NeighbourDot> = (0..ns * n_sf)
             .into_par_iter()
             .map(|idx| {
                 let (sd, j) = (&seeds[idx / n_sf], idx % n_sf);
@@ -1030,7 +1163,12 @@ impl ShellModel {
                 };
                 let (state, x) = (&per[j].0, &per[j].1);
                 let (du, dd, da) = particle_increment_dot(state, &sdot, x, &local_dofs(j, sd.dofs));
-                (sdot, du, dd, da)
+                let ddir = sdot.d - sdot.d0;
+                let mut row = [0.0; 12];
+                for (c, v) in [sdot.u, du, ddir, dd].iter().enumerate() {
+                    row[3 * c..3 * c + 3].copy_from_slice(v.as_slice());
+                }
+                NeighbourDot { row, d_alpha: da }
             })
             .collect();
         // Per in-plane point: the f64 layers once, every seed set on each; results flat
@@ -1070,6 +1208,7 @@ impl ShellModel {
         // chunk order: deterministic and independent of the number of threads, without a
         // per-point row buffer to store and read back.
         let n_dofs = self.n_dofs();
+        let half_t_dot: Vec<f64> = seeds.iter().map(|sd| sd.thickness * 0.5).collect();
         let chunk_len = self.points.len().div_ceil(POINT_CHUNKS).max(1);
         let accs = slots
             .into_par_iter()
@@ -1083,7 +1222,6 @@ impl ShellModel {
                 for (k, (mut hist, kept)) in items {
                     let p = &self.points[k];
                     let nb = &p.neighbours;
-                    let nr = D * nb.len();
                     sc.parts.clear();
                     sc.parts.extend(nb.iter().map(|&j| per[j].0));
                     let inc = &mut sc.inc;
@@ -1097,25 +1235,20 @@ impl ShellModel {
                     inc.d_alpha.clear();
                     inc.d_alpha.extend(nb.iter().map(|&j| per[j].3));
                     let values = ValueSums::of_values(&p.surface, &p.shape, &sc.parts, inc);
-                    SeedSums::fill_all(
+                    FlatSums::fill_all(
                         &mut sc.sums,
                         &p.shape,
                         seeds.iter().map(|sd| sd.surface.map(|sp| &sp[k])),
-                        |s, i| {
-                            let d = &per_dot[s * n_sf + nb[i]];
-                            (&d.0, d.1, d.2)
-                        },
+                        |s, i| &per_dot[s * n_sf + nb[i]].row,
+                        &mut sc.flat,
                     );
-                    let residuals = &mut sc.residuals;
-                    residuals.clear();
-                    residuals.resize(ns * nr, 0.0);
                     sc.dots.clear();
                     sc.dots.resize(ns, StressSums::zero());
                     let mut val = StressSums::zero();
                     for l in 0..nl {
                         let inp = self.layer_input(k, l, &sc.parts);
                         let res = values.layer(&inp)?;
-                        let layer = LayerData::new(&inp, &res)?;
+                        let layer = LayerData::new(&inp, &res);
                         if let Some(kept) = kept.as_deref_mut() {
                             kept[l] = layer.keep;
                         }
@@ -1134,16 +1267,36 @@ impl ShellModel {
                     add_rows_dot_all(
                         &p.shape,
                         &sc.inc.d_alpha,
-                        |s, i| per_dot[s * n_sf + nb[i]].3,
+                        |s, i| per_dot[s * n_sf + nb[i]].d_alpha,
                         self.thickness * 0.5,
-                        seeds.iter().map(|sd| sd.thickness),
+                        &half_t_dot,
                         &val,
                         &sc.dots,
-                        residuals,
+                        &mut sc.rows,
+                        |i, rows| {
+                            // Scattered at once (ShellModel::scatter_particle, the source's map
+                            // looked up once for every seed set).
+                            let j = nb[i];
+                            let (src, q, det) = self.seed_map(j);
+                            let real = j < self.particles.len();
+                            for (s, o) in rows.iter().enumerate() {
+                                let at = s * n_dofs + D * src;
+                                let g = &mut acc[at..at + D];
+                                if real {
+                                    for (gc, v) in g.iter_mut().zip(o) {
+                                        *gc += *v;
+                                    }
+                                } else {
+                                    for c in 0..3 {
+                                        g[c] +=
+                                            o[0] * q[(0, c)] + o[1] * q[(1, c)] + o[2] * q[(2, c)];
+                                    }
+                                    g[3] += o[3] * det;
+                                    g[4] += o[4] * det;
+                                }
+                            }
+                        },
                     );
-                    for (s, r) in residuals.chunks_exact(nr).enumerate() {
-                        self.scatter_local(k, r, &mut acc[s * n_dofs..(s + 1) * n_dofs]);
-                    }
                 }
                 Ok(acc)
             })
@@ -1300,21 +1453,21 @@ fn add_history(a: &mut PointHistory<f64>, b: &PointHistory<f64>) {
 /// The seed-independent factors of one layer point's derivative chain, formed once from the
 /// f64 evaluation and shared by every seed set; kept by the fictitious loads' pass for the
 /// increment-only part of the trial-history derivative
-/// ([`ShellModel::add_increment_history_dots`]): ≈ 1.1 kB per layer point (9 3×3 matrices and
-/// the compact strain part of the return-map sensitivity, [`StrainMap`]), whatever the number
-/// of seed sets; 5.5 MB on the 5120 layer points of the hemisphere (`benches/continuum.rs`
-/// prints it).
+/// ([`ShellModel::add_increment_history_dots`]): ≈ 1 kB per layer point (6 3×3 matrices, three
+/// 5-vectors and the compact strain part of the return-map sensitivity, [`StrainMap`]),
+/// whatever the number of seed sets (`benches/continuum.rs` prints the total).
 #[derive(Clone, Copy, Debug, Default)]
 struct LayerKeep {
-    /// `F½⁻¹ = (I + ½H)⁻¹`.
-    f_half_inv: M3<f64>,
-    /// `Jⁿ⁻¹ F½⁻¹`.
-    jn_inv_f: M3<f64>,
-    /// `A = Qₙ ½rᵀ` (eq 50).
+    /// `A F½⁻¹` and `Jⁿ⁻¹ F½⁻¹ Aᵀ`, with `A = Qₙ ½rᵀ` (eq 50) and `F½ = I + ½H`: the rate
+    /// `L̇ = F½⁻¹ Ḣ F½⁻¹` (eqs 56–57) seen in the rotated frame, `A L̇ Aᵀ`.
+    a_f: M3<f64>,
+    f_a: M3<f64>,
+    /// `A` (orthogonal: the product of two rotations).
     a: M3<f64>,
-    /// `Qₙ (½ṙ_i)ᵀ Δε Aᵀ` for the spin rate `ω = e_i` (eqs 50, 54–55):
-    /// `Qₙ ½ṙᵀ Δε Aᵀ = Σ ω_i strain_rot[i]`.
-    strain_rot: [M3<f64>; 3],
+    /// `2 · strain_to_vec5(Qₙ (½ṙ_i)ᵀ Δε Aᵀ)` for the spin rate `ω = e_i` (eqs 50, 54–55): the
+    /// symmetric part of eq 50's `Ȧ Δε Aᵀ + A Δε Ȧᵀ` from the rotation rate is
+    /// `Σ ω_i strain_rot5[i]`.
+    strain_rot5: [Vec5<f64>; 3],
     /// `Qₙ ṙ_iᵀ` for `ω = e_i` (eqs 51, 54–55): `Qₙ ṙᵀ = Σ ω_i frame_rot[i]`.
     frame_rot: [M3<f64>; 3],
     /// The return-map sensitivity's strain part (eqs 44–49, 48).
@@ -1322,17 +1475,15 @@ struct LayerKeep {
 }
 
 impl LayerKeep {
-    /// The Hughes–Winget rates of `L̇` (eqs 54–55, 58): `Δε̇ = sym L̇` and the axial vector
-    /// `ω` of `Δω̇ = skew L̇ = [ω]×` (the rotation rates follow from `ω` through
-    /// [`Self::strain_rot`](LayerKeep) and [`Self::frame_rate`]).
-    fn rates(l_dot: &M3<f64>) -> (M3<f64>, V3) {
-        let lt = l_dot.transpose();
-        let omega = V3::new(
-            (l_dot[(2, 1)] - l_dot[(1, 2)]) * 0.5,
-            (l_dot[(0, 2)] - l_dot[(2, 0)]) * 0.5,
-            (l_dot[(1, 0)] - l_dot[(0, 1)]) * 0.5,
-        );
-        ((l_dot + lt) * 0.5, omega)
+    /// The Hughes–Winget rates of `L̇ = F½⁻¹ Ḣ F½⁻¹` (eqs 54–58) for `Ḣ Jⁿ = y`: the rotated
+    /// strain rate `A Δε̇ Aᵀ` (`Δε̇ = sym L̇`, eq 50's middle term) as `strain_to_vec5`, and the
+    /// axial vector `ω` of `Δω̇ = skew L̇ = [ω]×` (the rotation rates follow from `ω` through
+    /// [`Self::strain_rot5`](LayerKeep) and [`Self::frame_rate`]). With `M = A L̇ Aᵀ`:
+    /// `A Δε̇ Aᵀ = sym M`, and, `A` being a rotation, `skew M = A [ω]× Aᵀ = [Aω]×`, so
+    /// `ω = Aᵀ axial(skew M)`.
+    fn rates(&self, y: &M3<f64>) -> (Vec5<f64>, V3) {
+        let m = self.a_f * y * self.f_a;
+        (strain_to_vec5(&m), self.a.tr_mul(&axial(&m)))
     }
 
     /// `Qₙ ṙᵀ` for the spin rate `ω` (eqs 51, 54–55).
@@ -1341,14 +1492,15 @@ impl LayerKeep {
     }
 
     /// `Δε̇ˡ = Ȧ Δε Aᵀ + A Δε̇ Aᵀ + A Δε Ȧᵀ` (eq 50, [`crate::kinematics::local_strain_increment_dot`])
-    /// with `Ȧ Δε Aᵀ = history + Σ ω_i strain_rot[i]` (`history = Q̇ₙ ½rᵀ Δε Aᵀ`); `Δε` is
-    /// symmetric, so the last term is the transpose of the first.
-    fn strain_dot(&self, history: &M3<f64>, omega: &V3, deps_dot: &M3<f64>) -> M3<f64> {
-        let t = history
-            + self.strain_rot[0] * omega[0]
-            + self.strain_rot[1] * omega[1]
-            + self.strain_rot[2] * omega[2];
-        t + t.transpose() + self.a * deps_dot * self.a.transpose()
+    /// as `strain_to_vec5`: `history` is the part of `Q̇ₙ` (`2 · strain_to_vec5(Q̇ₙ ½rᵀ Δε Aᵀ)`,
+    /// `Δε` symmetric, so the last term is the transpose of the first), `deps` the rotated
+    /// strain rate of [`Self::rates`].
+    fn strain_dot(&self, history: &Vec5<f64>, omega: &V3, deps: &Vec5<f64>) -> Vec5<f64> {
+        history
+            + self.strain_rot5[0] * omega[0]
+            + self.strain_rot5[1] * omega[1]
+            + self.strain_rot5[2] * omega[2]
+            + deps
     }
 
     /// The `Δq̇` column of [`LayerData::apply`] (`J̇ⁿ = 0`, `ż = ṫ = 0`, no history or
@@ -1366,11 +1518,10 @@ impl LayerKeep {
             sums.g_d3 * half_t,
         ]);
         // L̇ = F½⁻¹ Ġ Jⁿ⁻¹ F½⁻¹ (eqs 56–57).
-        let l_dot = self.f_half_inv * g_dot * self.jn_inv_f;
-        let (deps_dot, omega) = Self::rates(&l_dot);
+        let (deps_dot, omega) = self.rates(&g_dot);
         // Eq 50 with Ȧ = Qₙ ½ṙᵀ.
-        let deps_l_dot = self.strain_dot(&M3::zeros(), &omega, &deps_dot);
-        let mat_dot = self.material.apply(d, &strain_to_vec5(&deps_l_dot));
+        let deps_l_dot = self.strain_dot(&Vec5::zeros(), &omega, &deps_dot);
+        let mat_dot = self.material.apply(d, &deps_l_dot);
         // Eq 51 with Q̇ₙ = 0.
         PointHistory {
             frame: self.frame_rate(&omega),
