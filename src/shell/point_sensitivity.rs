@@ -231,6 +231,16 @@ fn rotation_vector(p: &ParticleState<f64>, q: &[f64]) -> V3 {
     p.e[0] * q[3] + p.e[1] * q[4]
 }
 
+/// `θ̇ = ė1 α1 + ė2 α2 + e1 α̇1 + e2 α̇2` ([`rotation_vector`] differentiated).
+fn rotation_vector_dot(
+    p: &ParticleState<f64>,
+    pd: &ParticleState<f64>,
+    q: &[f64],
+    qd: &[f64],
+) -> V3 {
+    rotation_vector(pd, q) + rotation_vector(p, qd)
+}
+
 /// [`particle_increment_dot`] with Rodrigues' coefficients `k` of the increment given (they
 /// depend on the f64 state alone, so one evaluation serves every seed set).
 fn particle_increment_dot_with(
@@ -240,8 +250,7 @@ fn particle_increment_dot_with(
     qd: &[f64],
     k: &Coefficients,
 ) -> (V3, V3, [V3; 2]) {
-    let theta = rotation_vector(p, q);
-    let theta_dot = pd.e[0] * q[3] + pd.e[1] * q[4] + p.e[0] * qd[3] + p.e[1] * qd[4];
+    let (theta, theta_dot) = (rotation_vector(p, q), rotation_vector_dot(p, pd, q, qd));
     (
         V3::new(qd[0], qd[1], qd[2]),
         rodrigues_increment_dot(&p.d, &pd.d, &theta, &theta_dot, k),
@@ -261,8 +270,10 @@ pub fn commit_particle_dot(
     q: &[f64],
     q_dot: &[f64],
 ) -> ParticleState<f64> {
-    let theta = p.e[0] * q[3] + p.e[1] * q[4];
-    let theta_dot = p_dot.e[0] * q[3] + p_dot.e[1] * q[4] + p.e[0] * q_dot[3] + p.e[1] * q_dot[4];
+    let (theta, theta_dot) = (
+        rotation_vector(p, q),
+        rotation_vector_dot(p, p_dot, q, q_dot),
+    );
     let k = Coefficients::at(&theta);
     let rotate = |v: &V3| {
         let c = theta.cross(v);
@@ -306,52 +317,25 @@ struct SeedSums {
 }
 
 impl SeedSums {
-    /// `nb(i)`: neighbour i's state sensitivity, `Δū̇_I` and `Δḋ_I`.
+    /// `nb(i)`: neighbour i's state sensitivity, `Δū̇_I` and `Δḋ_I` (or, for [`ValueSums`], its
+    /// state, `Δū` and `Δd`); `surface`: the surface's terms (`ẋ⁰,α`, `ṅ⁰,α`, `ṅ⁰`; zero
+    /// without a surface seed).
     fn new<'p>(
         shape: &[ShapeData],
         surface: Option<&SurfacePoint<f64>>,
         nb: impl Fn(usize) -> (&'p ParticleState<f64>, V3, V3),
     ) -> Self {
-        let mut s = SeedSums::start(surface);
+        let mut f = FlatSums::start(surface);
         for (i, sh) in shape.iter().enumerate() {
             let (p, du, dd) = nb(i);
-            s.add(sh, p, du, dd);
+            f.add(sh, &flat_row(p, du, dd));
         }
-        s
+        f.sums()
     }
 }
 
-impl SeedSums {
-    /// The surface's terms alone (`ẋ⁰,α`, `ṅ⁰,α`, `ṅ⁰`; zero without a surface seed).
-    fn start(surface: Option<&SurfacePoint<f64>>) -> Self {
-        match surface {
-            Some(sp) => SeedSums {
-                xa: sp.x_a,
-                da: sp.n_a,
-                d: sp.n,
-                ..Default::default()
-            },
-            None => SeedSums::default(),
-        }
-    }
-
-    /// Add neighbour `sh`'s terms: its state sensitivity `p`, `Δū̇` and `Δḋ` (or, for
-    /// [`ValueSums`], its state, `Δū` and `Δd`).
-    fn add(&mut self, sh: &ShapeData, p: &ParticleState<f64>, du: V3, dd: V3) {
-        let ddir = p.d - p.d0;
-        for a in 0..2 {
-            self.xa[a] += p.u * sh.dpsi[a];
-            self.da[a] += ddir * sh.dpsi[a];
-            self.g_u[a] += du * sh.dpsi[a];
-            self.g_d[a] += dd * sh.dpsi[a];
-        }
-        self.d += ddir * sh.psi;
-        self.g_d3 += dd * sh.psi;
-    }
-}
-
-/// `[ū, Δū, d − d⁰, Δd]` of a particle (or their sensitivities): the terms of
-/// [`SeedSums::add`], in the order of [`FlatSums`].
+/// `[ū, Δū, d − d⁰, Δd]` of a particle (or their sensitivities): its terms in the neighbour
+/// sums of [`FlatSums`].
 fn flat_row(p: &ParticleState<f64>, du: V3, dd: V3) -> [f64; 12] {
     let ddir = p.d - p.d0;
     let mut row = [0.0; 12];
@@ -373,7 +357,7 @@ struct ParticleValues {
 }
 
 /// One shape-function particle's data of one seed set, as the neighbour loops read it: `row`
-/// = `[ū̇, Δū̇, ḋ − ḋ⁰, Δḋ]` (the terms of [`SeedSums::add`], in the order of [`FlatSums`]) and
+/// = `[ū̇, Δū̇, ḋ − ḋ⁰, Δḋ]` ([`flat_row`] of the sensitivities) and
 /// `(∂d/∂α_β)˙`.
 #[derive(Clone, Copy, Debug)]
 struct NeighbourDot {
@@ -381,10 +365,9 @@ struct NeighbourDot {
     d_alpha: [V3; 2],
 }
 
-/// [`SeedSums`] in flat form, for the loop over the neighbours of a point and several seed
-/// sets: `a[α] = Σ Ψ_I,α row_I` (the sums `x̄,α, Σ Ψ,α Δū, d,α, Σ Ψ,α Δd` of the rows of
-/// [`NeighbourDot`]) and `psi = Σ Ψ_I row_I[6..12]` (`d`, `Σ Ψ Δd`). The same operations in the
-/// same order as [`SeedSums::add`] (the same floating-point results), on fixed-size arrays.
+/// The neighbour sums of [`SeedSums`] in flat form: `a[α] = Σ Ψ_I,α row_I` (the sums
+/// `x̄,α, Σ Ψ,α Δū, d,α, Σ Ψ,α Δd` of the rows of [`flat_row`]) and
+/// `psi = Σ Ψ_I row_I[6..12]` (`d`, `Σ Ψ Δd`), on fixed-size arrays.
 #[derive(Clone, Copy, Debug, Default)]
 struct FlatSums {
     a: [[f64; 12]; 2],
@@ -392,7 +375,7 @@ struct FlatSums {
 }
 
 impl FlatSums {
-    /// The surface's terms alone ([`SeedSums::start`]).
+    /// The surface's terms alone (`ẋ⁰,α`, `ṅ⁰,α`, `ṅ⁰`; zero without a surface seed).
     fn start(surface: Option<&SurfacePoint<f64>>) -> Self {
         let mut f = FlatSums::default();
         if let Some(sp) = surface {
@@ -467,11 +450,7 @@ impl ValueSums {
         particles: &[ParticleState<f64>],
         incr: &PointIncrement<f64>,
     ) -> Self {
-        let mut v = SeedSums::start(Some(s));
-        for (((sh, p), du), dd) in shape.iter().zip(particles).zip(&incr.du).zip(&incr.dd) {
-            v.add(sh, p, *du, *dd);
-        }
-        v
+        SeedSums::new(shape, Some(s), |i| (&particles[i], incr.du[i], incr.dd[i]))
     }
 
     /// The f64 evaluation of one layer of the point ([`point_residual_with`](super::point::point_residual_with)'s chain, eqs
@@ -1414,8 +1393,8 @@ impl ShellModel {
                 let (qd, j) = (dofs_dot[idx / n_sf], idx % n_sf);
                 let x = self.local_dofs(j, qd);
                 let (p, xs, k) = &lin.particles[j];
-                let theta = rotation_vector(p, xs);
-                let theta_dot = p.e[0] * x[3] + p.e[1] * x[4];
+                // θ̇ = e1 α̇1 + e2 α̇2: the rotation vector of the DOF rates.
+                let (theta, theta_dot) = (rotation_vector(p, xs), rotation_vector(p, &x));
                 let dd = rodrigues_increment_dot(&p.d, &V3::zeros(), &theta, &theta_dot, k);
                 (V3::new(x[0], x[1], x[2]), dd)
             })
