@@ -546,10 +546,8 @@ struct LayerData {
     keep: LayerKeep,
 }
 
-/// `strain_to_vec5(A B)` without the product's unused (2, 2) entry.
-fn vec5_of_product(a: &M3<f64>, b: &M3<f64>) -> Vec5<f64> {
-    let e =
-        |i: usize, j: usize| a[(i, 0)] * b[(0, j)] + a[(i, 1)] * b[(1, j)] + a[(i, 2)] * b[(2, j)];
+/// `strain_to_vec5(X)` of a matrix given by its entries `e(i, j)` (the (2, 2) entry unused).
+fn vec5_of(e: impl Fn(usize, usize) -> f64) -> Vec5<f64> {
     Vec5::new(
         e(0, 0),
         e(1, 1),
@@ -557,6 +555,11 @@ fn vec5_of_product(a: &M3<f64>, b: &M3<f64>) -> Vec5<f64> {
         e(1, 2) + e(2, 1),
         e(2, 0) + e(0, 2),
     )
+}
+
+/// `strain_to_vec5(A B)` without forming the product's unused (2, 2) entry.
+fn vec5_of_product(a: &M3<f64>, b: &M3<f64>) -> Vec5<f64> {
+    vec5_of(|i, j| a[(i, 0)] * b[(0, j)] + a[(i, 1)] * b[(1, j)] + a[(i, 2)] * b[(2, j)])
 }
 
 /// The axial vector of `skew M` (`skew M = [ω]×`).
@@ -590,35 +593,23 @@ impl LayerData {
         // Σ ω_i of per-layer matrices, formed once here for every seed set:
         // (R E_i S)ᵀ = −Sᵀ E_i Rᵀ. The resolvents follow from the Cayley transforms of the f64
         // evaluation: r = 2(I − ½Δω)⁻¹ − I, ½r = 2(I − ¼Δω)⁻¹ − I (eqs 23, 31).
-        let (r1, s1) = (
-            (M3::identity() + k.inc.r) * 0.5,
-            (M3::identity() + k.inc.r) * 0.5,
-        );
-        let (r2, s2) = (
-            (M3::identity() + k.inc.r_half) * 0.5,
-            (M3::identity() + k.inc.r_half) * 0.25,
-        );
+        // So (I − ½Δω)⁻¹ = ½(I + r) = S1 and (I − ¼Δω)⁻¹ = ½(I + ½r) = 2 S2.
+        let s1 = (M3::identity() + k.inc.r) * 0.5;
+        let r2 = (M3::identity() + k.inc.r_half) * 0.5;
+        let s2 = r2 * 0.5;
         let (u, w) = (q_n * s2.transpose(), r2.transpose() * c);
-        let (v, r1t) = (q_n * s1.transpose(), r1.transpose());
+        let (v, r1t) = (q_n * s1.transpose(), s1.transpose());
         // −(U [e_i]×) W = U:j ⊗ Wk: − U:k ⊗ Wj: for (i, j, k) cyclic ([e_i]× e_j = e_k,
         // [e_i]× e_k = −e_j): two outer products instead of two matrix products.
         let frame_rot = std::array::from_fn(|i| {
             let (j, k) = ((i + 1) % 3, (i + 2) % 3);
             v.column(j) * r1t.row(k) - v.column(k) * r1t.row(j)
         });
-        // Of the strain term only `strain_to_vec5` of its symmetric part enters (`Δε̇ˡ`), doubled:
-        // the five entries of `2 (X + Xᵀ)/2`-form, `2 · strain_to_vec5(X)`, with `X` the outer
-        // products' difference.
+        // Of the strain term X + Xᵀ (X the outer products' difference) only `strain_to_vec5`
+        // enters `Δε̇ˡ`: 2 · strain_to_vec5(X).
         let strain_rot5 = std::array::from_fn(|i| {
             let (j, k) = ((i + 1) % 3, (i + 2) % 3);
-            let e = |p: usize, q: usize| u[(p, j)] * w[(k, q)] - u[(p, k)] * w[(j, q)];
-            Vec5::new(
-                e(0, 0),
-                e(1, 1),
-                e(0, 1) + e(1, 0),
-                e(1, 2) + e(2, 1),
-                e(2, 0) + e(0, 2),
-            ) * 2.0
+            vec5_of(|p, q| u[(p, j)] * w[(k, q)] - u[(p, k)] * w[(j, q)]) * 2.0
         });
         // B's columns: Qᵀ E_k Q = q_i ⊗ q_j (+ q_j ⊗ q_i), q_i the rows of ⁿ⁺¹Q.
         let qr: [V3; 3] = std::array::from_fn(|i| q1.row(i).transpose());
