@@ -757,51 +757,13 @@ impl StressSums {
     }
 }
 
-/// Add the residual rows' derivative (eqs 62–64) into `out` from the layer
-/// sums of the nominal stress `val` and of its derivative `dot`:
+/// The residual rows' derivative (eqs 62–64) from the layer sums of the nominal stress `val`
+/// and of its derivative `dots[s]` (one per seed set, with `half_t_dot[s] = ṫ/2`):
 /// `ḟ_I = Ψ_I,α Σ Ṗ:α`, `m_I = Ψ_I,α Σ z P:α + t/2 Ψ_I Σ P:3`,
 /// `ṁ_I = Ψ_I,α (Σ z Ṗ:α + ṫ/2 Σ ζ P:α) + Ψ_I (t/2 Σ Ṗ:3 + ṫ/2 Σ P:3)` (`ż = ζ ṫ/2`),
-/// `ṙ_Iβ = (∂d_I/∂α_β)˙ · m_I + ∂d_I/∂α_β · ṁ_I`.
-#[allow(clippy::too_many_arguments)]
-fn add_rows_dot(
-    shape: &[ShapeData],
-    d_alpha: &[[V3; 2]],
-    d_alpha_dot: impl Fn(usize) -> [V3; 2],
-    half_t: f64,
-    t_dot: f64,
-    val: &StressSums,
-    dot: &StressSums,
-    out: &mut [f64],
-) {
-    let half_t_dot = t_dot * 0.5;
-    let (p3, pd3) = (val.p.column(2), dot.p.column(2));
-    for (i, ((sh, da), o)) in shape
-        .iter()
-        .zip(d_alpha)
-        .zip(out.chunks_exact_mut(DOFS_PER_PARTICLE))
-        .enumerate()
-    {
-        let dad = d_alpha_dot(i);
-        let [t0, t1] = sh.dpsi_test;
-        let f_dot = dot.p.column(0) * t0 + dot.p.column(1) * t1;
-        let m = val.pz.column(0) * t0 + val.pz.column(1) * t1 + p3 * (half_t * sh.psi);
-        let m_dot = dot.pz.column(0) * t0
-            + dot.pz.column(1) * t1
-            + (val.pzeta.column(0) * t0 + val.pzeta.column(1) * t1) * half_t_dot
-            + pd3 * (half_t * sh.psi)
-            + p3 * (half_t_dot * sh.psi);
-        o[0] += f_dot[0];
-        o[1] += f_dot[1];
-        o[2] += f_dot[2];
-        o[3] += dad[0].dot(&m) + da[0].dot(&m_dot);
-        o[4] += dad[1].dot(&m) + da[1].dot(&m_dot);
-    }
-}
-
-/// [`add_rows_dot`] for several seed sets at once (`half_t_dot` and `dots` one per seed set):
-/// the neighbour loop outside, so each neighbour's shape data and the seed-independent moment
-/// `m_I` are formed once; the same floating-point results. Neighbour `i`'s rows of every seed
-/// set (`rows[s]`, 5 each) go to `emit(i, rows)`.
+/// `ṙ_Iβ = (∂d_I/∂α_β)˙ · m_I + ∂d_I/∂α_β · ṁ_I`. The neighbour loop is outside, so each
+/// neighbour's shape data and the seed-independent moment `m_I` are formed once. Neighbour
+/// `i`'s rows of every seed set (`rows[s]`, 5 each) go to `emit(i, rows)`.
 #[allow(clippy::too_many_arguments)]
 fn add_rows_dot_all(
     shape: &[ShapeData],
@@ -874,15 +836,19 @@ pub fn point_residual_dot(
     let mut val = StressSums::zero();
     val.add_value(&layer.p, layer.z, layer.zeta);
     let mut residual = vec![0.0; DOFS_PER_PARTICLE * n];
-    add_rows_dot(
+    add_rows_dot_all(
         inp.shape,
         &incr.d_alpha,
-        |i| incr_dot.d_alpha[i],
+        |_, i| incr_dot.d_alpha[i],
         layer.half_t,
-        seeds.thickness,
+        &[seeds.thickness * 0.5],
         &val,
-        &dot,
-        &mut residual,
+        std::slice::from_ref(&dot),
+        &mut Vec::new(),
+        |i, rows| {
+            let at = DOFS_PER_PARTICLE * i;
+            residual[at..at + DOFS_PER_PARTICLE].copy_from_slice(&rows[0]);
+        },
     );
     Ok(PointDot { residual, history })
 }
