@@ -19,8 +19,8 @@ use super::shell_case::{
 use super::shell_output::{OutputError, OutputGrid, Separation, ShellOutput, StepSummary};
 use crate::contact::ShellContact;
 use crate::meshfree::quadrature::{CellQuadrature, QuadratureError};
-use crate::meshfree::transform::Edge;
 use crate::meshfree::vci::VciOrder;
+use crate::meshfree::Edge;
 use crate::meshfree::{jittered_grid, ParticleGrid};
 use crate::shell::constraints::{
     edge_constraints, ConstraintError, EdgeCondition, LinearConstraint, RowKind,

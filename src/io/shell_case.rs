@@ -14,8 +14,8 @@ use crate::contact::{ContactFaces, PathKey, RigidTool, Side, ToolPath, DEFAULT_P
 use crate::geometry::{Surface, SurfaceSpec};
 use crate::material::MaterialParams;
 use crate::meshfree::quadrature::{ThicknessRule, MAX_GAUSS_POINTS, MAX_LOBATTO_POINTS};
-use crate::meshfree::transform::Edge;
 use crate::meshfree::vci::VciOrder;
+use crate::meshfree::Edge;
 use crate::meshfree::{Basis, ParamBox};
 use nalgebra::Vector3;
 use serde::Deserialize;

@@ -43,13 +43,12 @@ pub mod particles;
 pub mod quadrature;
 pub mod search;
 pub mod shape;
-pub mod transform;
 pub mod vci;
 
 pub use kernel::{covers, cubic_bspline, kernel_1d, tensor_kernel};
 pub use particles::{
-    jittered_grid, local_spacing, regular_grid, supports_from_spacing, ParamBox, ParticleGrid,
-    XorShift64,
+    jittered_grid, local_spacing, regular_grid, supports_from_spacing, Edge, ParamBox,
+    ParticleGrid, XorShift64,
 };
 pub use search::{covering_brute_force, SupportGrid};
 pub use shape::{

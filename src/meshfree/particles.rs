@@ -33,6 +33,24 @@ impl ParamBox {
     }
 }
 
+/// A parametric edge of a box.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Edge {
+    /// `u = u_min`.
+    UMin,
+    /// `u = u_max`.
+    UMax,
+    /// `v = v_min`.
+    VMin,
+    /// `v = v_max`.
+    VMax,
+}
+
+impl Edge {
+    /// All four edges.
+    pub const ALL: [Edge; 4] = [Edge::UMin, Edge::UMax, Edge::VMin, Edge::VMax];
+}
+
 /// A grid-like particle set: positions (u fastest: index `i + n_u j`), nominal spacing, counts.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ParticleGrid {

@@ -17,7 +17,7 @@
 use super::model::ShellModel;
 use super::point::DOFS_PER_PARTICLE;
 use super::symmetry::on_edge;
-use crate::meshfree::transform::Edge;
+use crate::meshfree::Edge;
 use crate::meshfree::ShapeValues;
 use nalgebra::Vector3;
 use thiserror::Error;

@@ -30,7 +30,7 @@ use super::rotation::{director_derivatives, rotate_director};
 use super::ShellError;
 use crate::geometry::Surface;
 use crate::meshfree::quadrature::gauss_legendre;
-use crate::meshfree::transform::Edge;
+use crate::meshfree::Edge;
 use crate::meshfree::{ParamBox, ShapeValues};
 use crate::scalar::Real;
 use nalgebra::{DMatrix, Matrix3, Vector3};

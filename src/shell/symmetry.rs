@@ -23,7 +23,7 @@
 //! rotations fixed ([`SymmetryLayout::self_conditions`]).
 
 use crate::geometry::Surface;
-use crate::meshfree::transform::Edge;
+use crate::meshfree::Edge;
 use nalgebra::{Matrix3, Vector3};
 use thiserror::Error;
 
