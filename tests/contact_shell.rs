@@ -10,7 +10,7 @@ use shelldsa::contact::{
     ContactError, ContactFaces, PathKey, RigidTool, ShellContact, Side, ToolPath,
 };
 use shelldsa::geometry::{CylinderSector, Rectangle, SphereZone, Surface};
-use shelldsa::meshfree::transform::Edge;
+use shelldsa::meshfree::Edge;
 use shelldsa::scalar::Real;
 use shelldsa::shell::constraints::{edge_constraints, EdgeCondition, LinearConstraint};
 use shelldsa::shell::load::{ExternalLoad, GenericLoad, Gravity, LoadScaling};

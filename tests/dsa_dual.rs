@@ -14,7 +14,7 @@
 use shelldsa::geometry::{Rectangle, Surface};
 use shelldsa::material::MaterialParams;
 use shelldsa::meshfree::quadrature::{gauss_legendre, CellQuadrature};
-use shelldsa::meshfree::transform::Edge;
+use shelldsa::meshfree::Edge;
 use shelldsa::meshfree::{regular_grid, Basis, ParamBox};
 use shelldsa::sensitivity::dual::{run_dual, DualLoad, DualMode, DualRun};
 use shelldsa::sensitivity::fd::{central_differences, fit_rate, response, taylor_remainders};

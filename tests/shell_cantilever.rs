@@ -1,5 +1,5 @@
-//! First end-to-end check of the shell discretisation (issue 3 groundwork): a clamped cantilever
-//! strip under a tip shear force, linear response (one Newton step from the unloaded state).
+//! A clamped cantilever strip under a tip shear force, linear response (one solve of the shell
+//! problem's tangent at the unloaded state).
 //!
 //! Reference: Timoshenko beam theory, δ = PL³/(3EI) + PL/(k G A), exact for a strip with ν = 0
 //! (no anticlastic curvature). Data of Sze, Liu & Lo (2004) §3.2's cantilever: L = 12, b = 1,
@@ -9,15 +9,15 @@
 //!   clamped  ┌──────────────────────────────┐  ↑ P (at u = 1, spread over the width)
 //!   u = 0    └──────────────────────────────┘
 //! ```
-//! Clamping uses the transformation method on all 5 DOFs of the particles on u = 0. On a flat
-//! strip every particle has the same lamina vectors, so the rotation DOFs transform linearly and
-//! exactly (docs/shell-formulation.md §8.1).
+//! The library's [`ShellProblem`] (tests/common): the clamp as exact linear constraints with
+//! Lagrange multipliers, every RK-interpolated displacement component and rotation parameter of
+//! the particles on u = 0 held (on a flat strip every particle has the same lamina vectors, so the
+//! rotation conditions are exact, docs/shell-formulation.md §6.2); the tip load as point forces
+//! at the Gauss points of the tip edge; the tangent assembled into the problem's sparse pattern.
 
 mod common;
 
-use nalgebra::DMatrix;
-use shelldsa::meshfree::transform::{edge_particles, Edge, Transformation};
-use shelldsa::meshfree::{regular_grid, Basis, ParamBox, ShapeFunctions};
+use shelldsa::shell::problem::ShellProblem;
 
 const L: f64 = 12.0;
 const E: f64 = 1.2e6;
@@ -37,13 +37,9 @@ fn tip_deflection(n_u: usize, n_v: usize, support: f64, sub: usize, ppc: usize) 
             ppc,
         },
     });
-    let c = s
-        .model
-        .contributions(&vec![0.0; s.model.n_dofs()], true)
-        .unwrap();
-    let minus_f: Vec<f64> = s.tip_load.iter().map(|v| -v).collect();
-    let q = s.clamped_solve(&s.model.dense_tangent(&c), &minus_f);
-    s.field(|i| q[5 * i + 2], [1.0, 0.5])
+    let mut problem = s.problem(s.tip_load([0.0, 0.0, 1.0]), Vec::new());
+    let q = common::linear_solution(&mut problem);
+    common::field(&problem.model, &q, 2, [1.0, 0.5])
 }
 
 #[test]
@@ -80,34 +76,14 @@ fn cantilever_tip_shear_matches_timoshenko_beam() {
     );
 }
 
+/// The Newton driver on the same problem, as the CLI runs it: at a tip load of 1e-4 the
+/// response is linear to (δ/L)² ≈ 2e-9, so one load step must reproduce the linear solve of
+/// `tip_deflection` (25 × 3 particles) to 1e-7 relative.
 #[test]
-fn the_dense_reference_and_its_inverse_exist() {
-    // Guard for the helper above: the clamped transformation matrix is regular.
-    let grid = regular_grid(ParamBox::unit(), 13, 3);
-    let sf =
-        ShapeFunctions::new(grid.positions.clone(), grid.supports(3.0), Basis::Quadratic).unwrap();
-    let clamped = edge_particles(&grid.positions, &ParamBox::unit(), Edge::UMin, 1e-12);
-    assert_eq!(clamped.len(), 3);
-    let t = Transformation::new(&sf, &clamped).unwrap();
-    let l: DMatrix<f64> = t.lambda_dense(1);
-    assert!(l.try_inverse().is_some());
-}
+fn newton_driver_reproduces_the_linear_solution() {
+    use shelldsa::solver::{LoadStepping, NewtonOptions, NewtonSolver};
 
-/// The library path: [`ShellProblem`] (the clamp as exact linear constraints with Lagrange
-/// multipliers: every nodal value `Σ_I Ψ_I(ξ_J) q_I` of the particles J on u = 0 held, the same
-/// conditions as the transformation method of the dense reference; the tangent assembled
-/// straight into a sparse pattern built once) driven by the Newton solver with faer LU. At a tip
-/// load of 1e-4 the response is linear to (δ/L)² ≈ 2e-9, so one load step must reproduce the
-/// dense linear solve of `tip_deflection` (25 × 3 particles) to 1e-7 relative.
-#[test]
-fn sparse_newton_driver_reproduces_the_dense_linear_solution() {
-    use shelldsa::shell::constraints::{edge_constraints, EdgeCondition};
-    use shelldsa::shell::problem::ShellProblem;
-    use shelldsa::solver::{
-        LinearSolver, LoadStepping, Method, NewtonOptions, NewtonSolver, SolverOptions,
-    };
-
-    let dense = tip_deflection(25, 3, 3.0, 2, 4);
+    let linear = tip_deflection(25, 3, 3.0, 2, 4);
     let p = 1e-4;
     let s = common::strip(&common::StripSpec {
         length: L,
@@ -121,21 +97,12 @@ fn sparse_newton_driver_reproduces_the_dense_linear_solution() {
             ppc: 4,
         },
     });
-    let clamp = edge_constraints(&s.model, Edge::UMin, &EdgeCondition::Clamped).unwrap();
     assert_eq!(
-        clamp.len(),
+        s.clamp.len(),
         3 * 5,
         "3 particles on the clamped edge, 5 rows each"
     );
-    let load: Vec<f64> = s.tip_load.iter().map(|v| v * p).collect();
-    let mut problem = ShellProblem::new(
-        s.model.clone(),
-        vec![Box::new(common::GeneralisedLoad(load))],
-        clamp,
-    )
-    .unwrap();
-    let pattern = problem.pattern().clone();
-    let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+    let mut problem: ShellProblem = s.problem(s.tip_load([0.0, 0.0, p]), Vec::new());
     let newton = NewtonSolver {
         options: NewtonOptions {
             residual_rtol: 1e-10,
@@ -146,19 +113,17 @@ fn sparse_newton_driver_reproduces_the_dense_linear_solution() {
             ..LoadStepping::default()
         },
     };
-    let u0 = problem.state().to_vec();
-    let report = newton
-        .run_with_progress(&mut problem, &pattern, &mut solver, &u0, |r| {
-            println!("residual norms {:?}", r.residual_norms);
-        })
-        .expect("one linear step");
+    let report = common::newton_run(&mut problem, &newton, |r| {
+        println!("residual norms {:?}", r.residual_norms);
+    })
+    .expect("one linear step");
     let its: Vec<usize> = report.converged_steps().map(|r| r.iterations).collect();
     let w = problem.model.displacement_at([1.0, 0.5]).unwrap()[2] / p;
-    println!("sparse driver: iterations {its:?}, δ/P = {w:.8} (dense linear {dense:.8})");
+    println!("Newton driver: iterations {its:?}, δ/P = {w:.8} (linear {linear:.8})");
     assert_eq!(its.len(), 1, "a linear response converges in one load step");
     assert!(
-        (w / dense - 1.0).abs() < 1e-7,
-        "sparse {w} vs dense {dense}"
+        (w / linear - 1.0).abs() < 1e-7,
+        "Newton {w} vs linear {linear}"
     );
     // Force balance: the internal force of any state sums to zero over the particles (RK
     // functions reproduce constants), so the z-reactions of the clamp (each row's coefficients

@@ -12,9 +12,10 @@
 //! The moment is `shell::load::Moment` on the tip edge u = 1 (about −y, per unit width), acting
 //! through the rotation of the interpolated director; the bending stays in the x–z plane, where
 //! that load is exactly conservative (docs/loads.md), and the test checks the symmetry of its
-//! stiffness at the rolled-up state. Clamp by the transformation method (`tests/strip_problem`),
-//! solved by the Newton driver with the secant predictor, the load factor `M/M_max` in three
-//! runs (0 → 0.25 → 0.5 → 1) with equal steps.
+//! stiffness at the rolled-up state. The library's `ShellProblem` (tests/common: the clamp as
+//! constraint rows with Lagrange multipliers, sparse pattern), solved by the Newton driver with
+//! the secant predictor, the load factor `M/M_max` in three runs (0 → 0.25 → 0.5 → 1) with equal
+//! steps.
 //!
 //! Discretisation and why: 25 × 3 particles (quadratic basis, supports of 3 spacings), one
 //! background cell per particle spacing with 2 × 2 Gauss points, 2 Gauss points through the
@@ -25,7 +26,8 @@
 //! The test runs in about 8 s, the refinement study in about 30 s (release, 2 cores).
 //!
 //! Out-of-plane motion (the displacement across the width, `u_y`, and the rotation `α1` about
-//! the lamina vector along the strip) is held at zero on every particle: a plane problem, exact
+//! the lamina vector along the strip) is held at zero on every particle (generalised DOFs off the
+//! clamped edge, interpolated values on it): a plane problem, exact
 //! for the planar solution. Without it, the tangent of the 49 × 3 strip acquires a negative
 //! eigenvalue in an out-of-plane mode between M/M_max = 0.75 and 0.85 (the ignored test below
 //! measures it), and the symmetric path is then followed only because round-off keeps the
@@ -35,15 +37,12 @@
 //! (the interpolated, non-unit director; the incremental Hughes–Winget update) or of the load.
 
 mod common;
-mod strip_problem;
 
-use nalgebra::Vector3;
-use shelldsa::geometry::{Rectangle, Surface};
-use shelldsa::meshfree::transform::Edge;
+use shelldsa::meshfree::Edge;
 use shelldsa::shell::load::{ExternalLoad, Moment};
-use shelldsa::solver::{LoadStepping, NewtonOptions, NewtonSolver, NonlinearProblem};
+use shelldsa::shell::problem::ShellProblem;
+use shelldsa::solver::{LoadStepping, NewtonOptions, NewtonSolver};
 use std::f64::consts::PI;
-use strip_problem::StripProblem;
 
 const L: f64 = 12.0;
 const E: f64 = 1.2e6;
@@ -60,7 +59,7 @@ fn m_max() -> f64 {
 }
 
 /// The strip `n_u × 3` with the end moment `M_max` (load factor 1) on the tip edge.
-fn problem(n_u: usize, planar: bool) -> (StripProblem, Moment) {
+fn problem(n_u: usize, planar: bool) -> (ShellProblem, Moment) {
     let strip = common::strip(&common::StripSpec {
         length: L,
         model: common::ModelSpec {
@@ -73,32 +72,23 @@ fn problem(n_u: usize, planar: bool) -> (StripProblem, Moment) {
             ppc: 2,
         },
     });
-    // The surface `common::strip` builds, for the edge rule.
-    let surface = Surface::Rectangle(
-        Rectangle::new(
-            Vector3::zeros(),
-            Vector3::new(L, 0.0, 0.0),
-            Vector3::new(0.0, 1.0, 0.0),
-        )
-        .unwrap(),
-    );
     // About −y: the tip rotates from +x towards +z (w > 0). Two intervals of 4 Gauss points
     // across the width (one per particle spacing).
     let moment = Moment::on_edge(
         &strip.model,
-        &surface,
+        &common::strip_surface(L),
         Edge::UMax,
         [0.0, -m_max(), 0.0],
         2,
         4,
     )
     .unwrap();
-    let n = strip.model.n_dofs();
-    let mut p = StripProblem::new(strip, vec![0.0; n], vec![Box::new(moment.clone())]);
-    if planar {
-        p.restrain_component(1);
-        p.restrain_component(3);
-    }
+    let planar_rows = if planar {
+        [strip.restrain_component(1), strip.restrain_component(3)].concat()
+    } else {
+        Vec::new()
+    };
+    let p = strip.problem(vec![Box::new(moment.clone())], planar_rows);
     (p, moment)
 }
 
@@ -117,13 +107,10 @@ struct Level {
 /// Roll the strip up to each of `levels` (ascending, from 0), `steps_per_quarter` equal steps
 /// per 0.25 of `M_max`, residual tolerance 1e-10 relative to the moment's force norm.
 fn roll_up(
-    problem: &mut StripProblem,
+    problem: &mut ShellProblem,
     levels: &[f64],
     steps_per_quarter: usize,
 ) -> Result<Vec<Level>, String> {
-    let pattern = problem.pattern().clone();
-    let mut solver = problem.solver();
-    let mut u = vec![0.0; problem.n_dofs()];
     let mut start = 0.0;
     let mut out = Vec::new();
     for &end in levels {
@@ -143,16 +130,11 @@ fn roll_up(
                 ..Default::default()
             },
         };
-        let report = newton
-            .run(problem, &pattern, &mut solver, &u)
-            .map_err(|f| f.to_string())?;
-        u.clone_from(&report.u);
+        let report = common::newton_run(problem, &newton, |_| {}).map_err(|f| f.to_string())?;
         start = end;
         let (ue, we) = exact(end);
-        let (un, wn) = (
-            -problem.displacement(0, [1.0, 0.5]),
-            problem.displacement(2, [1.0, 0.5]),
-        );
+        let tip = problem.model.displacement_at([1.0, 0.5]).unwrap();
+        let (un, wn) = (-tip[0], tip[2]);
         out.push(Level {
             ratio: end,
             u: un,
@@ -198,7 +180,7 @@ fn cantilever_rolls_into_a_circle_under_an_end_moment() {
     assert!(levels[0].w > 0.0, "the moment about −y lifts the tip");
     // The rolled-up state is planar, where the moment is conservative: its stiffness is
     // symmetric to round-off (a Hessian).
-    let model = &p.strip.model;
+    let model = &p.model;
     let mut trip = Vec::new();
     moment
         .add_stiffness(model, &vec![0.0; model.n_dofs()], 1.0, &mut trip)
@@ -259,21 +241,32 @@ fn refinement_in_particles_and_load_steps() {
 }
 
 /// Diagnostic (about a minute): the tangent of the strip *without* the plane restriction, at
-/// 49 × 3 particles, along the planar path. Its smallest eigenvalue (inverse iteration on the
-/// non-symmetric `K̃`) is positive at M/M_max = 0.5 and negative by 0.85, with a mode that is
-/// almost all out-of-plane (`u_y`, `α1`). Measured: +6.8e-3 (in-plane mode) at 0.5, −5.9e-3
-/// (u_y 92 %, α1 6 %) at 0.85.
+/// 49 × 3 particles, along the planar path. Its smallest eigenvalue on the constraints' null
+/// space (inverse iteration on the non-symmetric `Zᵀ K Z`, `Z` an orthonormal basis of the
+/// generalised DOFs that satisfy the clamp rows) is positive at M/M_max = 0.5 and negative by
+/// 0.85, with a mode that is almost all out-of-plane (`u_y`, `α1`).
 #[test]
 #[ignore]
 fn unrestrained_strip_loses_out_of_plane_stability() {
     use nalgebra::{DMatrix, DVector};
-    let (mut p, moment) = problem(49, false);
-    let n = p.n_dofs();
-    let fixed: Vec<usize> = p.essential(0.0).iter().map(|e| e.0).collect();
-    let free: Vec<usize> = (0..n).filter(|i| !fixed.contains(i)).collect();
+    use shelldsa::solver::NonlinearProblem;
+    let (mut p, _) = problem(49, false);
+    let nq = p.n_generalised();
+    // Z: the eigenvectors of CᵀC with a zero eigenvalue (rows of O(1) coefficients).
+    let mut c = DMatrix::<f64>::zeros(p.constraints().len(), nq);
+    for (r, row) in p.constraints().iter().enumerate() {
+        for &(j, v) in &row.terms {
+            c[(r, j)] = v;
+        }
+    }
+    let eig = (c.transpose() * &c).symmetric_eigen();
+    let null: Vec<usize> = (0..nq)
+        .filter(|&i| eig.eigenvalues[i].abs() < 1e-10)
+        .collect();
+    assert_eq!(null.len(), nq - p.constraints().len());
+    let z = DMatrix::from_fn(nq, null.len(), |i, a| eig.eigenvectors[(i, null[a])]);
     let pattern = p.pattern().clone();
-    let mut solver = p.solver();
-    let mut u = vec![0.0; n];
+    let mut values = vec![0.0; pattern.nnz()];
     let mut start = 0.0;
     let mut found = Vec::new();
     for (end, steps) in [(0.25, 8.0), (0.5, 8.0), (0.75, 8.0), (0.85, 4.0)] {
@@ -291,30 +284,28 @@ fn unrestrained_strip_loses_out_of_plane_stability() {
                 ..Default::default()
             },
         };
-        u = newton.run(&mut p, &pattern, &mut solver, &u).unwrap().u;
+        common::newton_run(&mut p, &newton, |_| {}).unwrap();
         start = end;
-        let model = &p.strip.model;
-        let q = vec![0.0; n];
-        let c = model.contributions(&q, true).unwrap();
-        let mut k = model.dense_tangent(&c);
-        let mut trip = Vec::new();
-        moment.add_stiffness(model, &q, end, &mut trip).unwrap();
-        for (i, j, v) in trip {
-            k[(i, j)] -= v;
-        }
-        let kt = p.transform(&k);
-        let kf = DMatrix::from_fn(free.len(), free.len(), |a, b| kt[(free[a], free[b])]);
+        // K_int − λ ∂f_ext/∂q at the converged state: the generalised block of the tangent.
+        let u = p.state().to_vec();
+        p.tangent(&u, end, &mut values).unwrap();
+        let k = pattern
+            .to_dense(&values)
+            .view((0, 0), (nq, nq))
+            .into_owned();
+        let kf = z.transpose() * k * &z;
         let lu = kf.lu();
-        let mut x = DVector::from_fn(free.len(), |i, _| ((i * 7919) % 13) as f64 - 6.0);
+        let mut x = DVector::from_fn(null.len(), |i, _| ((i * 7919) % 13) as f64 - 6.0);
         let mut rq = 0.0;
         for _ in 0..60 {
             let y = lu.solve(&x).unwrap();
             rq = x.dot(&y) / x.dot(&x);
             x = &y / y.norm();
         }
+        let mode = &z * &x;
         let mut share = [0.0; 5];
-        for (a, &i) in free.iter().enumerate() {
-            share[i % 5] += x[a] * x[a];
+        for (i, v) in mode.iter().enumerate() {
+            share[i % 5] += v * v;
         }
         println!(
             "M/M_max {end}: smallest eigenvalue {:+.3e}, mode (u_x, u_y, u_z, α1, α2) {share:.3?}",

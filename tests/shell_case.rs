@@ -8,8 +8,8 @@ use shelldsa::io::shell_case::{
 };
 use shelldsa::io::{parse_case, Case, CaseError};
 use shelldsa::meshfree::quadrature::ThicknessRule;
-use shelldsa::meshfree::transform::Edge;
 use shelldsa::meshfree::Basis;
+use shelldsa::meshfree::Edge;
 use std::path::Path;
 
 /// A clamped strip with every kind of entry the current build can also run.

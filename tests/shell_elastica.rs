@@ -1,9 +1,8 @@
-//! Geometrically nonlinear shell (issue 3 groundwork): a clamped cantilever strip under a large
-//! conservative tip force, solved by the Newton driver (`solver::NewtonSolver`) with the
-//! consistent tangent in equal load steps and the secant predictor; the strip is the
-//! `NonlinearProblem` of `tests/strip_problem` (clamp by the transformation method, dense
-//! pattern). Also: the secant against the zero predictor, and the driver's round-off floor at a
-//! small load.
+//! Geometrically nonlinear shell: a clamped cantilever strip under a large conservative tip
+//! force, solved by the Newton driver (`solver::NewtonSolver`) with the consistent tangent in
+//! equal load steps and the secant predictor; the strip is the library's `ShellProblem`
+//! (tests/common: clamp rows with Lagrange multipliers, sparse pattern, run as the CLI runs it).
+//! Also: the secant against the zero predictor, and the driver's round-off floor at a small load.
 //!
 //! Reference: the inextensible Euler elastica, θ'' = −(P/EI) cos θ, θ(0) = 0, θ'(L) = 0, solved
 //! independently in this file by RK4 shooting on θ'(0); tip deflection w = ∫ sin θ ds and
@@ -23,12 +22,8 @@
 //! Data: L = 12, b = 1, t = 0.1, E = 1.2e6, ν = 0 (Sze, Liu & Lo 2004 §3.2 strip), P L²/EI = 2.
 
 mod common;
-mod strip_problem;
 
-use shelldsa::solver::{
-    Acceptance, LoadStepping, NewtonOptions, NewtonSolver, NonlinearProblem, Predictor,
-};
-use strip_problem::StripProblem;
+use shelldsa::solver::{Acceptance, LoadStepping, NewtonOptions, NewtonSolver, Predictor};
 
 const L: f64 = 12.0;
 const E: f64 = 1.2e6;
@@ -109,10 +104,7 @@ struct Run {
 fn run(n_u: usize, predictor: Predictor, steps: usize, grow: bool) -> Run {
     let p_total = 2.0 * ei() / (L * L);
     let strip = strip(n_u);
-    let dead: Vec<f64> = strip.tip_load.iter().map(|v| -v).collect();
-    let mut problem = StripProblem::new(strip, dead, Vec::new());
-    let pattern = problem.pattern().clone();
-    let mut solver = problem.solver();
+    let mut problem = strip.problem(strip.tip_load([0.0, 0.0, -1.0]), Vec::new());
     let h = p_total / steps as f64;
     let newton = NewtonSolver {
         options: NewtonOptions {
@@ -129,45 +121,28 @@ fn run(n_u: usize, predictor: Predictor, steps: usize, grow: bool) -> Run {
             ..Default::default()
         },
     };
-    let n = problem.n_dofs();
-    let report = newton
-        .run_with_progress(&mut problem, &pattern, &mut solver, &vec![0.0; n], |r| {
-            let shown: Vec<String> = r
-                .residual_norms
-                .iter()
-                .map(|v| format!("{v:.2e}"))
-                .collect();
-            println!(
-                "  P {:.4e} ({:?} predictor, {:?}): residual norms [{}]",
-                r.load,
-                r.predictor,
-                r.acceptance.unwrap(),
-                shown.join(", ")
-            );
-        })
-        .expect("the elastica run converges");
+    let report = common::newton_run(&mut problem, &newton, |r| {
+        let shown: Vec<String> = r
+            .residual_norms
+            .iter()
+            .map(|v| format!("{v:.2e}"))
+            .collect();
+        println!(
+            "  P {:.4e} ({:?} predictor, {:?}): residual norms [{}]",
+            r.load,
+            r.predictor,
+            r.acceptance.unwrap(),
+            shown.join(", ")
+        );
+    })
+    .expect("the elastica run converges");
+    let tip = problem.model.displacement_at([1.0, 0.5]).unwrap();
     Run {
-        w: -problem.displacement(2, [1.0, 0.5]),
-        u: -problem.displacement(0, [1.0, 0.5]),
+        w: -tip[2],
+        u: -tip[0],
         iterations: report.converged_steps().map(|s| s.iterations).collect(),
         failed: report.attempts.iter().filter(|s| !s.converged).count(),
     }
-}
-
-#[test]
-fn strip_problem_transform_equals_the_dense_transformation() {
-    // The problem forms Λ⁻ᵀ K Λ⁻¹ from the clamped rows of Λ⁻¹; the dense reference inverts
-    // Λ ⊗ I and multiplies. Both are products of O(1) entries of Λ⁻¹ with K: round-off only.
-    let s = strip(7);
-    let n = s.model.n_dofs();
-    let c = s.model.contributions(&vec![0.0; n], true).unwrap();
-    let k = s.model.dense_tangent(&c);
-    let reference = s.clamp.transform_matrix_dense(&k, 5).unwrap();
-    let problem = StripProblem::new(s, vec![0.0; n], Vec::new());
-    let kt = problem.transform(&k);
-    let err = (&kt - &reference).norm() / reference.norm();
-    println!("|K̃ − K̃_dense|/|K̃_dense| = {err:.2e}");
-    assert!(err < 1e-14, "{err:e}");
 }
 
 #[test]
@@ -233,16 +208,11 @@ fn small_load_stops_at_the_roundoff_floor() {
     // stop at 1e-13).
     let p = 1e-4;
     let s = strip(25);
-    let n = s.model.n_dofs();
-    // Linear reference: one clamped solve from the unloaded state.
-    let c = s.model.contributions(&vec![0.0; n], true).unwrap();
-    let minus_f: Vec<f64> = s.tip_load.iter().map(|v| -v * p).collect();
-    let q = s.clamped_solve(&s.model.dense_tangent(&c), &minus_f);
-    let w_lin = s.field(|i| q[5 * i + 2], [1.0, 0.5]);
-    let dead = s.tip_load.clone();
-    let mut problem = StripProblem::new(s, dead, Vec::new());
-    let pattern = problem.pattern().clone();
-    let mut solver = problem.solver();
+    // Linear reference: one solve of the problem's tangent at the unloaded state.
+    let mut linear = s.problem(s.tip_load([0.0, 0.0, p]), Vec::new());
+    let q = common::linear_solution(&mut linear);
+    let w_lin = common::field(&linear.model, &q, 2, [1.0, 0.5]);
+    let mut problem = s.problem(s.tip_load([0.0, 0.0, 1.0]), Vec::new());
     let newton = NewtonSolver {
         options: NewtonOptions {
             residual_rtol: 1e-13,
@@ -254,9 +224,7 @@ fn small_load_stops_at_the_roundoff_floor() {
             ..Default::default()
         },
     };
-    let report = newton
-        .run(&mut problem, &pattern, &mut solver, &vec![0.0; n])
-        .expect("one step");
+    let report = common::newton_run(&mut problem, &newton, |_| {}).expect("one step");
     let st = report.converged_steps().next().unwrap();
     println!(
         "residual norms {:?}\nfloor estimates {:?}\naccepted by {:?} after {} iterations",
@@ -265,6 +233,6 @@ fn small_load_stops_at_the_roundoff_floor() {
     assert_eq!(report.attempts.len(), 1);
     assert_eq!(st.acceptance, Some(Acceptance::RoundoffFloor));
     assert!(st.iterations <= 3, "{:?}", st.residual_norms);
-    let w = problem.displacement(2, [1.0, 0.5]);
+    let w = problem.model.displacement_at([1.0, 0.5]).unwrap()[2];
     assert!((w / w_lin - 1.0).abs() < 1e-7, "{w} vs linear {w_lin}");
 }

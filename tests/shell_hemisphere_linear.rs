@@ -23,7 +23,7 @@ use nalgebra::Vector3;
 use shelldsa::geometry::{SphereZone, Surface};
 use shelldsa::material::MaterialParams;
 use shelldsa::meshfree::quadrature::{gauss_legendre, gauss_lobatto, CellQuadrature};
-use shelldsa::meshfree::transform::Edge;
+use shelldsa::meshfree::Edge;
 use shelldsa::meshfree::{regular_grid, Basis, ParamBox};
 use shelldsa::shell::constraints::LinearConstraint;
 use shelldsa::shell::load::{ExternalLoad, PointForce};

@@ -8,7 +8,7 @@ mod common;
 
 use nalgebra::{DMatrix, Rotation3, Vector3};
 use shelldsa::geometry::{CylinderSector, Rectangle, SphereZone, Surface};
-use shelldsa::meshfree::transform::Edge;
+use shelldsa::meshfree::Edge;
 use shelldsa::meshfree::{ParamBox, XorShift64};
 use shelldsa::scalar::Real;
 use shelldsa::shell::load::{

@@ -10,6 +10,8 @@
 //!
 //! meshio must be installed (`pip install meshio`); the tests fail, rather than skip, without it.
 
+mod common;
+
 use serde_json::Value;
 use shelldsa::io::shell_build::{cell_quadrature, discretisation, particle_grid};
 use shelldsa::io::shell_case::{parse_shell_case, Monitor, OutputSpec, ShellCase};
@@ -567,15 +569,15 @@ fn run_cli(args: &[&str]) -> i32 {
 }
 
 /// Tip deflection per unit load of the same discretisation, linear, by an independent path:
-/// the model assembled directly, clamped by the transformation method (nodal values of the
-/// particles on u = 0 held at zero), the point force spread as `Ψ_I(ξ_P) P`, one dense solve.
+/// the model assembled directly into a dense tangent, the clamp as rows formed here from the
+/// shape functions (every component of `Σ_I Ψ_I(ξ_J) q_I` held at zero at the particles J on
+/// u = 0), the point force spread as `Ψ_I(ξ_P) P`, one dense solve with Lagrange multipliers.
 fn independent_linear_tip_deflection() -> f64 {
-    use nalgebra::{DMatrix, DVector, Vector3};
+    use nalgebra::Vector3;
     use shelldsa::geometry::{Rectangle, Surface};
     use shelldsa::material::MaterialParams;
     use shelldsa::meshfree::quadrature::gauss_legendre;
-    use shelldsa::meshfree::transform::{edge_particles, Edge, Transformation};
-    use shelldsa::meshfree::{regular_grid, Basis, ParamBox, ShapeValues};
+    use shelldsa::meshfree::{regular_grid, Basis, Edge, ParamBox, ShapeValues};
     use shelldsa::shell::model::Discretisation;
 
     let surface = Surface::Rectangle(
@@ -617,18 +619,13 @@ fn independent_linear_tip_deflection() -> f64 {
     for (i, psi, _) in sv.iter() {
         f[5 * i + 2] += psi;
     }
-    let clamped = edge_particles(&m.particle_uv, &ParamBox::unit(), Edge::UMin, 1e-12);
-    let t = Transformation::new(&m.shape_functions, &clamped).unwrap();
-    let mut kt: DMatrix<f64> = t.transform_matrix_dense(&k, 5).unwrap();
-    let mut ft = DVector::from_vec(t.transform_vector(&f, 5).unwrap());
-    for d in t.constrained_dofs(5) {
-        kt.row_mut(d).fill(0.0);
-        kt.column_mut(d).fill(0.0);
-        kt[(d, d)] = 1.0;
-        ft[d] = 0.0;
-    }
-    let ut = kt.lu().solve(&ft).unwrap();
-    let q = t.to_generalised(ut.as_slice(), 5).unwrap();
+    let clamped = common::particles_on_edges(&m.particle_uv, &[Edge::UMin]);
+    let xj: Vec<[f64; 2]> = clamped.iter().map(|&j| m.particle_uv[j]).collect();
+    let zeros = vec![0.0; xj.len()];
+    let rows: Vec<common::Row> = (0..5)
+        .flat_map(|c| common::nodal_rows(&m.shape_functions, &xj, 5, c, &zeros))
+        .collect();
+    let q = common::solve_constrained(&k, &f, &rows);
     m.shape_functions.evaluate([1.0, 0.5], &mut sv).unwrap();
     sv.iter().map(|(i, psi, _)| psi * q[5 * i + 2]).sum()
 }

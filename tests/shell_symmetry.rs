@@ -18,7 +18,7 @@ mod common;
 use nalgebra::{Matrix3, Vector3};
 use shelldsa::geometry::{CylinderSector, Rectangle, SphereZone, Surface};
 use shelldsa::material::MaterialParams;
-use shelldsa::meshfree::transform::Edge;
+use shelldsa::meshfree::Edge;
 use shelldsa::meshfree::{regular_grid, Basis, ParamBox, XorShift64};
 use shelldsa::scalar::Real;
 use shelldsa::shell::constraints::{edge_constraints, EdgeCondition};

@@ -1,11 +1,12 @@
 //! Variationally consistent integration (`shelldsa::meshfree::vci`): the discrete divergence
 //! identities after correction (and their failure before, as the control), the accuracy of the
-//! boundary rule, and the Poisson patch tests of `tests/transform.rs` with few Gauss points per
-//! cell on jittered particles.
+//! boundary rule, and the Poisson patch tests of `tests/poisson_patch.rs` with few Gauss points
+//! per cell on jittered particles.
 
-use nalgebra::{DMatrix, DVector};
+mod common;
+
+use nalgebra::DMatrix;
 use shelldsa::meshfree::quadrature::CellQuadrature;
-use shelldsa::meshfree::transform::{particles_on_edges, Edge, Transformation};
 use shelldsa::meshfree::vci::*;
 use shelldsa::meshfree::*;
 
@@ -480,29 +481,6 @@ fn assemble_poisson(
     (k, f)
 }
 
-/// Solve the transformed system with the exact values prescribed at the boundary particles
-/// (dense LU: the VCI system is not symmetric); returns the generalised coefficients.
-fn solve_transformed(tr: &Transformation, k: &DMatrix<f64>, f: &[f64], g: &[f64]) -> Vec<f64> {
-    let kt = tr.transform_matrix_dense(k, 1).unwrap();
-    let ft = tr.transform_vector(f, 1).unwrap();
-    let n = ft.len();
-    let fixed = tr.constrained();
-    let mut u = vec![0.0; n];
-    for (&j, &v) in fixed.iter().zip(g) {
-        u[j] = v;
-    }
-    let free: Vec<usize> = (0..n).filter(|&i| !tr.is_constrained(i)).collect();
-    let kff = DMatrix::from_fn(free.len(), free.len(), |a, b| kt[(free[a], free[b])]);
-    let rhs = DVector::from_fn(free.len(), |a, _| {
-        ft[free[a]] - fixed.iter().map(|&j| kt[(free[a], j)] * u[j]).sum::<f64>()
-    });
-    let sol = kff.lu().solve(&rhs).expect("regular K̃_FF");
-    for (a, &i) in free.iter().enumerate() {
-        u[i] = sol[a];
-    }
-    tr.to_generalised(&u, 1).unwrap()
-}
-
 /// Field and coefficient errors of one Poisson patch test, relative to the largest value of the
 /// exact solution on the domain.
 #[allow(clippy::too_many_arguments)]
@@ -529,10 +507,12 @@ fn poisson_patch(
     let (k, f) = assemble_poisson(&sf, &table, &rule, source, grad, |i, x, g| {
         c.corrected_gradient(i, x, g)
     });
-    let j = particles_on_edges(&grid.positions, &b, &Edge::ALL, 1e-12);
-    let tr = Transformation::new(&sf, &j).unwrap();
-    let gj: Vec<f64> = j.iter().map(|&p| u_exact(grid.positions[p])).collect();
-    let d = solve_transformed(&tr, &k, &f, &gj);
+    // The exact values at the boundary particles: `Σ_I Ψ_I(ξ_J) d_I = u(ξ_J)` (dense LU with
+    // Lagrange multipliers: the VCI system is not symmetric).
+    let j = common::particles_on_edges(&grid.positions, &Edge::ALL);
+    let xj: Vec<[f64; 2]> = j.iter().map(|&p| grid.positions[p]).collect();
+    let gj: Vec<f64> = xj.iter().map(|&x| u_exact(x)).collect();
+    let d = common::solve_constrained(&k, &f, &common::nodal_rows(&sf, &xj, 1, 0, &gj));
     let scale = grid
         .positions
         .iter()
@@ -556,15 +536,15 @@ fn poisson_patch(
 
 /// Poisson patch tests on jittered particles (jitter 0.3, 11 × 11 and 9 × 9), cells of one
 /// particle spacing, 2 × 2 and 3 × 3 Gauss points per cell, essential conditions at the boundary
-/// particles through the transformation (the set-up of `tests/transform.rs`):
+/// particles as constraint rows (the set-up of `tests/poisson_patch.rs`):
 /// - linear exact solution: linear basis (support 2h) and quadratic basis (support 3h) with
 ///   first-order VCI;
 /// - quadratic exact solution: quadratic basis with second-order VCI.
 ///
 /// The exact solution lies in the trial space, and with VCI the quadrature satisfies the
 /// integration constraint of that order to round-off, so the discrete solution is exact up to
-/// round-off amplified by the conditioning of K̃ (measured: coefficients ≤ 4e-14, field ≤ 2e-15,
-/// relative to the largest value). The tolerance 1e-10 of the brief leaves a wide margin. Without
+/// round-off amplified by the conditioning of the system (measured: coefficients ≤ 4e-14, field ≤ 2e-15,
+/// relative to the largest value). The tolerance 1e-10 leaves a wide margin. Without
 /// VCI the same set-ups miss by 4e-4 to 1e-2 in the field (coefficients up to 0.15; asserted
 /// > 1e-8 as the control), and first-order VCI does not pass the quadratic test (7e-5 to 7e-4).
 #[test]

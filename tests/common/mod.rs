@@ -1,26 +1,35 @@
-//! Shared set-up of the clamped elastic strip used by the shell cantilever tests.
+//! Shared set-up of the shell reference tests: elastic test models, the clamped strip of the
+//! cantilever tests, the Scordelis–Lo roof, and the solver helpers that run them.
 //!
-//! A flat strip `L × 1`, thickness `t`, E, ν = 0, clamped at u = 0 through the transformation
-//! method (exact on a flat strip, whose particles share their lamina vectors), loaded by a unit
-//! transverse force spread uniformly over the tip edge u = 1.
+//! The strip is a flat `L × 1` shell, thickness `t`, E, ν = 0, clamped on u = 0 by the library's
+//! edge constraints ([`edge_constraints`] with [`EdgeCondition::Clamped`]: every RK-interpolated
+//! displacement component and rotation parameter held at the particles on the edge, exact on a
+//! flat strip, whose particles share their lamina vectors), and loaded by a transverse force
+//! spread uniformly over the tip edge u = 1 (point forces at the Gauss points of the edge).
+//! [`ShellProblem`] with the Newton driver runs it as the CLI does ([`newton_run`]); the linear
+//! response is one solve of the problem's tangent at the unloaded state ([`linear_solution`]).
 #![allow(dead_code)] // each test file uses a subset
 
 use nalgebra::{DMatrix, DVector, Vector3};
 use shelldsa::geometry::{Rectangle, Surface};
 use shelldsa::material::MaterialParams;
 use shelldsa::meshfree::quadrature::{gauss_legendre, CellQuadrature};
-use shelldsa::meshfree::transform::{edge_particles, Edge, Transformation};
-use shelldsa::meshfree::{regular_grid, Basis, ParamBox, ShapeFunctions, ShapeValues};
-use shelldsa::shell::load::ExternalLoad;
+use shelldsa::meshfree::{regular_grid, Basis, Edge, ParamBox, ShapeFunctions, ShapeValues};
+use shelldsa::shell::constraints::{edge_constraints, EdgeCondition, LinearConstraint, RowKind};
+use shelldsa::shell::load::{ExternalLoad, Gravity, PointForce};
 use shelldsa::shell::model::{Discretisation, ShellModel};
-use shelldsa::shell::ShellError;
+use shelldsa::shell::problem::ShellProblem;
+use shelldsa::shell::symmetry::on_edge;
+use shelldsa::solver::{
+    EssentialBc, LinearSolver, Method, NewtonFailure, NewtonReport, NewtonSolver, NonlinearProblem,
+    SolverOptions, StepRecord,
+};
 
-/// The strip: model, shape functions, clamping transformation and the unit tip load (+z).
+/// The strip: model (unloaded), clamp rows and its length.
 pub struct Strip {
     pub model: ShellModel,
-    pub shape: ShapeFunctions,
-    pub clamp: Transformation,
-    pub tip_load: Vec<f64>,
+    pub clamp: Vec<LinearConstraint>,
+    pub n_v: usize,
 }
 
 /// Discretisation of an elastic test shell on the unit parameter square: `n_u × n_v` particles
@@ -61,27 +70,114 @@ pub fn elastic_model(surface: &Surface<f64>, spec: &ModelSpec) -> ShellModel {
     ShellModel::new(surface, disc, material).unwrap()
 }
 
-/// Solve `K Δq = −r` in the transformed (nodal) space of `t`, `K̃ = Λ⁻ᵀ K Λ⁻¹`, `r̃ = Λ⁻ᵀ r`,
-/// with the nodal DOFs `fixed` held at zero; returns the generalised `Δq`.
-pub fn solve_with_fixed(
-    t: &Transformation,
-    k: &DMatrix<f64>,
-    r: &[f64],
-    fixed: &[usize],
-) -> Vec<f64> {
-    let mut rt = DVector::from_vec(t.transform_vector(r, 5).unwrap());
-    let mut kt = t.transform_matrix_dense(k, 5).unwrap();
-    for &d in fixed {
-        rt[d] = 0.0;
-        kt.row_mut(d).fill(0.0);
-        kt.column_mut(d).fill(0.0);
-        kt[(d, d)] = 1.0;
+/// Indices (ascending, each once) of the particles at `positions` on any of `edges` of the unit
+/// parameter square.
+pub fn particles_on_edges(positions: &[[f64; 2]], edges: &[Edge]) -> Vec<usize> {
+    let unit = [[0.0, 1.0], [0.0, 1.0]];
+    (0..positions.len())
+        .filter(|&i| edges.iter().any(|&e| on_edge(positions[i], e, unit)))
+        .collect()
+}
+
+/// One row `Σ_k c_k d_k = g` of a dense constrained solve.
+pub type Row = (Vec<(usize, f64)>, f64);
+
+/// The rows fixing the RK-interpolated value of component `c` (of `comps` per particle) at each
+/// of `points` to the matching entry of `values`: `Σ_I Ψ_I(ξ_J) d_{comps·I + c} = g_J`.
+pub fn nodal_rows(
+    shape: &ShapeFunctions,
+    points: &[[f64; 2]],
+    comps: usize,
+    c: usize,
+    values: &[f64],
+) -> Vec<Row> {
+    let mut sv = ShapeValues::new();
+    points
+        .iter()
+        .zip(values)
+        .map(|(&x, &g)| {
+            shape.evaluate(x, &mut sv).unwrap();
+            (
+                sv.iter().map(|(i, psi, _)| (comps * i + c, psi)).collect(),
+                g,
+            )
+        })
+        .collect()
+}
+
+/// Solve `K d = f` subject to the rows `C d = g` by Lagrange multipliers: one dense LU of
+/// `[K sCᵀ; sC 0]`, the rows scaled by `s = max_i |K_ii|` so that both blocks are of the same
+/// size for the pivoting (the solution `d` does not depend on `s`). Returns `d`.
+pub fn solve_constrained(k: &DMatrix<f64>, f: &[f64], rows: &[Row]) -> Vec<f64> {
+    let n = k.nrows();
+    let m = rows.len();
+    let s = (0..n).fold(0.0_f64, |a, i| a.max(k[(i, i)].abs()));
+    let mut a = DMatrix::zeros(n + m, n + m);
+    a.view_mut((0, 0), (n, n)).copy_from(k);
+    let mut b = DVector::zeros(n + m);
+    b.rows_mut(0, n).copy_from_slice(f);
+    for (r, (terms, g)) in rows.iter().enumerate() {
+        for &(j, c) in terms {
+            a[(n + r, j)] += s * c;
+            a[(j, n + r)] += s * c;
+        }
+        b[n + r] = s * g;
     }
-    let du = kt
-        .lu()
-        .solve(&(-rt))
-        .expect("supported tangent must be regular");
-    t.to_generalised(du.as_slice(), 5).unwrap()
+    let x = a.lu().solve(&b).expect("regular bordered system");
+    x.as_slice()[..n].to_vec()
+}
+
+/// Value of component `c` of the RK approximation of the generalised DOFs `q` (5 per particle)
+/// at `uv`.
+pub fn field(model: &ShellModel, q: &[f64], c: usize, uv: [f64; 2]) -> f64 {
+    let mut sv = ShapeValues::new();
+    model.shape_functions.evaluate(uv, &mut sv).unwrap();
+    sv.iter().map(|(i, psi, _)| psi * q[5 * i + c]).sum()
+}
+
+/// The linear response of `problem` at load factor 1 from its committed state: one solve of the
+/// problem's tangent (constraint rows with their multipliers, essential conditions eliminated),
+/// `K Δu = −r(u, 1)`. Returns the generalised DOFs `u + Δu` (without the multipliers).
+pub fn linear_solution(problem: &mut ShellProblem) -> Vec<f64> {
+    let n = problem.n_dofs();
+    let pattern = problem.pattern().clone();
+    let u = problem.state().to_vec();
+    let mut r = vec![0.0; n];
+    let mut values = vec![0.0; pattern.nnz()];
+    problem
+        .residual_and_tangent(&u, 1.0, &mut r, &mut values)
+        .unwrap();
+    let essential = problem.essential(1.0);
+    let bc = EssentialBc::new(n, &essential).unwrap();
+    let increments: Vec<f64> = bc
+        .dofs()
+        .iter()
+        .zip(bc.values())
+        .map(|(&d, &g)| g - u[d])
+        .collect();
+    let mut rhs: Vec<f64> = r.iter().map(|v| -v).collect();
+    bc.apply_with(&pattern, &mut values, &mut rhs, &increments)
+        .unwrap();
+    let mut solver =
+        LinearSolver::new(&pattern, Method::auto(&pattern), SolverOptions::default()).unwrap();
+    solver.factorize(&values).unwrap();
+    solver.solve_in_place(&mut rhs).unwrap();
+    let nq = problem.n_generalised();
+    (0..nq).map(|i| u[i] + rhs[i]).collect()
+}
+
+/// Run `newton` on `problem` from its committed state with the problem's sparse pattern and the
+/// linear solver the CLI chooses for it; `progress` sees every attempted step.
+pub fn newton_run(
+    problem: &mut ShellProblem,
+    newton: &NewtonSolver,
+    progress: impl FnMut(&StepRecord),
+) -> Result<NewtonReport, Box<NewtonFailure>> {
+    let pattern = problem.pattern().clone();
+    let mut solver =
+        LinearSolver::new(&pattern, Method::auto(&pattern), SolverOptions::default()).unwrap();
+    let u0 = problem.state().to_vec();
+    newton.run_with_progress(problem, &pattern, &mut solver, &u0, progress)
 }
 
 /// Strip of length `length` and width 1 with the discretisation `model`.
@@ -91,96 +187,83 @@ pub struct StripSpec {
     pub model: ModelSpec,
 }
 
+/// The flat strip's surface.
+pub fn strip_surface(length: f64) -> Surface<f64> {
+    Surface::Rectangle(
+        Rectangle::new(
+            Vector3::zeros(),
+            Vector3::new(length, 0.0, 0.0),
+            Vector3::new(0.0, 1.0, 0.0),
+        )
+        .unwrap(),
+    )
+}
+
 /// Build the strip.
 pub fn strip(spec: &StripSpec) -> Strip {
-    let rect = Rectangle::new(
-        Vector3::zeros(),
-        Vector3::new(spec.length, 0.0, 0.0),
-        Vector3::new(0.0, 1.0, 0.0),
-    )
-    .unwrap();
-    let model = elastic_model(&Surface::Rectangle(rect), &spec.model);
-    let shape = model.shape_functions.clone();
-    let n_v = spec.model.n_v;
-
-    // f_I = ∫ Ψ_I(1, v) dv over the tip edge, 6 Gauss points per particle interval.
-    let mut tip_load = vec![0.0; model.n_dofs()];
-    let (gn, gw) = gauss_legendre(6).unwrap().mapped(0.0, 1.0);
-    let mut sv = ShapeValues::new();
-    let cells = n_v - 1;
-    for cell in 0..cells {
-        let (a, b) = (cell as f64 / cells as f64, (cell + 1) as f64 / cells as f64);
-        for (&x, &w) in gn.iter().zip(&gw) {
-            shape.evaluate([1.0, a + (b - a) * x], &mut sv).unwrap();
-            for (i, psi, _) in sv.iter() {
-                tip_load[5 * i + 2] += psi * w * (b - a);
-            }
-        }
-    }
-    let clamped = edge_particles(&model.particle_uv, &ParamBox::unit(), Edge::UMin, 1e-12);
-    let clamp = Transformation::new(&shape, &clamped).unwrap();
+    let model = elastic_model(&strip_surface(spec.length), &spec.model);
+    let clamp = edge_constraints(&model, Edge::UMin, &EdgeCondition::Clamped).unwrap();
     Strip {
         model,
-        shape,
         clamp,
-        tip_load,
+        n_v: spec.model.n_v,
     }
 }
 
 impl Strip {
-    /// `|Λ⁻ᵀ r|` over the free DOFs: the residual norm in the transformed (nodal) space.
-    pub fn clamped_residual_norm(&self, r: &[f64]) -> f64 {
-        let mut rt = self.clamp.transform_vector(r, 5).unwrap();
-        for d in self.clamp.constrained_dofs(5) {
-            rt[d] = 0.0;
+    /// The tip load of total force `total` (global axes), uniform over the tip edge u = 1:
+    /// `f_I = ∫ Ψ_I(1, v) dv total`, as point forces at 6 Gauss points per particle interval.
+    pub fn tip_load(&self, total: [f64; 3]) -> Vec<Box<dyn ExternalLoad>> {
+        let (gn, gw) = gauss_legendre(6).unwrap().mapped(0.0, 1.0);
+        let cells = self.n_v - 1;
+        let mut loads: Vec<Box<dyn ExternalLoad>> = Vec::new();
+        for cell in 0..cells {
+            let (a, b) = (cell as f64 / cells as f64, (cell + 1) as f64 / cells as f64);
+            for (&x, &w) in gn.iter().zip(&gw) {
+                loads.push(Box::new(PointForce {
+                    uv: [1.0, a + (b - a) * x],
+                    force: total.map(|f| f * w * (b - a)),
+                }));
+            }
         }
-        rt.iter().map(|v| v * v).sum::<f64>().sqrt()
+        loads
     }
 
-    /// Solve `K Δq = −r` with every nodal DOF of the clamped particles held at zero.
-    pub fn clamped_solve(&self, k: &DMatrix<f64>, r: &[f64]) -> Vec<f64> {
-        solve_with_fixed(&self.clamp, k, r, &self.clamp.constrained_dofs(5))
-    }
-
-    /// Value of component `c` of the RK approximation of the coefficients `q` at `(u, v)`.
-    pub fn field(&self, q: impl Fn(usize) -> f64, uv: [f64; 2]) -> f64 {
-        let mut sv = ShapeValues::new();
-        self.shape.evaluate(uv, &mut sv).unwrap();
-        sv.iter().map(|(i, psi, _)| psi * q(i)).sum()
-    }
-}
-
-/// A dead load given directly as a generalised force vector (load factor 1), e.g. the strip's
-/// edge-integrated tip load.
-#[derive(Debug, Clone)]
-pub struct GeneralisedLoad(pub Vec<f64>);
-
-impl ExternalLoad for GeneralisedLoad {
-    fn add_force(
+    /// The clamped strip under `loads` with the further constraint rows `extra`.
+    pub fn problem(
         &self,
-        model: &ShellModel,
-        _q: &[f64],
-        factor: f64,
-        f: &mut [f64],
-    ) -> Result<(), ShellError> {
-        if f.len() != self.0.len() || model.n_dofs() != f.len() {
-            return Err(ShellError::Dimension {
-                expected: self.0.len(),
-                got: f.len(),
-            });
-        }
-        for (a, b) in f.iter_mut().zip(&self.0) {
-            *a += factor * b;
-        }
-        Ok(())
+        loads: Vec<Box<dyn ExternalLoad>>,
+        extra: Vec<LinearConstraint>,
+    ) -> ShellProblem {
+        let mut rows = self.clamp.clone();
+        rows.extend(extra);
+        ShellProblem::new(self.model.clone(), loads, rows).unwrap()
+    }
+
+    /// Rows holding generalised component `c` (a displacement or rotation index) of every
+    /// particle off the clamped edge at zero (e.g. the out-of-plane displacement and rotation of
+    /// a plane problem; the clamp holds the interpolated values on the edge already).
+    pub fn restrain_component(&self, c: usize) -> Vec<LinearConstraint> {
+        let clamped = particles_on_edges(&self.model.particle_uv, &[Edge::UMin]);
+        let kind = if c < 3 {
+            RowKind::Displacement
+        } else {
+            RowKind::Rotation
+        };
+        (0..self.model.n_particles())
+            .filter(|i| !clamped.contains(i))
+            .map(|i| LinearConstraint::generalised(5 * i + c, 0.0, kind))
+            .collect()
     }
 }
 
 /// Scordelis–Lo roof, linear (reference-values §2: R = 25, L = 50, half-angle 40°, t = 0.25,
-/// E = 4.32e8, ν = 0, self-weight 90 per unit area; diaphragms u_y = u_z = 0 at the curved ends
-/// by the transformation method, one axial nodal value fixed): vertical deflection (downward
-/// positive) at the middle of the free edge θ = +40°, with `n × n` particles, supports of
-/// `support` spacings, `sub` cells per spacing of `ppc × ppc` Gauss points and VCI of `vci`.
+/// E = 4.32e8, ν = 0, self-weight 90 per unit area; rigid diaphragms at the curved ends, the
+/// in-plane displacements u_y = u_z held at their particles, and the axial displacement at the
+/// middle particle of the first end): vertical deflection (downward positive) at the middle of
+/// the free edge θ = +40°, with `n × n` particles, supports of `support` spacings, `sub` cells
+/// per spacing of `ppc × ppc` Gauss points and VCI of `vci`. The library's problem: diaphragm
+/// edge constraints, [`Gravity`], one linear solve ([`linear_solution`]).
 pub fn scordelis_lo_deflection(
     n: usize,
     support: f64,
@@ -214,31 +297,17 @@ pub fn scordelis_lo_deflection(
         let rule = shelldsa::shell::integration::boundary_rule(&model, ParamBox::unit()).unwrap();
         shelldsa::shell::integration::apply_vci(&mut model, vci, &rule).unwrap();
     }
-    let nd = model.n_dofs();
-    let c = model.contributions(&vec![0.0; nd], true).unwrap();
-    let k = model.dense_tangent(&c);
-
-    // Self-weight: f_I = −90 ∫ Ψ_I dA ẑ, dA = |x̄,1 × x̄,2| dξ at the model's quadrature points.
-    let mut f = vec![0.0; nd];
-    for p in &model.points {
-        let da = p.surface.x_a[0].cross(&p.surface.x_a[1]).norm() * p.weight;
-        for (&i, s) in p.neighbours.iter().zip(&p.shape) {
-            f[5 * i + 2] -= 90.0 * s.psi * da;
-        }
-    }
-
-    // Diaphragms at v = 0 and v = 1: nodal u_y = u_z = 0; one nodal u_x = 0.
-    let uv = &model.particle_uv;
-    let mut ends = edge_particles(uv, &ParamBox::unit(), Edge::VMin, 1e-12);
-    let first_end = ends.clone();
-    ends.extend(edge_particles(uv, &ParamBox::unit(), Edge::VMax, 1e-12));
-    let t = Transformation::new(&model.shape_functions, &ends).unwrap();
-    let mut fixed: Vec<usize> = ends.iter().flat_map(|&i| [5 * i + 1, 5 * i + 2]).collect();
-    fixed.push(5 * first_end[first_end.len() / 2]);
-    // K q = f, i.e. K Δq = −r with r = −f.
-    let minus_f: Vec<f64> = f.iter().map(|v| -v).collect();
-    let q = solve_with_fixed(&t, &k, &minus_f, &fixed);
-    let mut sv = ShapeValues::new();
-    model.shape_functions.evaluate([1.0, 0.5], &mut sv).unwrap();
-    -sv.iter().map(|(i, psi, _)| psi * q[5 * i + 2]).sum::<f64>()
+    // Diaphragms at v = 0 and v = 1 (planes normal to the axis x); one axial displacement.
+    let diaphragm = EdgeCondition::Diaphragm {
+        normal: Vector3::x(),
+    };
+    let mut rows = edge_constraints(&model, Edge::VMin, &diaphragm).unwrap();
+    rows.extend(edge_constraints(&model, Edge::VMax, &diaphragm).unwrap());
+    let first_end = particles_on_edges(&model.particle_uv, &[Edge::VMin]);
+    let mid = model.particle_uv[first_end[first_end.len() / 2]];
+    rows.push(LinearConstraint::displacement(&model, mid, Vector3::x(), 0.0).unwrap());
+    let weight: Box<dyn ExternalLoad> = Box::new(Gravity::new([0.0, 0.0, -90.0]).unwrap());
+    let mut problem = ShellProblem::new(model, vec![weight], rows).unwrap();
+    let q = linear_solution(&mut problem);
+    -field(&problem.model, &q, 2, [1.0, 0.5])
 }
