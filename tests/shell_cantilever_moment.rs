@@ -244,7 +244,8 @@ fn refinement_in_particles_and_load_steps() {
 /// 49 × 3 particles, along the planar path. Its smallest eigenvalue on the constraints' null
 /// space (inverse iteration on the non-symmetric `Zᵀ K Z`, `Z` an orthonormal basis of the
 /// generalised DOFs that satisfy the clamp rows) is positive at M/M_max = 0.5 and negative by
-/// 0.85, with a mode that is almost all out-of-plane (`u_y`, `α1`).
+/// 0.85, with a mode that is almost all out-of-plane (`u_y`, `α1`). Measured: +6.8e-3 (in-plane
+/// mode) at 0.5, −5.9e-3 (u_y 92 %, α1 6 %) at 0.85.
 #[test]
 #[ignore]
 fn unrestrained_strip_loses_out_of_plane_stability() {
