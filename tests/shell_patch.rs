@@ -25,7 +25,7 @@
 
 mod common;
 
-use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use nalgebra::{DVector, Matrix3, Vector3};
 use shelldsa::geometry::{CylinderSector, Rectangle, Surface};
 use shelldsa::material::MaterialParams;
 use shelldsa::meshfree::quadrature::{gauss_legendre, CellQuadrature};
@@ -815,23 +815,16 @@ plot = false
     )
 }
 
-/// δ_A / P of [`hemisphere_case`] (one Newton step of the case's driver with LU).
+/// δ_A / P of [`hemisphere_case`] (one Newton step of the case's driver).
 fn hemisphere_deflection(grid: usize, vci: &str) -> f64 {
     use shelldsa::io::{parse_case, shell_build, Case};
-    use shelldsa::solver::{LinearSolver, Method, SolverOptions};
     let text = hemisphere_case(grid, vci);
     let Case::Shell(case) = parse_case(&text, std::path::Path::new("hemisphere.toml")).unwrap()
     else {
         panic!("not a shell case")
     };
     let mut built = shell_build::build(&case).unwrap();
-    let pattern = built.problem.pattern().clone();
-    let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
-    let u0 = built.problem.state().to_vec();
-    built
-        .newton
-        .run(&mut built.problem, &pattern, &mut solver, &u0)
-        .unwrap();
+    common::newton_run(&mut built.problem, &built.newton, |_| {}).unwrap();
     built.problem.model.displacement_at([0.0, 0.0]).unwrap()[0] / 1e-3
 }
 
