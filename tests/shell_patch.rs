@@ -648,13 +648,13 @@ fn scordelis_lo(n: usize, ppc: usize, order: VciOrder) -> f64 {
 /// Scordelis–Lo with the recommended integration (2 × 2 Gauss points per cell of one particle
 /// spacing, second-order VCI), against the shear-deformable reference 0.3024 of
 /// ../shared/reference-values.md §2 (MacNeal & Harder 1985). Measured (regular particles,
-/// quadratic basis, support 3h):
+/// quadratic basis, support 3h; docs/integration.md §4.6):
 ///
 /// | Gauss, VCI | 9² | 13² | 17² |
 /// |---|---|---|---|
 /// | 2×2, none   | −1.89 % | −0.77 % | −0.52 % |
-/// | 2×2, first  | −2.79 % | −1.26 % | −0.77 % |
-/// | 2×2, second | −1.30 % | −0.65 % | −0.56 % |
+/// | 2×2, first  | −2.69 % | −1.20 % | −0.77 % |
+/// | 2×2, second | −1.28 % | −0.58 % | −0.50 % |
 /// | 3×3, none   | −22.99 % | −8.48 % | −3.66 % |
 /// | 3×3, second | −22.92 % | −8.45 % | −3.64 % |
 ///

@@ -25,7 +25,7 @@ use shelldsa::solver::{
     SolverOptions, StepRecord,
 };
 
-/// The strip: model (unloaded), clamp rows and its length.
+/// The strip: model (unloaded), clamp rows and the number of particles across the width.
 pub struct Strip {
     pub model: ShellModel,
     pub clamp: Vec<LinearConstraint>,
