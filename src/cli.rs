@@ -74,6 +74,7 @@ pub fn main_with_args<I: IntoIterator<Item = String>>(args: I) -> i32 {
     let result = match cli.command {
         Command::Check { case } => read_case(&case).map(|c| {
             println!("{}: ok ({})", case.display(), describe(&c));
+            report(&c);
             if let Case::Shell(s) = &c {
                 let missing = shell_build::unsupported(s);
                 if !missing.is_empty() {
@@ -85,13 +86,19 @@ pub fn main_with_args<I: IntoIterator<Item = String>>(args: I) -> i32 {
             }
             0
         }),
-        Command::Run { case, out, quiet } => read_case(&case).map(|c| run(&c, &out, quiet)),
+        Command::Run { case, out, quiet } => read_case(&case).map(|c| {
+            report(&c);
+            run(&c, &out, quiet)
+        }),
         Command::Dsa {
             case,
             out,
             methods,
             terms,
-        } => read_case(&case).map(|c| dsa(&c, &out, methods.as_deref(), terms)),
+        } => read_case(&case).map(|c| {
+            report(&c);
+            dsa(&c, &out, methods.as_deref(), terms)
+        }),
     };
     match result {
         Ok(code) => code,
@@ -99,6 +106,15 @@ pub fn main_with_args<I: IntoIterator<Item = String>>(args: I) -> i32 {
             eprintln!("error: {e}");
             1
         }
+    }
+}
+
+/// The case's resource estimate and warnings ([`crate::io::case_report`]), printed before any
+/// work (a closed or full stdout is not an error here).
+fn report(c: &Case) {
+    let mut out = std::io::stdout().lock();
+    for line in crate::io::case_report(c) {
+        let _ = writeln!(out, "{line}");
     }
 }
 

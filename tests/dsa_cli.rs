@@ -425,9 +425,9 @@ fn hemisphere_dual_against_fd_through_the_cli() {
 }
 
 /// Issue 5, items 1–3 on the reduced Table 2 case (`verification/cylindrical-bending-dsa/ci.toml`:
-/// punch-driven bending with contact, die x and z position): continuum = dual to 1e-8 on every
+/// punch-driven bending with contact, die x and z position): continuum = dual to 2e-10 on every
 /// component with |ψ'| ≥ 1e-6 max|ψ'| at every step, continuum = central differences within
-/// 0.1 % on the steps whose active set (contact and yield status) does not change within ±h,
+/// 5e-5 on the steps whose active set (contact and yield status) does not change within ±h,
 /// Taylor rate 2.0 ± 0.1 where fitted.
 #[test]
 fn bending_three_ways_through_the_cli() {
@@ -473,10 +473,14 @@ fn bending_three_ways_through_the_cli() {
             "{name}: continuum vs dual {vs_dual:.2e}, vs FD {vs_fd:.2e} ({compared} compared)"
         );
         // Both solve eq (65) with the same tangent; their right-hand sides differ by round-off.
-        assert!(vs_dual <= 1e-8, "{name}: continuum vs dual {vs_dual:e}");
-        // Issue 5: 0.1 %. Measured ~1e-5 (truncation at h = 1e-4 mm and the re-runs' noise).
+        // Measured 1.85e-11 (die.x) and 1.32e-11 (die.z): bound 2e-10, ten times the larger
+        // (round-off of other builds and thread counts is ~1e-14 of the response).
+        assert!(vs_dual <= 2e-10, "{name}: continuum vs dual {vs_dual:e}");
+        // Measured 9.24e-6 (die.x) and 9.0e-7 (die.z): truncation at h = 1e-4 mm and the
+        // re-runs' noise. Bound 5e-5, five times the larger (the noise part varies with the
+        // re-runs' convergence, the truncation part does not).
         assert!(compared > 0, "{name}: no unflagged component");
-        assert!(vs_fd <= 1e-3, "{name}: continuum vs FD {vs_fd:e}");
+        assert!(vs_fd <= 5e-5, "{name}: continuum vs FD {vs_fd:e}");
         for f in v["taylor"]["per_step"].as_array().unwrap() {
             if let Some(r) = f["rate"].as_f64() {
                 assert!((r - 2.0).abs() < 0.1, "{name} step {}: rate {r}", f["step"]);

@@ -209,6 +209,18 @@ pub(crate) fn check(
         surface: Some(surface.clone()),
         tool_offsets: Default::default(),
     };
+    // Size of the sheet's coordinates (largest |x_i| at the corners and the middle of the
+    // parameter box), against which a tool's absolute step must not vanish.
+    let coordinate_scale = {
+        let d = surface.domain();
+        let mut m: f64 = 0.0;
+        for u in [d[0][0], 0.5 * (d[0][0] + d[0][1]), d[0][1]] {
+            for v in [d[1][0], 0.5 * (d[1][0] + d[1][1]), d[1][1]] {
+                m = m.max(surface.eval(u, v).x.amax());
+            }
+        }
+        m
+    };
     let mut entries: Vec<DesignEntry> = Vec::with_capacity(design.len());
     for (k, d) in design.iter().enumerate() {
         let key = format!("design[{k}]");
@@ -260,7 +272,7 @@ pub(crate) fn check(
                 return Err(invalid(
                     path,
                     format!("{steps_key}[{i}]"),
-                    r.to_string(),
+                    super::shell_case::fmt_num(r),
                     "a finite relative step h/|τ| > 0",
                 ));
             }
@@ -268,7 +280,7 @@ pub(crate) fn check(
                 return Err(invalid(
                     path,
                     format!("{steps_key}[{i}]"),
-                    r.to_string(),
+                    super::shell_case::fmt_num(r),
                     "a step not listed before",
                 ));
             }
@@ -288,12 +300,32 @@ pub(crate) fn check(
         }
         for (i, &r) in fd_steps.iter().enumerate() {
             let h = if is_tool { r } else { r * tau.abs() };
+            // The perturbed value must differ from the nominal one in floating point: a step
+            // that vanishes against τ (or, for a tool offset, against the coordinates it
+            // moves) gives a difference of 0 and a meaningless central difference.
+            let (value, what) = if is_tool {
+                (coordinate_scale, "the sheet's coordinates")
+            } else {
+                (tau, "the variable's value")
+            };
+            if !(h >= f64::MIN_POSITIVE && value + h != value && value - h != value) {
+                return Err(invalid(
+                    path,
+                    format!("{steps_key}[{i}]"),
+                    super::shell_case::fmt_num(r),
+                    format!(
+                        "a step h = {h:e} that changes {what} ({value:e}) in floating point \
+                         (τ ± h ≠ τ; relative steps above ~1e-12 keep the difference above \
+                         round-off)"
+                    ),
+                ));
+            }
             for delta in [h, -h] {
                 variable.perturbed(&base, delta).map_err(|e| {
                     invalid(
                         path,
                         format!("{steps_key}[{i}]"),
-                        r.to_string(),
+                        super::shell_case::fmt_num(r),
                         format!("a step that keeps the design admissible: {e}"),
                     )
                 })?;

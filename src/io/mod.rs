@@ -17,7 +17,7 @@ pub mod vtu;
 
 use crate::material::{MaterialError, MaterialParams, Vec5};
 use crate::verification::material_path::MaterialPath;
-use serde::Deserialize;
+use serde::{Deserialize, Deserializer};
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
@@ -61,6 +61,31 @@ pub enum CaseError {
         /// What was expected.
         expected: String,
     },
+}
+
+/// A fixed-length array of a case file, of exactly `N` entries. serde's own array support reads
+/// the first `N` entries of a longer TOML array and drops the rest without a word, so every
+/// fixed-length array of a case file is read through this (the TOML layer then names the key,
+/// line and column of a wrong length).
+pub(crate) fn exact<'de, D, T, const N: usize>(d: D) -> Result<[T; N], D::Error>
+where
+    D: Deserializer<'de>,
+    T: Deserialize<'de>,
+{
+    let v: Vec<T> = Vec::deserialize(d)?;
+    let n = v.len();
+    let expected = format!("an array of exactly {N} entries");
+    v.try_into()
+        .map_err(|_| <D::Error as serde::de::Error>::invalid_length(n, &expected.as_str()))
+}
+
+/// [`exact`] for an optional key (use with `#[serde(default)]`).
+pub(crate) fn exact_opt<'de, D, T, const N: usize>(d: D) -> Result<Option<[T; N]>, D::Error>
+where
+    D: Deserializer<'de>,
+    T: Deserialize<'de>,
+{
+    exact(d).map(Some)
 }
 
 /// `[problem]`.
@@ -133,9 +158,10 @@ fn default_fd_step() -> f64 {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct SegmentSpec {
-    steps: usize,
+    steps: i64,
+    #[serde(deserialize_with = "exact")]
     increment: [f64; 5],
-    #[serde(default)]
+    #[serde(default, deserialize_with = "exact")]
     rate: [f64; 5],
 }
 
@@ -158,7 +184,21 @@ struct MaterialPathFile {
     path: PathSpec,
     #[serde(default)]
     check: Option<CheckSpec>,
+    #[serde(default)]
+    limits: Option<PathLimitsFile>,
 }
+
+/// `[limits]` of a material-path case.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PathLimitsFile {
+    max_steps: i64,
+}
+
+/// Default largest number of steps of a material path (`[limits] max_steps` raises it): about
+/// 0.6 kB per step over the analysis, the dual and finite-difference runs and the tables,
+/// 60 MB at the limit.
+pub const MAX_PATH_STEPS: usize = 100_000;
 
 /// `[check]`: tolerances of the three-way comparison.
 #[derive(Debug, Deserialize, Clone, Copy)]
@@ -195,6 +235,8 @@ pub struct MaterialPathCase {
     pub fd_step: f64,
     /// Tolerances.
     pub check: CheckSpec,
+    /// Largest number of path steps accepted (`[limits] max_steps`).
+    pub max_steps: usize,
 }
 
 /// A parsed case.
@@ -208,6 +250,29 @@ pub enum Case {
 
 /// Problem kinds this build understands.
 pub const KINDS: &[&str] = &["material-path", "shell"];
+
+/// What a checked case will need and any warnings, as lines for `check`, `run` and `dsa` to
+/// print before the work (the estimate of [`shell_case::ShellCase::estimate`], or the steps of
+/// a material path; warnings start with `warning:`).
+pub fn case_report(case: &Case) -> Vec<String> {
+    match case {
+        Case::MaterialPath(m) => vec![format!(
+            "estimate: {} path steps (limit {}), 4 runs of the path (analysis, dual numbers, τ ± h)",
+            m.path.n_steps(),
+            m.max_steps
+        )],
+        Case::Shell(s) => std::iter::once(format!(
+            "{} (limits: {} unknowns, {} layer points, memory {}, support {} spacings)",
+            s.estimate(),
+            s.limits.max_unknowns,
+            s.limits.max_layer_points,
+            shell_case::fmt_bytes(s.limits.max_memory_bytes),
+            s.limits.max_support
+        ))
+        .chain(s.warnings.iter().map(|w| format!("warning: {w}")))
+        .collect(),
+    }
+}
 
 /// Read and validate a case file.
 pub fn read_case(path: &Path) -> Result<Case, CaseError> {
@@ -325,7 +390,7 @@ fn material_path_case(f: MaterialPathFile, path: &Path) -> Result<Case, CaseErro
     if !(h > 0.0 && h.is_finite()) {
         return Err(invalid(
             "design.fd_step",
-            h.to_string(),
+            shell_case::fmt_num(h),
             "a finite step > 0",
         ));
     }
@@ -335,6 +400,31 @@ fn material_path_case(f: MaterialPathFile, path: &Path) -> Result<Case, CaseErro
             f.design.tau.to_string(),
             "a finite number",
         ));
+    }
+    let max_steps = match &f.limits {
+        None => MAX_PATH_STEPS,
+        Some(l) if l.max_steps >= 1 => l.max_steps as usize,
+        Some(l) => {
+            return Err(invalid(
+                "limits.max_steps",
+                l.max_steps.to_string(),
+                "an integer >= 1",
+            ))
+        }
+    };
+    let check = f.check.unwrap_or_default();
+    for (key, v) in [
+        ("check.dual_rel", check.dual_rel),
+        ("check.fd_rel", check.fd_rel),
+        ("check.fd_floor", check.fd_floor),
+    ] {
+        if !(v > 0.0 && v < 1.0) {
+            return Err(invalid(
+                key,
+                shell_case::fmt_num(v),
+                "a relative tolerance in (0, 1)",
+            ));
+        }
     }
     let mut mp = match (&f.path.generator, f.path.segment.is_empty()) {
         (Some(g), true) if g == "non-proportional-60" => {
@@ -365,12 +455,25 @@ fn material_path_case(f: MaterialPathFile, path: &Path) -> Result<Case, CaseErro
         (None, false) => {
             let mut inc = Vec::new();
             let mut rates = Vec::new();
+            let mut total: usize = 0;
             for (i, s) in f.path.segment.iter().enumerate() {
-                if s.steps == 0 {
+                if s.steps < 1 {
                     return Err(invalid(
                         &format!("path.segment[{i}].steps"),
-                        "0".into(),
+                        s.steps.to_string(),
                         "an integer >= 1",
+                    ));
+                }
+                total = total.saturating_add(s.steps as usize);
+                if total > max_steps {
+                    return Err(invalid(
+                        &format!("path.segment[{i}].steps"),
+                        s.steps.to_string(),
+                        &format!(
+                            "at most limits.max_steps = {max_steps} steps over all segments \
+                             (these reach {total}); raise `max_steps` in a [limits] table for a \
+                             longer path"
+                        ),
                     ));
                 }
                 for (c, v) in s.increment.iter().chain(&s.rate).enumerate() {
@@ -400,6 +503,16 @@ fn material_path_case(f: MaterialPathFile, path: &Path) -> Result<Case, CaseErro
     mp.material = material;
     mp.material_rate = material_rate;
     mp.tau = f.design.tau;
+    if let Some(what) = mp.lost_in_step(h) {
+        return Err(invalid(
+            "design.fd_step",
+            shell_case::fmt_num(h),
+            &format!(
+                "a step that changes every τ-dependent value in floating point: with τ ± h, \
+                 {what} is unchanged, so its central difference is 0"
+            ),
+        ));
+    }
     Ok(Case::MaterialPath(Box::new(MaterialPathCase {
         title: f
             .problem
@@ -408,7 +521,8 @@ fn material_path_case(f: MaterialPathFile, path: &Path) -> Result<Case, CaseErro
         design_name: f.design.name,
         path: mp,
         fd_step: h,
-        check: f.check.unwrap_or_default(),
+        check,
+        max_steps,
     })))
 }
 
@@ -478,5 +592,69 @@ rate = [1e-4, 0.0, 0.0, 0.0, 0.0]
             "increment = [1e-3, 0.0]",
         ));
         assert!(e.contains("increment") || e.contains("5"), "{e}");
+    }
+
+    #[test]
+    fn too_long_arrays_are_errors() {
+        let e = err(&GOOD.replace(
+            "increment = [1e-3, 0.0, 0.0, 0.0, 0.0]",
+            "increment = [1e-3, 0.0, 0.0, 0.0, 0.0, 7.0]",
+        ));
+        assert!(e.contains("increment") && e.contains("exactly 5"), "{e}");
+        let e = err(&GOOD.replace(
+            "rate = [1e-4, 0.0, 0.0, 0.0, 0.0]",
+            "rate = [1e-4, 0.0, 0.0, 0.0, 0.0, 0.0]",
+        ));
+        assert!(e.contains("rate") && e.contains("exactly 5"), "{e}");
+    }
+
+    /// NaN compared with a tolerance is false, so a NaN tolerance used to pass every check.
+    #[test]
+    fn tolerances_are_finite_and_in_range() {
+        let base = format!("{GOOD}[check]\ndual_rel = 1e-9\nfd_rel = 1e-5\nfd_floor = 1e-4\n");
+        assert!(parse_case(&base, Path::new("c.toml")).is_ok());
+        for (key, bad) in [
+            ("dual_rel", "nan"),
+            ("dual_rel", "-1e-9"),
+            ("fd_rel", "inf"),
+            ("fd_rel", "0.0"),
+            ("fd_floor", "-1e-4"),
+            ("fd_floor", "2.0"),
+        ] {
+            let text = base.replacen(&format!("{key} = "), &format!("{key} = {bad} # "), 1);
+            let e = err(&text);
+            assert!(e.contains(&format!("check.{key}")), "{key} = {bad}: {e}");
+        }
+    }
+
+    /// A step that leaves a τ-dependent value unchanged (its difference is 0) is an error naming
+    /// `design.fd_step`; NaN, 0 and negative steps too.
+    #[test]
+    fn fd_steps_that_underflow_are_errors() {
+        for bad in ["1e-20", "5e-324", "0.0", "-1e-6", "nan"] {
+            let e = err(&GOOD.replace("[design]", &format!("[design]\nfd_step = {bad}")));
+            assert!(e.contains("design.fd_step"), "{bad}: {e}");
+        }
+        let e = err(&GOOD.replace("[design]", "[design]\nfd_step = 1e-20"));
+        assert!(e.contains("material.young"), "{e}");
+    }
+
+    #[test]
+    fn path_length_is_limited_unless_raised() {
+        let e = err(&GOOD.replace("steps = 3", "steps = 1000000000000"));
+        assert!(
+            e.contains("path.segment[0].steps") && e.contains("max_steps"),
+            "{e}"
+        );
+        let e = err(&GOOD.replace("steps = 3", "steps = -3"));
+        assert!(e.contains("path.segment[0].steps"), "{e}");
+        let raised = format!(
+            "{}[limits]\nmax_steps = 200000\n",
+            GOOD.replace("steps = 3", "steps = 150000")
+        );
+        let Case::MaterialPath(c) = parse_case(&raised, Path::new("c.toml")).unwrap() else {
+            panic!("a material-path case")
+        };
+        assert_eq!(c.path.n_steps(), 150_000);
     }
 }

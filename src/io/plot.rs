@@ -60,9 +60,40 @@ const COLORS: [RGBColor; 6] = [
     RGBColor(140, 86, 75),
 ];
 
+/// Largest magnitude an axis spans: values beyond it (and, on a log axis, positive values
+/// below its inverse) are drawn at the axis' end. Keeps every range, its padding and the tick
+/// arithmetic finite.
+const AXIS_MAX: f64 = 1e300;
+
+/// Largest ratio of the ends of a log axis. plotters counts the decades of a log axis as
+/// `ln(hi/lo)`: where the ratio overflows to ∞ the count becomes `usize::MAX` and its loop that
+/// thins the ticks runs ~10^19 times (errors of 3e307 next to 1e-17 did that). Values more than
+/// 300 decades below the largest are drawn at the axis' lower end.
+const MAX_LOG_RATIO: f64 = 1e300;
+
+/// Smallest width of a linear axis relative to its largest magnitude. plotters' tick search
+/// refines the tick spacing until enough ticks fit; on a range only a few ulps wide the spacing
+/// underflows and the search never ends, so a narrower range is widened to ±1e-3 of its
+/// centre (±1 around 0).
+const MIN_REL_WIDTH: f64 = 1e-9;
+
+/// The value drawn for `v` on an axis (`None`: not drawn: not finite, or not positive on a log
+/// axis).
+fn axis_value(v: f64, log: bool) -> Option<f64> {
+    if !v.is_finite() {
+        None
+    } else if log {
+        (v > 0.0).then(|| v.clamp(1.0 / AXIS_MAX, AXIS_MAX))
+    } else {
+        Some(v.clamp(-AXIS_MAX, AXIS_MAX))
+    }
+}
+
+/// Axis range of `vals`: finite, non-empty, at least one decade on a log axis, at least
+/// [`MIN_REL_WIDTH`] of the magnitude on a linear one.
 fn range(vals: impl Iterator<Item = f64>, log: bool) -> (f64, f64) {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for v in vals.filter(|v| v.is_finite() && (!log || *v > 0.0)) {
+    for v in vals.filter_map(|v| axis_value(v, log)) {
         lo = lo.min(v);
         hi = hi.max(v);
     }
@@ -70,9 +101,18 @@ fn range(vals: impl Iterator<Item = f64>, log: bool) -> (f64, f64) {
         return if log { (1e-16, 1.0) } else { (0.0, 1.0) };
     }
     if log {
-        (lo / 2.0, hi * 2.0)
-    } else if hi - lo <= f64::EPSILON * hi.abs().max(1.0) {
-        (lo - 1.0, hi + 1.0)
+        // A factor 2 of margin on both sides; at least one decade, at most MAX_LOG_RATIO.
+        let (lo, hi) = (lo / 2.0, hi * 2.0);
+        if hi / lo < 10.0 {
+            let c = lo.sqrt() * hi.sqrt();
+            (c / 10f64.sqrt(), c * 10f64.sqrt())
+        } else {
+            (lo.max(hi / MAX_LOG_RATIO), hi)
+        }
+    } else if hi - lo <= MIN_REL_WIDTH * lo.abs().max(hi.abs()) {
+        let c = 0.5 * (lo + hi);
+        let half = if c == 0.0 { 1.0 } else { 1e-3 * c.abs() };
+        (c - half, c + half)
     } else {
         let pad = 0.05 * (hi - lo);
         (lo - pad, hi + pad)
@@ -112,7 +152,7 @@ pub fn figure(path: &Path, width: u32, height: u32, panels: &[Panel]) -> Result<
                 .y_label_formatter(&|v| format!("{v:.0e}"))
                 .draw()
                 .map_err(|x| e(&x))?;
-            draw_series(&mut chart, &p.series, true).map_err(|x| e(&x))?;
+            draw_series(&mut chart, &p.series, true, xs, ys).map_err(|x| e(&x))?;
         } else {
             let mut chart = b
                 .build_cartesian_2d(xs.0..xs.1, ys.0..ys.1)
@@ -124,7 +164,7 @@ pub fn figure(path: &Path, width: u32, height: u32, panels: &[Panel]) -> Result<
                 .y_label_formatter(&|v| format!("{v:.3e}"))
                 .draw()
                 .map_err(|x| e(&x))?;
-            draw_series(&mut chart, &p.series, false).map_err(|x| e(&x))?;
+            draw_series(&mut chart, &p.series, false, xs, ys).map_err(|x| e(&x))?;
         }
     }
     root.present().map_err(|x| e(&x))?;
@@ -135,17 +175,24 @@ fn draw_series<'a, DB: DrawingBackend + 'a, CT>(
     chart: &mut ChartContext<'a, DB, CT>,
     series: &[Series],
     log: bool,
+    xs: (f64, f64),
+    ys: (f64, f64),
 ) -> Result<(), String>
 where
     CT: plotters::coord::CoordTranslate<From = (f64, f64)>,
 {
     for (k, s) in series.iter().enumerate() {
         let color = COLORS[k % COLORS.len()];
+        // Points inside the axes: a point far outside would be mapped to a pixel ~2^31 away,
+        // and a line to it rasterised pixel by pixel.
         let pts: Vec<(f64, f64)> = s
             .points
             .iter()
-            .copied()
-            .filter(|p| p.1.is_finite() && (!log || p.1 > 0.0))
+            .filter_map(|p| {
+                let x = axis_value(p.0, false)?.clamp(xs.0, xs.1);
+                let y = axis_value(p.1, log)?.clamp(ys.0, ys.1);
+                Some((x, y))
+            })
             .collect();
         if s.markers {
             chart
@@ -170,4 +217,111 @@ where
         .draw()
         .map_err(|e| e.to_string())?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::mpsc;
+    use std::time::Duration;
+
+    #[test]
+    fn ranges_are_finite_and_wide_enough() {
+        let cases: [(&[f64], bool); 9] = [
+            (&[1e-300, 1e300], true),
+            (&[3e307, 1e-3], true),
+            (&[f64::MAX, 5e-324], true),
+            (&[1e-300, 1e-300], true),
+            (&[0.0, -1.0, f64::NAN], true),
+            (&[-f64::MAX, f64::MAX], false),
+            (&[1e10, 1e10 + 1e-5], false),
+            (&[0.0, 0.0], false),
+            (&[f64::INFINITY, f64::NAN], false),
+        ];
+        for (vals, log) in cases {
+            let (lo, hi) = range(vals.iter().copied(), log);
+            assert!(
+                lo.is_finite() && hi.is_finite() && lo < hi,
+                "{vals:?}: {lo} {hi}"
+            );
+            if log {
+                assert!(
+                    lo > 0.0
+                        && hi / lo >= 10.0 * (1.0 - 1e-12)
+                        && hi / lo <= MAX_LOG_RATIO * (1.0 + 1e-12),
+                    "{vals:?}: {lo} {hi}"
+                );
+            } else {
+                assert!(
+                    hi - lo >= MIN_REL_WIDTH * lo.abs().max(hi.abs()),
+                    "{vals:?}: {lo} {hi}"
+                );
+            }
+        }
+    }
+
+    /// Degenerate data (errors of 3e307 next to 1e-17, subnormals, a constant series, values
+    /// a few ulps apart, ±f64::MAX, NaN, ±∞) draw within a few seconds: each figure is drawn
+    /// on a thread and the test fails, rather than hangs, when one does not finish in 60 s
+    /// (a figure takes ~0.1 s).
+    #[test]
+    fn degenerate_data_plot_in_bounded_time() {
+        let dir = std::env::temp_dir().join(format!("shelldsa-plot-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let data: Vec<(Vec<(f64, f64)>, Scale)> = vec![
+            (vec![(1.0, 3e307), (2.0, 1e-17), (3.0, 0.0)], Scale::Log),
+            (
+                vec![(1.0, 5e-324), (2.0, f64::MAX), (3.0, f64::INFINITY)],
+                Scale::Log,
+            ),
+            (vec![(1.0, 1e-300), (2.0, 1e-300)], Scale::Log),
+            (
+                vec![(1.0, -f64::MAX), (2.0, f64::MAX), (3.0, f64::NAN)],
+                Scale::Linear,
+            ),
+            (
+                vec![(1.0, 1e10), (2.0, 1e10 + 2e-6), (3.0, 1e10)],
+                Scale::Linear,
+            ),
+            (vec![(1.0, 0.0), (2.0, 0.0)], Scale::Linear),
+            (vec![(1e300, 1.0), (-1e300, 2.0)], Scale::Linear),
+            (vec![(f64::NAN, 1.0)], Scale::Linear),
+        ];
+        for (k, (points, y_scale)) in data.into_iter().enumerate() {
+            let path = dir.join(format!("degenerate-{k}.png"));
+            let (tx, rx) = mpsc::channel();
+            let shown = format!("{points:?} on a {y_scale:?} axis");
+            std::thread::spawn(move || {
+                let r = figure(
+                    &path,
+                    400,
+                    300,
+                    &[Panel {
+                        title: "degenerate",
+                        x_label: "x",
+                        y_label: "y",
+                        y_scale,
+                        series: vec![
+                            Series {
+                                label: "markers",
+                                points: points.clone(),
+                                markers: true,
+                            },
+                            Series {
+                                label: "line",
+                                points,
+                                markers: false,
+                            },
+                        ],
+                    }],
+                );
+                let _ = tx.send(r);
+            });
+            match rx.recv_timeout(Duration::from_secs(60)) {
+                Ok(r) => r.unwrap_or_else(|e| panic!("{shown}: {e}")),
+                Err(_) => panic!("{shown}: plotting did not finish in 60 s"),
+            }
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

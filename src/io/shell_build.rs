@@ -165,6 +165,7 @@ pub fn newton_settings(case: &ShellCase) -> (NewtonOptions, LoadStepping) {
             grow_factor: s.grow_factor,
             easy_iterations: s.easy_iterations,
             stops: s.stops.clone(),
+            max_attempts: s.max_attempts,
             ..LoadStepping::default()
         },
     )

@@ -9,7 +9,7 @@
 //!
 //! Nothing here builds the model: [`crate::io::shell_build`] does that from a [`ShellCase`].
 
-use super::{material_from_spec, CaseError, MaterialSpec};
+use super::{exact, exact_opt, material_from_spec, CaseError, MaterialSpec};
 use crate::contact::{ContactFaces, PathKey, RigidTool, Side, ToolPath, DEFAULT_PENALTY_FACTOR};
 use crate::geometry::{Surface, SurfaceSpec};
 use crate::material::MaterialParams;
@@ -51,6 +51,22 @@ struct ShellFile {
     design: Vec<super::dsa_case::DesignFile>,
     #[serde(default)]
     dsa: Option<super::dsa_case::DsaFile>,
+    #[serde(default)]
+    limits: Option<LimitsFile>,
+}
+
+/// `[limits]`: raise the resource limits of [`Limits`] for a case that needs more.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LimitsFile {
+    #[serde(default)]
+    max_unknowns: Option<i64>,
+    #[serde(default)]
+    max_layer_points: Option<i64>,
+    #[serde(default)]
+    max_memory_gb: Option<f64>,
+    #[serde(default)]
+    max_support: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -65,6 +81,7 @@ struct ProblemFile {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ParticlesFile {
+    #[serde(deserialize_with = "exact")]
     grid: [i64; 2],
     #[serde(default)]
     jitter: f64,
@@ -98,8 +115,11 @@ struct IntegrationFile {
 struct BoundaryFile {
     kind: String,
     edge: Option<String>,
+    #[serde(default, deserialize_with = "exact_opt")]
     at: Option<[f64; 2]>,
+    #[serde(default, deserialize_with = "exact_opt")]
     normal: Option<[f64; 3]>,
+    #[serde(default, deserialize_with = "exact_opt")]
     point: Option<[f64; 3]>,
     components: Option<Vec<String>>,
     component: Option<String>,
@@ -111,11 +131,15 @@ struct BoundaryFile {
 #[serde(deny_unknown_fields)]
 struct LoadFile {
     kind: String,
+    #[serde(default, deserialize_with = "exact_opt")]
     at: Option<[f64; 2]>,
+    #[serde(default, deserialize_with = "exact_opt")]
     force: Option<[f64; 3]>,
     value: Option<f64>,
+    #[serde(default, deserialize_with = "exact_opt")]
     per_area: Option<[f64; 3]>,
     edge: Option<String>,
+    #[serde(default, deserialize_with = "exact_opt")]
     per_length: Option<[f64; 3]>,
     #[serde(default)]
     scaling: Option<String>,
@@ -133,11 +157,11 @@ struct ToolFile {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ToolPathFile {
-    #[serde(default)]
+    #[serde(default, deserialize_with = "exact_opt")]
     pivot: Option<[f64; 3]>,
     #[serde(default)]
     keys: Option<Vec<PathKeyFile>>,
-    #[serde(default)]
+    #[serde(default, deserialize_with = "exact_opt")]
     stroke: Option<[f64; 3]>,
 }
 
@@ -145,8 +169,9 @@ struct ToolPathFile {
 #[serde(deny_unknown_fields)]
 struct PathKeyFile {
     t: f64,
+    #[serde(deserialize_with = "exact")]
     translation: [f64; 3],
-    #[serde(default)]
+    #[serde(default, deserialize_with = "exact_opt")]
     rotation: Option<[f64; 3]>,
 }
 
@@ -193,7 +218,16 @@ struct StepsFile {
     linear_updates: Option<String>,
     #[serde(default)]
     stops: Vec<f64>,
+    #[serde(default = "default_max_attempts")]
+    max_attempts: i64,
 }
+
+fn default_max_attempts() -> i64 {
+    DEFAULT_MAX_ATTEMPTS as i64
+}
+
+/// Default `steps.max_attempts`: step attempts (converged or cut) before a run stops.
+pub const DEFAULT_MAX_ATTEMPTS: usize = 10_000;
 
 fn one() -> f64 {
     1.0
@@ -222,6 +256,7 @@ fn default_grow() -> f64 {
 #[serde(deny_unknown_fields)]
 struct MonitorFile {
     name: String,
+    #[serde(deserialize_with = "exact")]
     at: [f64; 2],
 }
 
@@ -466,6 +501,9 @@ pub struct StepsSpec {
     /// Load levels the stepping lands on exactly (strictly ascending, finite, in
     /// `(0, final_load]`; possibly empty).
     pub stops: Vec<f64>,
+    /// Step attempts (converged or cut) before the run stops (default
+    /// [`DEFAULT_MAX_ATTEMPTS`]).
+    pub max_attempts: usize,
 }
 
 /// A named point whose displacement is recorded at every converged step.
@@ -587,6 +625,199 @@ pub struct ShellCase {
     pub output: OutputSpec,
     /// `[[design]]` and `[dsa]` (`None` without `[[design]]` tables; [`super::dsa_case`]).
     pub dsa: Option<super::dsa_case::DsaSpec>,
+    /// Resource limits (defaults raised by `[limits]`).
+    pub limits: Limits,
+    /// Warnings about a valid but doubtful case (geometry outside the shell regime, ...): the
+    /// case runs; `check`, `run` and `dsa` print them.
+    pub warnings: Vec<String>,
+}
+
+/// Resource limits a case is checked against before any work (`[limits]` raises them).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Limits {
+    /// Largest number of unknowns (5 per particle); `limits.max_unknowns`.
+    pub max_unknowns: usize,
+    /// Largest number of layer points (in-plane quadrature points × thickness points);
+    /// `limits.max_layer_points`.
+    pub max_layer_points: usize,
+    /// Largest estimated memory in bytes; `limits.max_memory_gb` (default: 3/4 of the machine's
+    /// memory, or [`Limits::DEFAULT_MEMORY_GB`] where that is unknown).
+    pub max_memory_bytes: f64,
+    /// Largest kernel support in particle spacings; `limits.max_support`.
+    pub max_support: f64,
+}
+
+impl Limits {
+    /// Default `max_unknowns`: 40,000 particles (a 200 × 200 grid).
+    pub const DEFAULT_MAX_UNKNOWNS: usize = 200_000;
+    /// Default `max_layer_points`.
+    pub const DEFAULT_MAX_LAYER_POINTS: usize = 20_000_000;
+    /// Default memory bound where the machine's memory cannot be read.
+    pub const DEFAULT_MEMORY_GB: f64 = 8.0;
+    /// Default `max_support`: supports wider than 10 spacings couple every particle with
+    /// hundreds of others and are no longer a local approximation.
+    pub const DEFAULT_MAX_SUPPORT: f64 = 10.0;
+
+    /// The defaults of this machine.
+    pub fn machine_default() -> Self {
+        let memory = machine_memory_bytes()
+            .map(|m| 0.75 * m)
+            .unwrap_or(Self::DEFAULT_MEMORY_GB * 1e9);
+        Limits {
+            max_unknowns: Self::DEFAULT_MAX_UNKNOWNS,
+            max_layer_points: Self::DEFAULT_MAX_LAYER_POINTS,
+            max_memory_bytes: memory,
+            max_support: Self::DEFAULT_MAX_SUPPORT,
+        }
+    }
+}
+
+/// Total memory of the machine (`MemTotal` of `/proc/meminfo`), where readable.
+fn machine_memory_bytes() -> Option<f64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemTotal:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024.0)
+}
+
+/// What a case will need, estimated before anything is built (printed by `check`, `run` and
+/// `dsa`; checked against [`Limits`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ResourceEstimate {
+    /// Particles.
+    pub particles: usize,
+    /// Unknowns (5 per particle).
+    pub unknowns: usize,
+    /// In-plane quadrature points.
+    pub quadrature_points: usize,
+    /// Layer points (quadrature points × thickness points), each with a material history.
+    pub layer_points: usize,
+    /// Particles in a quadrature point's kernel supports (at most all).
+    pub neighbours: usize,
+    /// Stored entries of the tangent (particles coupled through overlapping supports).
+    pub tangent_entries: f64,
+    /// Memory estimate in bytes: shape functions, histories, tangent and its factorisation.
+    pub memory_bytes: f64,
+    /// Fewest load steps that reach `final_load` (`final_load / max_step`, plus the stops).
+    pub min_steps: f64,
+    /// The step-attempt cap (`steps.max_attempts`).
+    pub max_attempts: usize,
+}
+
+impl std::fmt::Display for ResourceEstimate {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "estimate: {} particles, {} unknowns, {} quadrature points × layers = {} layer \
+             points, {} particles per support, ~{:.3e} tangent entries, memory ~{}; at least \
+             {} load step(s) of at most {} attempts",
+            self.particles,
+            self.unknowns,
+            self.quadrature_points,
+            self.layer_points,
+            self.neighbours,
+            self.tangent_entries,
+            fmt_bytes(self.memory_bytes),
+            self.min_steps,
+            self.max_attempts
+        )
+    }
+}
+
+/// Bytes with a binary prefix.
+pub fn fmt_bytes(b: f64) -> String {
+    const UNITS: [&str; 6] = ["B", "KiB", "MiB", "GiB", "TiB", "PiB"];
+    let mut v = b;
+    let mut k = 0;
+    while v >= 1024.0 && k + 1 < UNITS.len() {
+        v /= 1024.0;
+        k += 1;
+    }
+    if v >= 1024.0 {
+        format!("{b:.2e} B")
+    } else {
+        format!("{v:.1} {}", UNITS[k])
+    }
+}
+
+/// Memory of a run before the model: program, thread pools, output buffers (the measured peak
+/// of the smallest shipped case less its model).
+const BASE_MEMORY: f64 = 64.0 * 1024.0 * 1024.0;
+
+/// Estimate a case's resources from the checked settings (all arithmetic in `f64`, so that no
+/// setting can overflow it). Memory: per quadrature point and particle of its supports the
+/// shape data and indices (64 bytes); per layer point three histories (committed, trial and a
+/// sensitivity, 480 bytes); the tangent's entries (16 bytes with their index) twice (matrix
+/// and values in the assembly), and its LU: dense (`8 n²`) where the solver picks the dense
+/// LU ([`crate::solver::linear::Method`]), else 8 times the tangent (fill-in of the sparse LU
+/// of a two-dimensional coupling pattern), plus [`BASE_MEMORY`]. Against the measured peak
+/// resident memory of `run` on the linear hemisphere at 17², 33² and 49² particles (119, 647 and
+/// 1765 MiB): 121, 782 and 1600 MiB, within 21 %.
+fn estimate(
+    particles: &ParticleLayout,
+    kernel: &KernelSpec,
+    integration: &IntegrationSpec,
+    steps: &StepsSpec,
+) -> ResourceEstimate {
+    let (nu, nv) = (particles.counts[0] as f64, particles.counts[1] as f64);
+    let n = nu * nv;
+    let cells = match integration.cells {
+        CellLayout::PerParticleSpacing { subdivide } => {
+            (nu - 1.0) * (nv - 1.0) * (subdivide as f64).powi(2)
+        }
+        CellLayout::Counts(c) => c[0] as f64 * c[1] as f64,
+    };
+    let q = cells * (integration.gauss as f64).powi(2);
+    let layers = match integration.thickness_rule {
+        ThicknessRule::Gauss(k) | ThicknessRule::Lobatto(k) => k as f64,
+    };
+    let s = kernel.support;
+    let support_width = |m: f64| (2.0 * s + 1.0).min(m);
+    let coupled_width = |m: f64| (4.0 * s + 1.0).min(m);
+    let neighbours = support_width(nu) * support_width(nv);
+    let coupled = coupled_width(nu) * coupled_width(nv);
+    let unknowns = 5.0 * n;
+    let entries = unknowns * 5.0 * coupled;
+    let dense = unknowns <= crate::solver::linear::Method::DENSE_MAX_N as f64
+        && entries >= crate::solver::linear::Method::DENSE_FILL * unknowns * unknowns;
+    let lu = if dense {
+        8.0 * unknowns * unknowns
+    } else {
+        8.0 * 16.0 * entries
+    };
+    let memory =
+        BASE_MEMORY + q * neighbours * 64.0 + q * layers * 480.0 + 2.0 * 16.0 * entries + lu;
+    let to_usize = |x: f64| {
+        if x >= usize::MAX as f64 {
+            usize::MAX
+        } else {
+            x as usize
+        }
+    };
+    let min_steps = (steps.final_load / steps.max_step).ceil() + steps.stops.len() as f64;
+    ResourceEstimate {
+        particles: to_usize(n),
+        unknowns: to_usize(unknowns),
+        quadrature_points: to_usize(q),
+        layer_points: to_usize(q * layers),
+        neighbours: to_usize(neighbours),
+        tangent_entries: entries,
+        memory_bytes: memory,
+        min_steps,
+        max_attempts: steps.max_attempts,
+    }
+}
+
+impl ShellCase {
+    /// The resources this case needs (estimated from the settings, nothing built).
+    pub fn estimate(&self) -> ResourceEstimate {
+        estimate(
+            &self.particles,
+            &self.kernel,
+            &self.integration,
+            &self.steps,
+        )
+    }
 }
 
 /// Edge names as written in case files.
@@ -624,6 +855,85 @@ struct Checker<'a> {
     path: &'a Path,
 }
 
+/// Warnings about geometry outside the regime of the shell model: a thickness not small
+/// against the smallest radius of curvature (sampled on a 9 × 9 grid of the parameter box) or
+/// the surface's size, or particle spacings of very different lengths along `u` and `v`.
+fn geometry_warnings(
+    thickness: f64,
+    surface: &Surface<f64>,
+    pb: &ParamBox,
+    particles: &ParticleLayout,
+) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut kappa_max: f64 = 0.0;
+    let mut at = [0.0; 2];
+    let (mut len_u, mut len_v) = (0.0, 0.0);
+    for i in 0..=8 {
+        for j in 0..=8 {
+            let u = pb.lo[0] + (pb.hi[0] - pb.lo[0]) * i as f64 / 8.0;
+            let v = pb.lo[1] + (pb.hi[1] - pb.lo[1]) * j as f64 / 8.0;
+            let d = surface.eval(u, v);
+            if let (Ok(h), Ok(k)) = (d.mean_curvature(), d.gaussian_curvature()) {
+                let kappa = h.abs() + (h * h - k).max(0.0).sqrt();
+                if kappa.is_finite() && kappa > kappa_max {
+                    kappa_max = kappa;
+                    at = [u, v];
+                }
+            }
+            // Mean lengths of the u and v parameter lines (trapezoid-free sampling mean).
+            len_u += d.xu.norm() * (pb.hi[0] - pb.lo[0]) / 81.0;
+            len_v += d.xv.norm() * (pb.hi[1] - pb.lo[1]) / 81.0;
+        }
+    }
+    if kappa_max > 0.0 && thickness * kappa_max >= 1.0 {
+        out.push(format!(
+            "`thickness` = {thickness} is not smaller than the smallest radius of curvature \
+             {:.4e} (at (u, v) = ({}, {})): the shell model assumes t much smaller than it",
+            1.0 / kappa_max,
+            at[0],
+            at[1]
+        ));
+    }
+    let size = len_u.max(len_v);
+    if size.is_finite() && size > 0.0 {
+        let ratio = size / thickness;
+        if ratio < 4.0 {
+            out.push(format!(
+                "`thickness` = {thickness} is more than a quarter of the surface's size \
+                 {size:.4e}: a solid, not a shell"
+            ));
+        } else if ratio > 1e5 {
+            out.push(format!(
+                "`thickness` = {thickness} is below 1e-5 of the surface's size {size:.4e}: the \
+                 stiffness matrix is ill-conditioned (bending against membrane stiffness as \
+                 (t/L)² = {:.1e})",
+                (thickness / size).powi(2)
+            ));
+        }
+    }
+    let hu = len_u / (particles.counts[0] as f64 - 1.0);
+    let hv = len_v / (particles.counts[1] as f64 - 1.0);
+    let aspect = hu.max(hv) / hu.min(hv);
+    if aspect.is_finite() && aspect > 20.0 {
+        out.push(format!(
+            "particle spacings of {hu:.3e} along u and {hv:.3e} along v (ratio {aspect:.1}): \
+             `particles.grid` with spacings within a factor 20 of each other keeps the \
+             rectangular kernel supports balanced"
+        ));
+    }
+    out
+}
+
+/// A number as a message shows it: plain between 1e-4 and 1e15, else in exponent form (`{}`
+/// writes 1e308 with 309 digits).
+pub(crate) fn fmt_num(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() || (1e-4..1e15).contains(&v.abs()) {
+        v.to_string()
+    } else {
+        format!("{v:e}")
+    }
+}
+
 fn fmt_arr(a: &[f64]) -> String {
     let parts: Vec<String> = a.iter().map(|v| format!("{v}")).collect();
     format!("[{}]", parts.join(", "))
@@ -648,7 +958,16 @@ impl Checker<'_> {
         if v > 0.0 && v.is_finite() {
             Ok(v)
         } else {
-            Err(self.err(key, v.to_string(), "a finite number > 0"))
+            Err(self.err(key, fmt_num(v), "a finite number > 0"))
+        }
+    }
+
+    /// A relative tolerance: finite, in `(0, 1)`.
+    fn fraction(&self, key: &str, v: f64) -> Result<f64, CaseError> {
+        if v > 0.0 && v < 1.0 {
+            Ok(v)
+        } else {
+            Err(self.err(key, fmt_num(v), "a relative tolerance in (0, 1)"))
         }
     }
 
@@ -706,6 +1025,7 @@ impl Checker<'_> {
                 ))
             }
         };
+        let limits = self.limits(f.limits.as_ref())?;
         let surface = f.surface.build().map_err(|source| CaseError::Surface {
             path: self.path.into(),
             source,
@@ -745,6 +1065,17 @@ impl Checker<'_> {
             }
         };
         let support = self.positive("kernel.support", f.kernel.support)?;
+        if support > limits.max_support {
+            return Err(self.err(
+                "kernel.support",
+                support.to_string(),
+                format!(
+                    "a support of at most limits.max_support = {} particle spacings (raise \
+                     `max_support` in a [limits] table to use a wider one)",
+                    limits.max_support
+                ),
+            ));
+        }
         let kernel = KernelSpec { basis, support };
 
         // [integration]
@@ -866,6 +1197,13 @@ impl Checker<'_> {
             .collect::<Result<Vec<_>, _>>()?;
         self.check_everywhere(&boundary)?;
         let steps = self.steps(&f.steps)?;
+        self.check_resources(
+            &estimate(&particles, &kernel, &integration, &steps),
+            &limits,
+            &particles,
+            &integration,
+            &steps,
+        )?;
         let tools = f
             .tool
             .iter()
@@ -914,7 +1252,10 @@ impl Checker<'_> {
             super::dsa_case::check_tool_names(self.path, &tools, spec)?;
         }
 
+        let warnings = geometry_warnings(thickness, &surface, &param_box, &particles);
         Ok(ShellCase {
+            limits,
+            warnings,
             dsa,
             path: self.path.into(),
             title: f.problem.title.clone().unwrap_or_else(|| "shell".into()),
@@ -935,6 +1276,102 @@ impl Checker<'_> {
             monitors,
             output,
         })
+    }
+
+    /// `[limits]`: each given limit a positive finite number.
+    fn limits(&self, l: Option<&LimitsFile>) -> Result<Limits, CaseError> {
+        let mut out = Limits::machine_default();
+        let Some(l) = l else { return Ok(out) };
+        if let Some(v) = l.max_unknowns {
+            out.max_unknowns = self.count("limits.max_unknowns", v, 1, None)?;
+        }
+        if let Some(v) = l.max_layer_points {
+            out.max_layer_points = self.count("limits.max_layer_points", v, 1, None)?;
+        }
+        if let Some(v) = l.max_memory_gb {
+            out.max_memory_bytes = self.positive("limits.max_memory_gb", v)? * 1e9;
+        }
+        if let Some(v) = l.max_support {
+            out.max_support = self.positive("limits.max_support", v)?;
+        }
+        Ok(out)
+    }
+
+    /// Refuse a case beyond a limit, naming the key that sets the size, the estimate and the
+    /// `[limits]` key that raises the limit.
+    fn check_resources(
+        &self,
+        e: &ResourceEstimate,
+        limits: &Limits,
+        particles: &ParticleLayout,
+        integration: &IntegrationSpec,
+        steps: &StepsSpec,
+    ) -> Result<(), CaseError> {
+        let grid = format!("[{}, {}]", particles.counts[0], particles.counts[1]);
+        if e.unknowns > limits.max_unknowns {
+            return Err(self.err(
+                "particles.grid",
+                grid,
+                format!(
+                    "at most limits.max_unknowns = {} unknowns (5 per particle; this grid has \
+                     {}): use fewer particles, or raise `max_unknowns` in a [limits] table",
+                    limits.max_unknowns, e.unknowns
+                ),
+            ));
+        }
+        if e.layer_points > limits.max_layer_points {
+            let (key, value) = match integration.cells {
+                CellLayout::PerParticleSpacing { subdivide } if subdivide > 1 => {
+                    ("integration.subdivide", subdivide.to_string())
+                }
+                CellLayout::Counts(c) => ("integration.cells", format!("[{}, {}]", c[0], c[1])),
+                _ => ("particles.grid", grid.clone()),
+            };
+            return Err(self.err(
+                key,
+                value,
+                format!(
+                    "at most limits.max_layer_points = {} layer points (this case has {} \
+                     quadrature points × {} thickness points = {}): use fewer cells or points, \
+                     or raise `max_layer_points` in a [limits] table",
+                    limits.max_layer_points,
+                    e.quadrature_points,
+                    e.layer_points / e.quadrature_points.max(1),
+                    e.layer_points
+                ),
+            ));
+        }
+        if e.memory_bytes > limits.max_memory_bytes {
+            return Err(self.err(
+                "particles.grid",
+                grid,
+                format!(
+                    "a case within the memory limit {} (limits.max_memory_gb; default 3/4 of \
+                     this machine's memory): this one needs ~{} ({}); use fewer particles, \
+                     cells or a smaller kernel.support, or raise `max_memory_gb` in a [limits] \
+                     table",
+                    fmt_bytes(limits.max_memory_bytes),
+                    fmt_bytes(e.memory_bytes),
+                    e
+                ),
+            ));
+        }
+        if e.min_steps > e.max_attempts as f64 {
+            return Err(self.err(
+                "steps.max_step",
+                fmt_num(steps.max_step),
+                format!(
+                    "a step that reaches steps.final_load = {} within steps.max_attempts = {} \
+                     step attempts (final_load / max_step + {} stops = {} steps): raise \
+                     `max_step` or `steps.max_attempts`, or lower `final_load`",
+                    fmt_num(steps.final_load),
+                    e.max_attempts,
+                    steps.stops.len(),
+                    fmt_num(e.min_steps)
+                ),
+            ));
+        }
+        Ok(())
     }
 
     /// One `[[tool]]`: name (non-empty, unique), side, surface and path, validated as a
@@ -1546,8 +1983,9 @@ impl Checker<'_> {
             ));
         }
         let max_iterations = self.count("steps.max_iterations", s.max_iterations, 1, Some(1000))?;
-        let residual_rtol = self.positive("steps.residual_rtol", s.residual_rtol)?;
-        let energy_rtol = self.positive("steps.energy_rtol", s.energy_rtol)?;
+        let residual_rtol = self.fraction("steps.residual_rtol", s.residual_rtol)?;
+        let energy_rtol = self.fraction("steps.energy_rtol", s.energy_rtol)?;
+        let max_attempts = self.count("steps.max_attempts", s.max_attempts, 1, None)?;
         for (k, v) in [
             ("steps.residual_atol", s.residual_atol),
             ("steps.energy_atol", s.energy_atol),
@@ -1625,6 +2063,7 @@ impl Checker<'_> {
             predictor,
             krylov_updates,
             stops: s.stops.clone(),
+            max_attempts,
         })
     }
 }
@@ -1638,5 +2077,247 @@ pub fn edge_point(b: &ParamBox, e: Edge, s: f64) -> [f64; 2] {
         Edge::UMax => [b.hi[0], lerp(1)],
         Edge::VMin => [lerp(0), b.lo[1]],
         Edge::VMax => [lerp(0), b.hi[1]],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A clamped strip (12 × 1, t = 0.1) with one design variable.
+    const GOOD: &str = r#"
+thickness = 0.1
+
+[problem]
+kind = "shell"
+
+[surface]
+type = "rectangle"
+origin = [0.0, 0.0, 0.0]
+edge_u = [12.0, 0.0, 0.0]
+edge_v = [0.0, 1.0, 0.0]
+
+[particles]
+grid = [13, 3]
+
+[kernel]
+basis = "quadratic"
+support = 3.0
+
+[integration]
+cells = "per-particle-spacing"
+subdivide = 2
+gauss = 4
+thickness_points = 5
+thickness_rule = "lobatto"
+
+[material]
+young = 1.2e6
+poisson = 0.0
+sigma0 = 100.0
+hardening = 10.0
+beta = 1.0
+
+[[boundary]]
+kind = "clamped"
+edge = "u-min"
+
+[[load]]
+kind = "point-force"
+at = [1.0, 0.5]
+force = [0.0, 0.0, 1.0]
+
+[steps]
+initial_step = 0.1
+min_step = 0.001
+max_step = 0.2
+
+[[monitor]]
+name = "tip"
+at = [1.0, 0.5]
+
+[[design]]
+name = "t"
+kind = "thickness"
+fd_steps = [1e-3]
+"#;
+
+    fn parse(text: &str) -> Result<ShellCase, CaseError> {
+        parse_shell_case(text, Path::new("case.toml"))
+    }
+
+    fn err(text: &str) -> String {
+        match parse(text) {
+            Ok(_) => panic!("accepted:\n{text}"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    fn with(a: &str, b: &str) -> String {
+        assert!(GOOD.contains(a), "{a}");
+        GOOD.replacen(a, b, 1)
+    }
+
+    #[test]
+    fn good_case_has_no_warning_and_a_small_estimate() {
+        let c = parse(GOOD).unwrap();
+        assert!(c.warnings.is_empty(), "{:?}", c.warnings);
+        let e = c.estimate();
+        assert_eq!((e.particles, e.unknowns), (39, 195));
+        // 12 × 2 spacings, subdivided twice, 4 × 4 Gauss points, 5 layers.
+        assert_eq!(e.quadrature_points, 24 * 4 * 16);
+        assert_eq!(e.layer_points, 24 * 4 * 16 * 5);
+        // Supports of 3 spacings: 7 particles along u, all 3 along v.
+        assert_eq!(e.neighbours, 21);
+        assert_eq!(e.min_steps, 5.0);
+        assert_eq!(e.max_attempts, DEFAULT_MAX_ATTEMPTS);
+    }
+
+    /// serde would read the first entries of a longer array and drop the rest: every
+    /// fixed-length array is read whole, the surface's included.
+    #[test]
+    fn arrays_of_the_wrong_length_are_errors() {
+        for (a, b, key) in [
+            ("grid = [13, 3]", "grid = [13, 3, 3]", "grid"),
+            ("grid = [13, 3]", "grid = [13]", "grid"),
+            (
+                "force = [0.0, 0.0, 1.0]",
+                "force = [1e-3, 0, 0, 1e6]",
+                "force",
+            ),
+            (
+                "at = [1.0, 0.5]\nforce",
+                "at = [1.0, 0.5, 0.0]\nforce",
+                "at",
+            ),
+            // The surface's arrays (a tagged enum, read through serde's buffered content)
+            // get serde's own length message.
+            (
+                "edge_u = [12.0, 0.0, 0.0]",
+                "edge_u = [12.0, 0.0, 0.0, 5.0]",
+                "invalid length 4",
+            ),
+        ] {
+            let e = err(&with(a, b));
+            assert!(e.contains(key) && e.contains("length"), "{b}: {e}");
+        }
+    }
+
+    #[test]
+    fn tolerances_and_counts_are_range_checked() {
+        for (key, bad) in [
+            ("residual_rtol", "-1e-8"),
+            ("residual_rtol", "nan"),
+            ("residual_rtol", "1.5"),
+            ("energy_rtol", "-1e-14"),
+            ("residual_atol", "-1.0"),
+            ("energy_atol", "inf"),
+            ("max_attempts", "0"),
+        ] {
+            let e = err(&with(
+                "max_step = 0.2",
+                &format!("max_step = 0.2\n{key} = {bad}"),
+            ));
+            assert!(e.contains(&format!("steps.{key}")), "{key} = {bad}: {e}");
+        }
+    }
+
+    /// The cases that were accepted and then ran out of memory or time are refused with the
+    /// estimate and the `[limits]` key; an explicit `[limits]` lets them through.
+    #[test]
+    fn cases_beyond_the_limits_are_refused_unless_raised() {
+        let e = err(&with("grid = [13, 3]", "grid = [5000, 5000]"));
+        assert!(
+            e.contains("particles.grid") && e.contains("125000000") && e.contains("max_unknowns"),
+            "{e}"
+        );
+        let e = err(&with("subdivide = 2", "subdivide = 1000"));
+        assert!(
+            e.contains("integration.subdivide") && e.contains("max_layer_points"),
+            "{e}"
+        );
+        let e = err(&with("support = 3.0", "support = 1e6"));
+        assert!(
+            e.contains("kernel.support") && e.contains("max_support"),
+            "{e}"
+        );
+        let e = err(&with(
+            "max_step = 0.2",
+            "max_step = 0.2\nfinal_load = 1e308",
+        ));
+        assert!(
+            e.contains("steps.max_step") && e.contains("max_attempts"),
+            "{e}"
+        );
+        let stops: Vec<String> = (1..=10_000)
+            .map(|k| format!("{}", k as f64 * 1e-4))
+            .collect();
+        let e = err(&with(
+            "max_step = 0.2",
+            &format!("max_step = 0.2\nstops = [{}]", stops.join(", ")),
+        ));
+        assert!(
+            e.contains("max_attempts") && e.contains("10000 stops"),
+            "{e}"
+        );
+        // Raised explicitly: accepted (nothing is built by `check`).
+        let raised = with("support = 3.0", "support = 12.0") + "\n[limits]\nmax_support = 20.0\n";
+        assert_eq!(parse(&raised).unwrap().kernel.support, 12.0);
+        let raised = with(
+            "max_step = 0.2",
+            "max_step = 0.2\nfinal_load = 1e4\nmax_attempts = 100000",
+        );
+        assert_eq!(parse(&raised).unwrap().steps.max_attempts, 100_000);
+        let e = err(&(GOOD.to_string() + "\n[limits]\nmax_memory_gb = -1.0\n"));
+        assert!(e.contains("limits.max_memory_gb"), "{e}");
+        let e = err(&(GOOD.to_string() + "\n[limits]\nmax_memory_gb = 1e-9\n"));
+        assert!(e.contains("memory") && e.contains("max_memory_gb"), "{e}");
+    }
+
+    #[test]
+    fn implausible_geometry_is_a_warning() {
+        // A cylinder of radius 1 with t = 1.5: thicker than its radius of curvature.
+        let cyl = with(
+            "type = \"rectangle\"\norigin = [0.0, 0.0, 0.0]\nedge_u = [12.0, 0.0, 0.0]\n\
+             edge_v = [0.0, 1.0, 0.0]",
+            "type = \"cylinder-sector\"\norigin = [0.0, 0.0, 0.0]\naxis = [0.0, 0.0, 1.0]\n\
+             reference = [1.0, 0.0, 0.0]\nradius = 1.0\nangle_deg = [0.0, 90.0]\n\
+             length = [0.0, 12.0]",
+        )
+        .replacen("thickness = 0.1", "thickness = 1.5", 1);
+        let c = parse(&cyl).unwrap();
+        assert!(
+            c.warnings.iter().any(|w| w.contains("radius of curvature")),
+            "{:?}",
+            c.warnings
+        );
+        let thick = with("thickness = 0.1", "thickness = 5.0");
+        let c = parse(&thick).unwrap();
+        assert!(
+            c.warnings.iter().any(|w| w.contains("solid")),
+            "{:?}",
+            c.warnings
+        );
+        let stretched = with("grid = [13, 3]", "grid = [3, 60]");
+        let c = parse(&stretched).unwrap();
+        assert!(
+            c.warnings.iter().any(|w| w.contains("spacings")),
+            "{:?}",
+            c.warnings
+        );
+    }
+
+    /// A finite-difference step that vanishes against the variable's value: an error naming
+    /// the step.
+    #[test]
+    fn fd_steps_that_underflow_are_errors() {
+        for bad in ["5e-324", "1e-300", "1e-17"] {
+            let e = err(&with("fd_steps = [1e-3]", &format!("fd_steps = [{bad}]")));
+            assert!(
+                e.contains("design[0].fd_steps[0]") && e.contains("floating point"),
+                "{bad}: {e}"
+            );
+        }
+        assert!(parse(&with("fd_steps = [1e-3]", "fd_steps = [1e-10]")).is_ok());
     }
 }

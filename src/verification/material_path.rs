@@ -57,6 +57,48 @@ impl MaterialPath {
         self.increments.len()
     }
 
+    /// The first τ-dependent value (a material parameter or a strain-increment component
+    /// with a non-zero rate) that `τ ± h` leaves unchanged in floating point, named for a
+    /// message; `None` when the step reaches every one (or `h` is not a finite step > 0,
+    /// reported as such).
+    pub fn lost_in_step(&self, h: f64) -> Option<String> {
+        if !(h.is_finite() && h > 0.0) {
+            return Some(format!("every value (h = {h})"));
+        }
+        let (lo, hi) = (self.tau - h, self.tau + h);
+        if lo == self.tau || hi == self.tau {
+            return Some(format!("τ = {} itself", self.tau));
+        }
+        let m0 = self.material_at(self.tau).to_array();
+        let (ml, mh) = (
+            self.material_at(lo).to_array(),
+            self.material_at(hi).to_array(),
+        );
+        let rate = self.material_rate.to_array();
+        for (i, name) in crate::material::PARAM_NAMES.iter().enumerate() {
+            if rate[i] != 0.0 && (ml[i] == m0[i] || mh[i] == m0[i]) {
+                return Some(format!("material.{name} = {}", m0[i]));
+            }
+        }
+        for k in 0..self.n_steps() {
+            let (a, l, u) = (
+                self.increment_at(k, self.tau),
+                self.increment_at(k, lo),
+                self.increment_at(k, hi),
+            );
+            for c in 0..5 {
+                if self.increment_rates[k][c] != 0.0 && (l[c] == a[c] || u[c] == a[c]) {
+                    return Some(format!(
+                        "the strain increment component {c} of step {} (= {:e})",
+                        k + 1,
+                        a[c]
+                    ));
+                }
+            }
+        }
+        None
+    }
+
     fn material_at<T: Real>(&self, tau: T) -> MaterialParams<T> {
         let a = self.material.to_array();
         let b = self.material_rate.to_array();
@@ -322,8 +364,34 @@ pub struct PathCheck {
 
 impl PathCheck {
     /// Both comparisons within tolerance.
+    ///
+    /// A comparison whose tolerances are not finite numbers in `(0, 1)` or whose errors are not
+    /// finite (NaN compares false with every bound) does not pass.
     pub fn passed(&self) -> bool {
-        self.vs_dual.passed() && self.vs_fd.passed()
+        let sane = |c: &Comparison| {
+            let t = c.tol;
+            t.rel > 0.0
+                && t.rel < 1.0
+                && t.floor > 0.0
+                && t.floor < 1.0
+                && c.max_error().is_finite()
+        };
+        // FD is compared before the first flip only (as `vs_fd`).
+        let first_flip = self
+            .flipped_steps
+            .iter()
+            .copied()
+            .min()
+            .unwrap_or(usize::MAX);
+        let steps_finite =
+            self.per_step.iter().enumerate().all(|(k, s)| {
+                s.dual_error.is_finite() && (k >= first_flip || s.fd_error.is_finite())
+            });
+        self.vs_dual.passed()
+            && self.vs_fd.passed()
+            && sane(&self.vs_dual)
+            && sane(&self.vs_fd)
+            && steps_finite
     }
 }
 
