@@ -1,6 +1,11 @@
 //! The `shelldsa` command line.
+//!
+//! Nothing it prints can panic: standard output goes through [`Console`], which ends the
+//! printed output quietly when its reader closes it (`shelldsa run CASE | head -1`; the run
+//! goes on and writes its files) and reports any other write error once (`> /dev/full`);
+//! standard error is written without failing. The exit statuses are [`EXIT_STATUS_HELP`].
 
-use crate::io::shell_build::{self, RunStatus};
+use crate::io::shell_build::{self, BuildError, RunStatus};
 use crate::io::shell_case::ShellCase;
 use crate::io::shell_output::StepSummary;
 use crate::io::{read_case, Case, MaterialPathCase};
@@ -9,13 +14,40 @@ use crate::scalar::Dual;
 use crate::verification::Tolerance;
 use clap::{Parser, Subcommand};
 use serde_json::json;
+use std::borrow::Cow;
+use std::cell::Cell;
 use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+/// Success.
+pub const EXIT_OK: i32 = 0;
+/// Bad input: the case file, the command-line arguments, or a case that cannot be built.
+pub const EXIT_BAD_INPUT: i32 = 1;
+/// A derivative check outside its tolerance (material-path cases).
+pub const EXIT_CHECK_FAILED: i32 = 2;
+/// The analysis stopped before its end (a Newton failure; in `dsa`, a failed method or
+/// finite-difference re-run). Every converged result is written.
+pub const EXIT_STOPPED: i32 = 3;
+/// Output error: a results file, the output directory or the standard output could not be
+/// written.
+pub const EXIT_OUTPUT: i32 = 4;
+
+/// The exit statuses, as `--help` prints them.
+pub const EXIT_STATUS_HELP: &str = "Exit status:
+  0  success
+  1  bad input: the case file, the command-line arguments, or a case that cannot be built
+     (nothing is run)
+  2  a derivative check outside its tolerance (material-path cases)
+  3  the analysis stopped before its end (Newton failure; in `dsa`, a failed method or
+     finite-difference re-run): every converged result is written, the failure is named
+  4  output error: a results file, the output directory or the standard output could not be
+     written (a reader that closes the standard output early, as `| head` does, is not an
+     error: the printed output ends and the run finishes its files)";
+
 /// Design sensitivity analysis of nonlinear shells, checked three ways.
 #[derive(Debug, Parser)]
-#[command(name = "shelldsa", version, about)]
+#[command(name = "shelldsa", version, about, after_help = EXIT_STATUS_HELP)]
 pub struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -24,6 +56,7 @@ pub struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Run a case: the analysis and every derivative method, with results written to --out.
+    #[command(after_help = EXIT_STATUS_HELP)]
     Run {
         /// Case file (TOML).
         case: PathBuf,
@@ -36,7 +69,9 @@ enum Command {
     },
     /// Design sensitivities of a shell case with `[[design]]` tables: the dual-number
     /// reference and central differences of complete re-runs, a table per design variable in
-    /// the format of the paper's Tables 1–2, and DIR/sensitivity.json.
+    /// the format of the paper's Tables 1–2, and DIR/sensitivity.json (rewritten after each
+    /// run, with a `status` and the `failures`).
+    #[command(after_help = EXIT_STATUS_HELP)]
     Dsa {
         /// Case file (TOML) with at least one [[design]] table.
         case: PathBuf,
@@ -54,41 +89,143 @@ enum Command {
         terms: Option<usize>,
     },
     /// Read and validate a case file without running it.
+    #[command(after_help = EXIT_STATUS_HELP)]
     Check {
         /// Case file (TOML).
         case: PathBuf,
     },
 }
 
-/// Exit status: 0 success, 1 bad input, set-up or I/O failure, 2 derivative check outside
-/// tolerance, 3 shell analysis stopped before the final load factor (the converged steps are
-/// written).
+/// Text as printed: control characters other than line breaks and tabs (terminal escape
+/// sequences, carriage returns, bells) are shown escaped (`\u{1b}`), never sent raw.
+pub fn printable(text: &str) -> Cow<'_, str> {
+    let raw = |c: char| c.is_control() && c != '\n' && c != '\t';
+    if !text.chars().any(raw) {
+        return Cow::Borrowed(text);
+    }
+    Cow::Owned(
+        text.chars()
+            .map(|c| {
+                if raw(c) {
+                    c.escape_unicode().to_string()
+                } else {
+                    c.to_string()
+                }
+            })
+            .collect(),
+    )
+}
+
+/// A line on standard error; a failure to write it is ignored (there is nowhere left to say so).
+fn eline(text: &str) {
+    let _ = writeln!(std::io::stderr().lock(), "{}", printable(text));
+}
+
+/// The state of standard output.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Stdout {
+    Open,
+    /// Closed by its reader (broken pipe): nothing more is printed, not an error.
+    Closed,
+    /// Failed otherwise (a full device): reported once, the exit status becomes [`EXIT_OUTPUT`].
+    Failed,
+}
+
+/// Standard output of one command (see the module documentation).
+struct Console {
+    state: Cell<Stdout>,
+}
+
+impl Console {
+    fn new() -> Self {
+        Console {
+            state: Cell::new(Stdout::Open),
+        }
+    }
+
+    /// Print a line (through [`printable`]), flushed at once.
+    fn line(&self, text: &str) {
+        if self.state.get() != Stdout::Open {
+            return;
+        }
+        let mut o = std::io::stdout().lock();
+        let written = o
+            .write_all(printable(text).as_bytes())
+            .and_then(|()| o.write_all(b"\n"))
+            .and_then(|()| o.flush());
+        if let Err(e) = written {
+            if e.kind() == std::io::ErrorKind::BrokenPipe {
+                self.state.set(Stdout::Closed);
+            } else {
+                self.state.set(Stdout::Failed);
+                eline(&format!(
+                    "error: cannot write to standard output: {e} (the run goes on and writes \
+                     its files)"
+                ));
+            }
+        }
+    }
+
+    /// The exit status of a command that would exit with `code`: [`EXIT_OUTPUT`] instead of
+    /// success, a failed check or a stopped analysis when standard output failed.
+    fn status(&self, code: i32) -> i32 {
+        if self.state.get() == Stdout::Failed
+            && matches!(code, EXIT_OK | EXIT_CHECK_FAILED | EXIT_STOPPED)
+        {
+            EXIT_OUTPUT
+        } else {
+            code
+        }
+    }
+}
+
+/// Print a formatted line on a [`Console`].
+macro_rules! say {
+    ($con:expr, $($arg:tt)*) => {
+        $con.line(&format!($($arg)*))
+    };
+}
+
+/// Print a formatted line on standard error.
+macro_rules! err {
+    ($($arg:tt)*) => {
+        eline(&format!($($arg)*))
+    };
+}
+
+/// Run the command line `args` (the program name first) and return the exit status
+/// ([`EXIT_STATUS_HELP`]).
 pub fn main_with_args<I: IntoIterator<Item = String>>(args: I) -> i32 {
     let cli = match Cli::try_parse_from(args) {
         Ok(c) => c,
         Err(e) => {
             let _ = e.print();
-            return if e.use_stderr() { 1 } else { 0 };
+            return if e.use_stderr() {
+                EXIT_BAD_INPUT
+            } else {
+                EXIT_OK
+            };
         }
     };
+    let con = Console::new();
     let result = match cli.command {
         Command::Check { case } => read_case(&case).map(|c| {
-            println!("{}: ok ({})", case.display(), describe(&c));
-            report(&c);
+            say!(con, "{}: ok ({})", case.display(), describe(&c));
+            report(&con, &c);
             if let Case::Shell(s) = &c {
                 let missing = shell_build::unsupported(s);
                 if !missing.is_empty() {
-                    println!("note: this build cannot run the case yet:");
+                    say!(con, "note: this build cannot run the case yet:");
                     for m in &missing {
-                        println!("  {m}");
+                        say!(con, "  {m}");
                     }
                 }
             }
-            0
+            EXIT_OK
         }),
         Command::Run { case, out, quiet } => read_case(&case).map(|c| {
-            report(&c);
-            run(&c, &out, quiet)
+            report(&con, &c);
+            run(&con, &c, &out, quiet)
         }),
         Command::Dsa {
             case,
@@ -96,73 +233,102 @@ pub fn main_with_args<I: IntoIterator<Item = String>>(args: I) -> i32 {
             methods,
             terms,
         } => read_case(&case).map(|c| {
-            report(&c);
-            dsa(&c, &out, methods.as_deref(), terms)
+            report(&con, &c);
+            dsa(&con, &c, &out, methods.as_deref(), terms)
         }),
     };
     match result {
-        Ok(code) => code,
+        Ok(code) => con.status(code),
         Err(e) => {
-            eprintln!("error: {e}");
-            1
+            err!("error: {e}");
+            EXIT_BAD_INPUT
         }
     }
 }
 
 /// The case's resource estimate and warnings ([`crate::io::case_report`]), printed before any
-/// work (a closed or full stdout is not an error here).
-fn report(c: &Case) {
-    let mut out = std::io::stdout().lock();
+/// work.
+fn report(con: &Console, c: &Case) {
     for line in crate::io::case_report(c) {
-        let _ = writeln!(out, "{line}");
+        say!(con, "{line}");
     }
 }
 
-/// `shelldsa dsa`: exit 0 on success, 1 on bad input or a failed run.
-fn dsa(case: &Case, out: &Path, methods: Option<&[String]>, terms: Option<usize>) -> i32 {
+/// The most load steps a run of `c` can converge: every step but those clipped to a `stops`
+/// level or to the final load is at least `min_step` long.
+fn max_load_steps(c: &ShellCase) -> f64 {
+    (c.steps.final_load / c.steps.min_step).ceil() + c.steps.stops.len() as f64 + 1.0
+}
+
+/// `shelldsa dsa` (exit statuses: [`EXIT_STATUS_HELP`]). Everything that can be checked
+/// before the analysis is: the case kind, the methods, `--terms` (at least 1, at most the
+/// steps the case can take), the design variables and the output directory, which receives a
+/// first `sensitivity.json` (`status` `"running"`). The file is rewritten after every run.
+fn dsa(
+    con: &Console,
+    case: &Case,
+    out: &Path,
+    methods: Option<&[String]>,
+    terms: Option<usize>,
+) -> i32 {
     use crate::io::dsa_run;
     let Case::Shell(c) = case else {
-        eprintln!(
+        err!(
             "error: `shelldsa dsa` takes a shell case (`[problem] kind = \"shell\"`); a \
              material-path case carries its sensitivities in `shelldsa run`"
         );
-        return 1;
+        return EXIT_BAD_INPUT;
     };
     let spec = match &c.dsa {
         Some(s) => s,
         None => {
-            eprintln!(
+            err!(
                 "error: {}",
                 dsa_run::DsaError::NoDesign(c.path.display().to_string())
             );
-            return 1;
+            return EXIT_BAD_INPUT;
         }
     };
     let methods = match methods {
         Some(m) => match crate::io::dsa_case::parse_methods(m, "--methods", &c.path) {
             Ok(m) => m,
             Err(e) => {
-                eprintln!("error: {e}");
-                return 1;
+                err!("error: {e}");
+                return EXIT_BAD_INPUT;
             }
         },
         None => spec.methods.clone(),
     };
+    if let Some(step) = terms {
+        let most = max_load_steps(c);
+        if step == 0 || step as f64 > most {
+            err!(
+                "error: --terms {step}: expected a load step in 1..={most} (the case takes at \
+                 most final_load / min_step = {} / {} steps, plus its {} stop(s))",
+                c.steps.final_load,
+                c.steps.min_step,
+                c.steps.stops.len()
+            );
+            return EXIT_BAD_INPUT;
+        }
+    }
     let spec = match dsa_run::validate(c, &methods) {
         Ok(s) => s,
         Err(e) => {
-            eprintln!("error: {e}");
-            return 1;
+            err!("error: {e}");
+            return EXIT_BAD_INPUT;
         }
     };
-    if let Err(e) = std::fs::create_dir_all(out) {
-        eprintln!(
-            "error: cannot create output directory {}: {e}",
-            out.display()
-        );
-        return 1;
+    let path = out.join("sensitivity.json");
+    let written = std::fs::create_dir_all(out)
+        .map_err(|e| format!("cannot create output directory {}: {e}", out.display()))
+        .and_then(|()| dsa_run::write_json(&path, &dsa_run::empty_json(c, &spec, "running")));
+    if let Err(e) = written {
+        err!("error: {e}");
+        return EXIT_OUTPUT;
     }
-    println!(
+    say!(
+        con,
         "{}: {} design variable(s) ({}), {} monitored component(s), methods {}",
         c.title,
         spec.design.len(),
@@ -178,19 +344,44 @@ fn dsa(case: &Case, out: &Path, methods: Option<&[String]>, terms: Option<usize>
             .collect::<Vec<_>>()
             .join(",")
     );
-    let result = match dsa_run::run(c, &spec, &mut |line| println!("{line}")) {
+    // The first error writing sensitivity.json while the methods run (they go on).
+    let mut write_error: Option<String> = None;
+    let run = dsa_run::run_observed(c, &spec, terms, &mut |line| con.line(line), &mut |r| {
+        if write_error.is_none() {
+            if let Err(e) = dsa_run::write_json(&path, &dsa_run::to_json(c, r, "running")) {
+                err!("error: {e} (the run goes on)");
+                write_error = Some(e);
+            }
+        }
+    });
+    let result = match run {
         Ok(r) => r,
         Err(e) => {
-            eprintln!("error: {e}");
-            return 1;
+            err!("error: {e}");
+            let stopped = matches!(
+                e,
+                dsa_run::DsaError::Sensitivity(crate::sensitivity::dual::SensitivityError::Newton(
+                    _
+                ))
+            );
+            let _ = dsa_run::write_json(
+                &path,
+                &dsa_run::empty_json(c, &spec, &format!("failed: {e}")),
+            );
+            return if stopped {
+                EXIT_STOPPED
+            } else {
+                EXIT_BAD_INPUT
+            };
         }
     };
-    println!();
+    say!(con, "");
     for v in 0..result.variables.len() {
-        println!("{}", dsa_run::table(&result, v));
+        say!(con, "{}", dsa_run::table(&result, v));
     }
     let fmt = |t: Option<f64>| t.map_or("—".to_string(), |t| format!("{t:.3} s"));
-    println!(
+    say!(
+        con,
         "timing: analysis {:.3} s (separate plain run), continuum {} (DSA inside a hooked run of \
          {}), dual {} (reference inside a hooked run of {}), fd {}",
         result.time_analysis,
@@ -202,7 +393,8 @@ fn dsa(case: &Case, out: &Path, methods: Option<&[String]>, terms: Option<usize>
     );
     if let (Some(t), Some(dsa)) = (result.continuum_stages, result.time_continuum) {
         let nv = result.variables.len().max(1) as f64;
-        println!(
+        say!(
+            con,
             "continuum DSA per design variable: {:.2} % of the analysis; stages: right-hand sides \
              {:.3} s, solve {:.3} s, history update {:.3} s, monitors {:.3} s, load check {:.3} s",
             100.0 * dsa / result.time_analysis / nv,
@@ -213,43 +405,52 @@ fn dsa(case: &Case, out: &Path, methods: Option<&[String]>, terms: Option<usize>
             t.check
         );
     }
-    let json = dsa_run::to_json(c, &result);
-    let path = out.join("sensitivity.json");
-    let text = match serde_json::to_string_pretty(&json) {
-        Ok(t) => t,
-        Err(e) => {
-            eprintln!("error: sensitivity.json: {e}");
-            return 1;
-        }
-    };
-    if let Err(e) = std::fs::write(&path, text) {
-        eprintln!("error: cannot write {}: {e}", path.display());
-        return 1;
+    for f in &result.failures {
+        say!(con, "failed: {f}");
     }
-    println!("wrote {}", path.display());
+    let status = if result.failures.is_empty() {
+        "complete"
+    } else {
+        "incomplete"
+    };
+    if let Err(e) = dsa_run::write_json(&path, &dsa_run::to_json(c, &result, status)) {
+        err!("error: {e}");
+        return EXIT_OUTPUT;
+    }
+    say!(con, "wrote {} ({status})", path.display());
+    if write_error.is_some() {
+        // Written in the end, but not while the methods ran.
+        return EXIT_OUTPUT;
+    }
+    let mut code = if result.failures.is_empty() {
+        EXIT_OK
+    } else {
+        EXIT_STOPPED
+    };
     if let Some(step) = terms {
-        println!("term breakdown at step {step} (analysis with the dual reference, Dual64):");
+        say!(
+            con,
+            "term breakdown at step {step} (analysis with the dual reference, Dual64):"
+        );
         let bs = match dsa_run::terms(c, &spec, step) {
             Ok(b) => b,
             Err(e) => {
-                eprintln!("error: --terms {step}: {e}");
-                return 1;
+                err!("error: --terms {step}: {e}");
+                return EXIT_STOPPED;
             }
         };
         for b in &bs {
-            println!("{}", dsa_run::terms_table(b));
+            say!(con, "{}", dsa_run::terms_table(b));
         }
         let path = out.join("terms.json");
-        let written = serde_json::to_string_pretty(&dsa_run::terms_json(&bs))
-            .map_err(|e| e.to_string())
-            .and_then(|t| std::fs::write(&path, t).map_err(|e| e.to_string()));
-        if let Err(e) = written {
-            eprintln!("error: cannot write {}: {e}", path.display());
-            return 1;
+        if let Err(e) = dsa_run::write_json(&path, &dsa_run::terms_json(&bs)) {
+            err!("error: {e}");
+            code = EXIT_OUTPUT;
+        } else {
+            say!(con, "wrote {}", path.display());
         }
-        println!("wrote {}", path.display());
     }
-    0
+    code
 }
 
 fn describe(c: &Case) -> String {
@@ -279,23 +480,23 @@ fn describe(c: &Case) -> String {
     }
 }
 
-fn run(case: &Case, out: &Path, quiet: bool) -> i32 {
+fn run(con: &Console, case: &Case, out: &Path, quiet: bool) -> i32 {
     if let Err(e) = std::fs::create_dir_all(out) {
-        eprintln!(
+        err!(
             "error: cannot create output directory {}: {e}",
             out.display()
         );
-        return 1;
+        return EXIT_OUTPUT;
     }
     match case {
-        Case::MaterialPath(c) => match run_material_path(c, out, quiet) {
+        Case::MaterialPath(c) => match run_material_path(con, c, out, quiet) {
             Ok(code) => code,
-            Err(e) => {
-                eprintln!("error: {e}");
-                1
+            Err(Failure { code, message }) => {
+                err!("error: {message}");
+                code
             }
         },
-        Case::Shell(c) => run_shell(c, out, quiet),
+        Case::Shell(c) => run_shell(con, c, out, quiet),
     }
 }
 
@@ -332,16 +533,17 @@ fn step_line(c: &ShellCase, s: &StepSummary) -> String {
     line
 }
 
-fn run_shell(c: &ShellCase, out: &Path, quiet: bool) -> i32 {
+fn run_shell(con: &Console, c: &ShellCase, out: &Path, quiet: bool) -> i32 {
     let start = Instant::now();
     let mut built = match shell_build::build(c) {
         Ok(b) => b,
         Err(e) => {
-            eprintln!("error: {}: {e}", c.path.display());
-            return 1;
+            err!("error: {}: {e}", c.path.display());
+            return EXIT_BAD_INPUT;
         }
     };
-    println!(
+    say!(
+        con,
         "{}: {} particles, {} unknowns, {} quadrature points × {} layers (built in {:.2} s)",
         c.title,
         built.n_particles,
@@ -366,11 +568,11 @@ fn run_shell(c: &ShellCase, out: &Path, quiet: bool) -> i32 {
         let line = step_line(c, s);
         match &bar {
             Some(b) => {
-                b.println(line);
+                b.println(printable(&line));
                 b.set_position((1000.0 * s.load_factor / final_load).round() as u64);
                 b.set_message(format!("{:.4e} / {final_load:e}", s.load_factor));
             }
-            None if !quiet => println!("{line}"),
+            None if !quiet => con.line(&line),
             None => {}
         }
     });
@@ -382,18 +584,22 @@ fn run_shell(c: &ShellCase, out: &Path, quiet: bool) -> i32 {
             let last = summary.steps.last();
             if quiet {
                 if let Some(s) = last {
-                    println!("{}", step_line(c, s));
+                    say!(con, "{}", step_line(c, s));
                 }
             }
             for w in &summary.warnings {
-                println!("warning: {w}");
+                say!(con, "warning: {w}");
             }
             if let (Some(cs), None) = (&c.contact, &summary.separation) {
                 if let Some(r) = &cs.release {
-                    println!("warning: the release tool `{r}` did not separate from the sheet");
+                    say!(
+                        con,
+                        "warning: the release tool `{r}` did not separate from the sheet"
+                    );
                 }
             }
-            println!(
+            say!(
+                con,
                 "{}: {} converged step(s) in {} attempt(s), load factor {:e}, {:.2} s; results in {}",
                 summary.status.label(),
                 summary.steps.len(),
@@ -403,46 +609,76 @@ fn run_shell(c: &ShellCase, out: &Path, quiet: bool) -> i32 {
                 out.display()
             );
             match summary.status {
-                RunStatus::Complete => 0,
-                RunStatus::Failed(_) => 3,
+                RunStatus::Complete => EXIT_OK,
+                RunStatus::Failed(_) => EXIT_STOPPED,
             }
         }
         Err(e) => {
-            eprintln!("error: {e}");
-            1
+            err!("error: {e}");
+            match e {
+                BuildError::Output(_) => EXIT_OUTPUT,
+                _ => EXIT_BAD_INPUT,
+            }
         }
     }
 }
 
+/// A failed command: its exit status and message.
+struct Failure {
+    code: i32,
+    message: String,
+}
+
+/// A failure of the computation on the case's data.
+fn bad_input(e: impl std::fmt::Display) -> Failure {
+    Failure {
+        code: EXIT_BAD_INPUT,
+        message: e.to_string(),
+    }
+}
+
+/// A failure to write a result.
+fn output_error(e: impl std::fmt::Display) -> Failure {
+    Failure {
+        code: EXIT_OUTPUT,
+        message: e.to_string(),
+    }
+}
+
 fn run_material_path(
+    con: &Console,
     c: &MaterialPathCase,
     out: &Path,
     quiet: bool,
-) -> Result<i32, Box<dyn std::error::Error>> {
+) -> Result<i32, Failure> {
     let start = Instant::now();
     let p = &c.path;
     // Time each method on its own.
     let t = Instant::now();
-    let (states, plastic) = p.run::<f64>(p.tau)?;
+    let (states, plastic) = p.run::<f64>(p.tau).map_err(bad_input)?;
     let t_analysis = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let hand = p.hand_derived()?;
+    let hand = p.hand_derived().map_err(bad_input)?;
     let t_continuum = (t.elapsed().as_secs_f64() - t_analysis).max(0.0);
     let t = Instant::now();
-    let (dual_states, _) = p.run(Dual::from_re(p.tau).derivative())?;
+    let (dual_states, _) = p
+        .run(Dual::from_re(p.tau).derivative())
+        .map_err(bad_input)?;
     let t_dual = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let (sp, _) = p.run::<f64>(p.tau + c.fd_step)?;
-    let (sm, _) = p.run::<f64>(p.tau - c.fd_step)?;
+    let (sp, _) = p.run::<f64>(p.tau + c.fd_step).map_err(bad_input)?;
+    let (sm, _) = p.run::<f64>(p.tau - c.fd_step).map_err(bad_input)?;
     let t_fd = t.elapsed().as_secs_f64();
-    let check = p.check(
-        c.fd_step,
-        Tolerance::rel(c.check.dual_rel),
-        Tolerance {
-            rel: c.check.fd_rel,
-            floor: c.check.fd_floor,
-        },
-    )?;
+    let check = p
+        .check(
+            c.fd_step,
+            Tolerance::rel(c.check.dual_rel),
+            Tolerance {
+                rel: c.check.fd_rel,
+                floor: c.check.fd_floor,
+            },
+        )
+        .map_err(bad_input)?;
 
     let mut steps = Vec::with_capacity(p.n_steps());
     let mut csv = String::from("step,plastic,component,value,continuum,dual,fd_central\n");
@@ -463,7 +699,7 @@ fn run_material_path(
                 "{},{},{},{:.16e},{:.16e},{:.16e},{:.16e}\n",
                 k + 1,
                 plastic[k],
-                STATE_LABELS[i],
+                crate::io::shell_output::csv_field(STATE_LABELS[i]),
                 v[i],
                 h[i],
                 d[i],
@@ -497,11 +733,14 @@ fn run_material_path(
         },
         "steps": steps,
     });
-    std::fs::write(
-        out.join("results.json"),
-        serde_json::to_string_pretty(&results)?,
-    )?;
-    std::fs::write(out.join("sensitivity.csv"), csv)?;
+    let write = |name: &str, bytes: &[u8]| {
+        let path = out.join(name);
+        crate::io::vtu::replace_file(&path, bytes)
+            .map_err(|e| output_error(format!("cannot write {}: {e}", path.display())))
+    };
+    let text = serde_json::to_string_pretty(&results).map_err(output_error)?;
+    write("results.json", text.as_bytes())?;
+    write("sensitivity.csv", csv.as_bytes())?;
     plot_material_path(
         c,
         &states,
@@ -511,25 +750,33 @@ fn run_material_path(
         &sm,
         &check,
         &out.join("sensitivity.png"),
-    )?;
+    )
+    .map_err(output_error)?;
 
-    let mut o = std::io::stdout().lock();
-    writeln!(
-        o,
+    say!(
+        con,
         "{} — design variable `{}` at τ = {}",
-        c.title, c.design_name, p.tau
-    )?;
+        c.title,
+        c.design_name,
+        p.tau
+    );
     if !quiet {
-        writeln!(
-            o,
+        say!(
+            con,
             "{:>4} {:>7} {:>14} {:>14} {:>14} {:>14} {:>9}",
-            "step", "status", "σ11", "σ̇11 continuum", "σ̇11 dual", "σ̇11 FD", "FD/cont%"
-        )?;
+            "step",
+            "status",
+            "σ11",
+            "σ̇11 continuum",
+            "σ̇11 dual",
+            "σ̇11 FD",
+            "FD/cont%"
+        );
         for k in 0..p.n_steps() {
             let fd = (sp[k].stress[0] - sm[k].stress[0]) / (2.0 * c.fd_step);
             let h = hand.sensitivities[k].stress[0];
-            writeln!(
-                o,
+            say!(
+                con,
                 "{:>4} {:>7} {:>14.6e} {:>14.6e} {:>14.6e} {:>14.6e} {:>9.4}",
                 k + 1,
                 if plastic[k] { "plastic" } else { "elastic" },
@@ -538,35 +785,38 @@ fn run_material_path(
                 dual_states[k].stress[0].eps,
                 fd,
                 100.0 * fd / h
-            )?;
+            );
         }
-        writeln!(
-            o,
+        say!(
+            con,
             "\nper-step errors (all 11 history components, scaled):\n{check}"
-        )?;
+        );
     } else {
-        writeln!(o, "{}\n{}", check.vs_dual, check.vs_fd)?;
+        say!(con, "{}\n{}", check.vs_dual, check.vs_fd);
     }
-    writeln!(
-        o,
+    say!(
+        con,
         "timing: analysis {:.3e} s, continuum DSA {:.3e} s, dual {:.3e} s, FD {:.3e} s",
-        t_analysis, t_continuum, t_dual, t_fd
-    )?;
-    writeln!(
-        o,
+        t_analysis,
+        t_continuum,
+        t_dual,
+        t_fd
+    );
+    say!(
+        con,
         "wrote results.json, sensitivity.csv and sensitivity.png to {}",
         out.display()
-    )?;
-    writeln!(
-        o,
+    );
+    say!(
+        con,
         "{}",
         if passed {
             "derivative check: PASSED"
         } else {
             "derivative check: FAILED"
         }
-    )?;
-    Ok(if passed { 0 } else { 2 })
+    );
+    Ok(if passed { EXIT_OK } else { EXIT_CHECK_FAILED })
 }
 
 fn dual_state_eps(s: &crate::material::MaterialState<Dual>) -> [f64; 11] {

@@ -224,12 +224,12 @@ pub(crate) fn check(
     let mut entries: Vec<DesignEntry> = Vec::with_capacity(design.len());
     for (k, d) in design.iter().enumerate() {
         let key = format!("design[{k}]");
-        if d.name.trim().is_empty() {
+        if !super::is_name(&d.name) {
             return Err(invalid(
                 path,
                 format!("{key}.name"),
                 format!("{:?}", d.name),
-                "a non-empty name",
+                super::NAME_EXPECTED,
             ));
         }
         if let Some(j) = entries.iter().position(|e| e.variable.name == d.name) {

@@ -45,9 +45,17 @@ pub enum DsaError {
     /// The analysis or a method failed.
     #[error(transparent)]
     Sensitivity(#[from] SensitivityError),
-    /// The dual-reference run took other load steps than the plain analysis.
-    #[error("dual reference: {0}")]
+    /// A hooked run took other load steps than the plain analysis.
+    #[error("{0}")]
     Inconsistent(String),
+    /// `--terms STEP` beyond the converged steps of the plain analysis.
+    #[error("--terms {step}: expected a converged load step in 1..={steps}")]
+    StepOutOfRange {
+        /// The step asked for.
+        step: usize,
+        /// Converged steps of the plain analysis.
+        steps: usize,
+    },
 }
 
 /// The case's analysis for any design: the case with `thickness` and `material` replaced.
@@ -218,6 +226,55 @@ pub struct DsaResult {
     pub time_dual_run: Option<f64>,
     /// Wall time of all finite-difference re-runs (s).
     pub time_fd: Option<f64>,
+    /// Methods and re-runs that failed after the plain analysis (their results are missing,
+    /// everything else is kept).
+    pub failures: Vec<DsaFailure>,
+}
+
+/// A method or finite-difference re-run that failed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DsaFailure {
+    /// `continuum`, `dual`, `continuum and dual` (one hooked run) or `fd`.
+    pub method: String,
+    /// The design variable of a re-run.
+    pub variable: Option<String>,
+    /// The perturbation of a re-run: `+h` or `−h` (absolute).
+    pub h: Option<f64>,
+    /// Its relative step `h/|τ|` as written in `fd_steps`.
+    pub relative: Option<f64>,
+    /// The error.
+    pub message: String,
+}
+
+impl DsaFailure {
+    /// A method's failure (no variable, no step).
+    pub fn method(method: &str, e: impl std::fmt::Display) -> Self {
+        DsaFailure {
+            method: method.into(),
+            variable: None,
+            h: None,
+            relative: None,
+            message: e.to_string(),
+        }
+    }
+}
+
+impl std::fmt::Display for DsaFailure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match (&self.variable, self.h) {
+            (Some(v), Some(h)) => write!(
+                f,
+                "{}: re-run of `{v}` at τ {} h (h = {:e}{}): {}",
+                self.method,
+                if h > 0.0 { "+" } else { "−" },
+                h.abs(),
+                self.relative
+                    .map_or(String::new(), |r| format!(", fd_steps entry {r:e}")),
+                self.message
+            ),
+            _ => write!(f, "{}: {}", self.method, self.message),
+        }
+    }
 }
 
 /// Check everything a `dsa` run of `case` with `methods` needs, before any analysis: design
@@ -239,11 +296,30 @@ pub fn validate(case: &ShellCase, methods: &[DsaMethod]) -> Result<DsaSpec, DsaE
 }
 
 /// Run the analysis and the methods of `spec` on `case`; `progress` receives one line per
-/// run.
+/// run ([`run_observed`] without the pre-check of a step and without the updates).
 pub fn run(
     case: &ShellCase,
     spec: &DsaSpec,
     progress: &mut dyn FnMut(&str),
+) -> Result<DsaResult, DsaError> {
+    run_observed(case, spec, None, progress, &mut |_| {})
+}
+
+/// Run the analysis and the methods of `spec` on `case`. `progress` receives one line per run;
+/// `update` the results so far after the plain analysis, after the continuum and dual run and
+/// after every finite-difference step size of every variable (to write `sensitivity.json` as
+/// the run goes). With `need_step`, a plain analysis with fewer converged steps is an error
+/// before the methods run ([`DsaError::StepOutOfRange`]).
+///
+/// The checks and the plain analysis are all or nothing: an error there is returned. After it,
+/// a failed method or re-run is recorded in [`DsaResult::failures`] (naming the method, the
+/// variable and `h`) and everything else still runs and is kept.
+pub fn run_observed(
+    case: &ShellCase,
+    spec: &DsaSpec,
+    need_step: Option<usize>,
+    progress: &mut dyn FnMut(&str),
+    update: &mut dyn FnMut(&DsaResult),
 ) -> Result<DsaResult, DsaError> {
     let analysis = CaseAnalysis { case };
     let base = base_design(case);
@@ -274,6 +350,41 @@ pub fn run(
         nominal.loads.len(),
         time_analysis
     ));
+    if let Some(step) = need_step.filter(|&s| s == 0 || s > nominal.loads.len()) {
+        return Err(DsaError::StepOutOfRange {
+            step,
+            steps: nominal.loads.len(),
+        });
+    }
+    let mut result = DsaResult {
+        spec: spec.clone(),
+        variables: spec
+            .design
+            .iter()
+            .map(|entry| VariableResult {
+                entry: entry.clone(),
+                value: entry.variable.value(&base),
+                continuum: None,
+                dual: None,
+                fd: Vec::new(),
+                taylor: Vec::new(),
+            })
+            .collect(),
+        nominal,
+        dual_value_difference: None,
+        dual_state_mismatch: None,
+        continuum_value_difference: None,
+        time_analysis,
+        time_continuum: None,
+        time_continuum_run: None,
+        continuum_stages: None,
+        time_dual: None,
+        time_dual_run: None,
+        time_fd: None,
+        failures: Vec::new(),
+    };
+    update(&result);
+    let nominal = result.nominal.clone();
 
     // With contact, the later runs replay the plain run's load levels: every converged level
     // becomes a `stops` entry and the step size starts at `max_step` (≥ every gap), so each
@@ -304,7 +415,12 @@ pub fn run(
         spec.methods.contains(&DsaMethod::Continuum),
         spec.methods.contains(&DsaMethod::Dual),
     );
-    let (continuum_run, dual_run) = if want_continuum || want_dual {
+    let methods_name = match (want_continuum, want_dual) {
+        (true, true) => "continuum and dual",
+        (true, false) => "continuum",
+        _ => "dual",
+    };
+    let hooked = || -> Result<_, DsaError> {
         let (problem, newton, loads) = method_problem(&analysis, case, &base)?;
         let (surface, solver) = (Some(&case.surface), analysis.solver());
         let (vars, monitors) = (vars.clone(), monitors.clone());
@@ -313,17 +429,26 @@ pub fn run(
                 let (c, d) = run_continuum_and_dual(
                     problem, surface, vars, loads, monitors, &newton, solver, dual_mode,
                 )?;
-                (Some(c), Some(d))
+                Ok((Some(c), Some(d)))
             }
             (true, false) => {
                 let c = run_continuum(problem, surface, vars, loads, monitors, &newton, solver)?;
-                (Some(c), None)
+                Ok((Some(c), None))
             }
             _ => {
                 let d = run_dual_on(
                     problem, surface, vars, loads, monitors, &newton, solver, dual_mode,
                 )?;
-                (None, Some(d))
+                Ok((None, Some(d)))
+            }
+        }
+    };
+    let (continuum_run, dual_run) = if want_continuum || want_dual {
+        match hooked() {
+            Ok(runs) => runs,
+            Err(e) => {
+                fail(&mut result, progress, DsaFailure::method(methods_name, e));
+                (None, None)
             }
         }
     } else {
@@ -331,75 +456,81 @@ pub fn run(
     };
 
     // (2a) The continuum DSA.
-    let mut continuum: Option<Vec<Vec<Vec<f64>>>> = None; // [variable][step][monitor]
-    let (mut time_continuum, mut time_continuum_run) = (None, None);
-    let mut continuum_stages = None;
-    let mut continuum_value_difference = None;
     if let Some(r) = continuum_run {
         let loads: Vec<f64> = r.records.iter().map(|s| s.load).collect();
         if loads != nominal.loads {
-            return Err(DsaError::Inconsistent(format!(
-                "continuum: converged load levels {loads:?}, plain analysis {:?}: prescribe \
-                 the steps",
+            let e = DsaError::Inconsistent(format!(
+                "converged load levels {loads:?}, plain analysis {:?}: prescribe the steps",
                 nominal.loads
-            )));
+            ));
+            fail(&mut result, progress, DsaFailure::method("continuum", e));
+        } else {
+            result.continuum_value_difference = Some(value_difference(
+                &nominal.values,
+                r.records.iter().map(|s| s.values.as_slice()),
+            ));
+            result.time_continuum = Some(r.dsa.as_secs_f64());
+            result.time_continuum_run = Some(r.total.as_secs_f64());
+            result.continuum_stages = Some(r.timing);
+            progress(&format!(
+                "continuum: {} variable(s), DSA {:.3} s in a run of {:.2} s",
+                vars.len(),
+                r.dsa.as_secs_f64(),
+                r.total.as_secs_f64()
+            ));
+            let d = by_variable(
+                vars.len(),
+                r.records.iter().map(|s| s.derivatives.as_slice()),
+            );
+            for (v, d) in result.variables.iter_mut().zip(d) {
+                v.continuum = Some(d);
+            }
         }
-        continuum_value_difference = Some(value_difference(
-            &nominal.values,
-            r.records.iter().map(|s| s.values.as_slice()),
-        ));
-        time_continuum = Some(r.dsa.as_secs_f64());
-        time_continuum_run = Some(r.total.as_secs_f64());
-        continuum_stages = Some(r.timing);
-        progress(&format!(
-            "continuum: {} variable(s), DSA {:.3} s in a run of {:.2} s",
-            vars.len(),
-            r.dsa.as_secs_f64(),
-            r.total.as_secs_f64()
-        ));
-        continuum = Some(by_variable(
-            vars.len(),
-            r.records.iter().map(|s| s.derivatives.as_slice()),
-        ));
     }
 
     // (2b) The dual reference.
-    let mut dual: Option<Vec<Vec<Vec<f64>>>> = None; // [variable][step][monitor]
-    let (mut time_dual, mut time_dual_run, mut dual_value_difference) = (None, None, None);
-    let mut dual_state_mismatch = None;
     if let Some(r) = dual_run {
         let loads: Vec<f64> = r.records.iter().map(|s| s.load).collect();
         if loads != nominal.loads {
-            return Err(DsaError::Inconsistent(format!(
+            let e = DsaError::Inconsistent(format!(
                 "converged load levels {loads:?}, plain analysis {:?}: prescribe the steps",
                 nominal.loads
-            )));
+            ));
+            fail(&mut result, progress, DsaFailure::method("dual", e));
+        } else {
+            result.dual_value_difference = Some(value_difference(
+                &nominal.values,
+                r.records.iter().map(|s| s.values.as_slice()),
+            ));
+            result.dual_state_mismatch = Some(
+                r.records
+                    .iter()
+                    .map(|s| s.value_mismatch)
+                    .fold(0.0f64, f64::max),
+            );
+            result.time_dual = Some(r.reference.as_secs_f64());
+            result.time_dual_run = Some(r.total.as_secs_f64());
+            progress(&format!(
+                "dual: {} variable(s), reference {:.2} s in a run of {:.2} s",
+                vars.len(),
+                r.reference.as_secs_f64(),
+                r.total.as_secs_f64()
+            ));
+            let d = by_variable(
+                vars.len(),
+                r.records.iter().map(|s| s.derivatives.as_slice()),
+            );
+            for (v, d) in result.variables.iter_mut().zip(d) {
+                v.dual = Some(d);
+            }
         }
-        dual_value_difference = Some(value_difference(
-            &nominal.values,
-            r.records.iter().map(|s| s.values.as_slice()),
-        ));
-        dual_state_mismatch = Some(
-            r.records
-                .iter()
-                .map(|s| s.value_mismatch)
-                .fold(0.0f64, f64::max),
-        );
-        time_dual = Some(r.reference.as_secs_f64());
-        time_dual_run = Some(r.total.as_secs_f64());
-        progress(&format!(
-            "dual: {} variable(s), reference {:.2} s in a run of {:.2} s",
-            vars.len(),
-            r.reference.as_secs_f64(),
-            r.total.as_secs_f64()
-        ));
-        dual = Some(by_variable(
-            vars.len(),
-            r.records.iter().map(|s| s.derivatives.as_slice()),
-        ));
+    }
+    if want_continuum || want_dual {
+        update(&result);
     }
 
-    // (3) Finite differences.
+    // (3) Finite differences: per variable and step size, the re-runs at τ ± h. A failed
+    // re-run is recorded (variable, h) and the other step sizes and variables still run.
     let run_fd = spec.methods.contains(&DsaMethod::Fd);
     let total_runs: usize = if run_fd {
         spec.design.iter().map(|d| 2 * d.fd_steps.len()).sum()
@@ -408,59 +539,81 @@ pub fn run(
     };
     let t_fd = Instant::now();
     let mut done = 0;
-    let mut variables = Vec::with_capacity(vars.len());
     for (v, entry) in spec.design.iter().enumerate() {
+        if !run_fd {
+            break;
+        }
         let var = &entry.variable;
-        let dual_v = dual.as_ref().map(|d| d[v].clone());
-        let continuum_v = continuum.as_ref().map(|d| d[v].clone());
-        // The Taylor test checks the continuum derivative when it ran, else the dual one.
-        let taylor_v = continuum_v.clone().or_else(|| dual_v.clone());
-        let mut cols = Vec::new();
-        if run_fd {
-            for (&relative, h) in entry.fd_steps.iter().zip(entry.absolute_steps(&base)) {
-                let mut one = |delta: f64| -> Result<RunResponse, DsaError> {
-                    let t = Instant::now();
-                    let (problem, newton, contact) = analysis.build_with_contact(
-                        &var.perturbed(&base, delta)
-                            .map_err(SensitivityError::from)?,
-                    )?;
-                    let r = fd::response_with_contact(
-                        problem,
-                        contact,
-                        &newton,
-                        analysis.solver(),
-                        monitors,
-                    )?;
-                    if r.loads != nominal.loads {
-                        return Err(SensitivityError::StepSequence {
-                            variable: var.name.clone(),
-                            h: delta,
-                            detail: format!(
-                                "converged load levels {:?}, nominal {:?}: prescribe the steps",
-                                r.loads, nominal.loads
-                            ),
-                        }
-                        .into());
+        for (&relative, h) in entry.fd_steps.iter().zip(entry.absolute_steps(&base)) {
+            let mut one = |delta: f64| -> Result<RunResponse, DsaError> {
+                let t = Instant::now();
+                done += 1;
+                let (problem, newton, contact) = analysis.build_with_contact(
+                    &var.perturbed(&base, delta)
+                        .map_err(SensitivityError::from)?,
+                )?;
+                let r = fd::response_with_contact(
+                    problem,
+                    contact,
+                    &newton,
+                    analysis.solver(),
+                    monitors,
+                )?;
+                if r.loads != nominal.loads {
+                    return Err(SensitivityError::StepSequence {
+                        variable: var.name.clone(),
+                        h: delta,
+                        detail: format!(
+                            "converged load levels {:?}, nominal {:?}: prescribe the steps",
+                            r.loads, nominal.loads
+                        ),
                     }
-                    done += 1;
-                    progress(&format!(
-                        "fd {done}/{total_runs}: `{}` {} h (h/|τ| = {relative:e}, h = {delta:.4e}) \
-                         in {:.2} s",
-                        var.name,
-                        if delta > 0.0 { "+" } else { "−" },
-                        t.elapsed().as_secs_f64()
-                    ));
-                    Ok(r)
-                };
-                let plus = one(h)?;
-                let minus = one(-h)?;
-                let derivatives = plus
-                    .values
-                    .iter()
-                    .zip(&minus.values)
-                    .map(|(p, m)| p.iter().zip(m).map(|(a, b)| (a - b) / (2.0 * h)).collect())
-                    .collect();
-                let taylor = taylor_v.as_ref().map(|d| TaylorRow {
+                    .into());
+                }
+                progress(&format!(
+                    "fd {done}/{total_runs}: `{}` {} h (h/|τ| = {relative:e}, h = {delta:.4e}) \
+                     in {:.2} s",
+                    var.name,
+                    if delta > 0.0 { "+" } else { "−" },
+                    t.elapsed().as_secs_f64()
+                ));
+                Ok(r)
+            };
+            let runs = one(h)
+                .map_err(|e| (h, e))
+                .and_then(|plus| one(-h).map(|minus| (plus, minus)).map_err(|e| (-h, e)));
+            let (plus, minus) = match runs {
+                Ok(r) => r,
+                Err((delta, e)) => {
+                    let f = DsaFailure {
+                        method: "fd".into(),
+                        variable: Some(var.name.clone()),
+                        h: Some(delta),
+                        relative: Some(relative),
+                        message: e.to_string(),
+                    };
+                    fail(&mut result, progress, f);
+                    if delta > 0.0 {
+                        // The pair's τ − h run is not made.
+                        done += 1;
+                    }
+                    update(&result);
+                    continue;
+                }
+            };
+            let derivatives = plus
+                .values
+                .iter()
+                .zip(&minus.values)
+                .map(|(p, m)| p.iter().zip(m).map(|(a, b)| (a - b) / (2.0 * h)).collect())
+                .collect();
+            // The Taylor test checks the continuum derivative when it ran, else the dual one.
+            let vr = &mut result.variables[v];
+            let taylor = vr
+                .continuum
+                .as_ref()
+                .or(vr.dual.as_ref())
+                .map(|d| TaylorRow {
                     h,
                     remainder: plus
                         .values
@@ -477,48 +630,33 @@ pub fn run(
                         .collect(),
                     flagged: fd::flags(&[&nominal, &plus]),
                 });
-                cols.push(FdColumn {
-                    relative,
-                    h,
-                    derivatives,
-                    flagged: fd::flags(&[&minus, &nominal, &plus]),
-                    taylor,
-                });
-            }
+            vr.fd.push(FdColumn {
+                relative,
+                h,
+                derivatives,
+                flagged: fd::flags(&[&minus, &nominal, &plus]),
+                taylor,
+            });
+            let rows: Vec<TaylorRow> = vr.fd.iter().filter_map(|c| c.taylor.clone()).collect();
+            vr.taylor = if rows.is_empty() {
+                Vec::new()
+            } else {
+                (0..nominal.loads.len())
+                    .map(|s| fit_rate(&rows, s))
+                    .collect()
+            };
+            result.time_fd = Some(t_fd.elapsed().as_secs_f64());
+            update(&result);
         }
-        let rows: Vec<TaylorRow> = cols.iter().filter_map(|c| c.taylor.clone()).collect();
-        let taylor = if rows.is_empty() {
-            Vec::new()
-        } else {
-            (0..nominal.loads.len())
-                .map(|s| fit_rate(&rows, s))
-                .collect()
-        };
-        variables.push(VariableResult {
-            entry: entry.clone(),
-            value: var.value(&base),
-            continuum: continuum_v,
-            dual: dual_v,
-            fd: cols,
-            taylor,
-        });
     }
-    let time_fd = run_fd.then(|| t_fd.elapsed().as_secs_f64());
-    Ok(DsaResult {
-        spec: spec.clone(),
-        nominal,
-        variables,
-        dual_value_difference,
-        dual_state_mismatch,
-        continuum_value_difference,
-        time_analysis,
-        time_continuum,
-        time_continuum_run,
-        continuum_stages,
-        time_dual,
-        time_dual_run,
-        time_fd,
-    })
+    result.time_fd = run_fd.then(|| t_fd.elapsed().as_secs_f64());
+    Ok(result)
+}
+
+/// Record a failure and report it on the progress lines.
+fn fail(result: &mut DsaResult, progress: &mut dyn FnMut(&str), f: DsaFailure) {
+    progress(&format!("failed: {f}"));
+    result.failures.push(f);
 }
 
 /// Largest difference of a hooked run's monitor values from the plain analysis', relative to
@@ -545,6 +683,30 @@ fn num(v: f64) -> Value {
     }
 }
 
+/// `sensitivity.json` before any analysis (`status` `"running"`, no steps yet) or after a plain
+/// analysis that failed (`status` `"failed: ..."`).
+pub fn empty_json(case: &ShellCase, spec: &DsaSpec, status: &str) -> Value {
+    json!({
+        "kind": "shell-dsa",
+        "case": case.path.display().to_string(),
+        "title": case.title,
+        "status": status,
+        "failures": [],
+        "methods": spec.methods.iter().map(|m| m.name()).collect::<Vec<_>>(),
+        "design_variables": spec.design.iter().map(|d| d.variable.name.clone()).collect::<Vec<_>>(),
+        "variables": [],
+        "loads": [],
+    })
+}
+
+/// Write `doc` as `DIR/sensitivity.json` (pretty, replaced whole: a reader or a killed run
+/// sees the previous or the new file).
+pub fn write_json(path: &std::path::Path, doc: &Value) -> Result<(), String> {
+    let text = serde_json::to_string_pretty(doc).map_err(|e| format!("{}: {e}", path.display()))?;
+    super::vtu::replace_file(path, text.as_bytes())
+        .map_err(|e| format!("cannot write {}: {e}", path.display()))
+}
+
 /// The notes written at the top of `sensitivity.json`.
 pub const NOTES: [&str; 4] = [
     "continuum: the hand-derived continuum DSA (eqs 37-65: fictitious loads solved with the \
@@ -568,8 +730,10 @@ pub const NOTES: [&str; 4] = [
 ];
 
 /// `sensitivity.json`. Everything but `timing_s` and `dual_run_total_s` is a deterministic
-/// function of the case.
-pub fn to_json(case: &ShellCase, r: &DsaResult) -> Value {
+/// function of the case. `status` is `"running"` while the methods run (the file is rewritten
+/// after each), then `"complete"`, or `"incomplete"` when some method or re-run failed
+/// (`failures` names each: method, variable, h, error).
+pub fn to_json(case: &ShellCase, r: &DsaResult, status: &str) -> Value {
     let monitors: Vec<Value> = r
         .spec
         .monitors
@@ -636,10 +800,25 @@ pub fn to_json(case: &ShellCase, r: &DsaResult) -> Value {
             })
         })
         .collect();
+    let failures: Vec<Value> = r
+        .failures
+        .iter()
+        .map(|f| {
+            json!({
+                "method": f.method,
+                "variable": f.variable,
+                "h": f.h,
+                "fd_step_relative": f.relative,
+                "error": f.message,
+            })
+        })
+        .collect();
     json!({
         "kind": "shell-dsa",
         "case": case.path.display().to_string(),
         "title": case.title,
+        "status": status,
+        "failures": failures,
         "notes": NOTES,
         "methods": r.spec.methods.iter().map(|m| m.name()).collect::<Vec<_>>(),
         "monitors": monitors,

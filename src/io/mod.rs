@@ -88,6 +88,16 @@ where
     exact(d).map(Some)
 }
 
+/// What a name or title in a case file must be (names are printed on terminals and written
+/// into CSV headers, JSON and XML).
+pub const NAME_EXPECTED: &str = "a non-empty name without control characters";
+
+/// A name or title of a case file: not blank, no control character (a terminal escape, a
+/// line break, a tab).
+pub fn is_name(text: &str) -> bool {
+    !text.trim().is_empty() && !text.chars().any(char::is_control)
+}
+
 /// `[problem]`.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -365,6 +375,16 @@ fn material_path_case(f: MaterialPathFile, path: &Path) -> Result<Case, CaseErro
         expected: expected.into(),
     };
     let material = material_from_spec(&f.material, path)?;
+    if let Some(t) = f.problem.title.as_ref().filter(|t| !is_name(t)) {
+        return Err(invalid("problem.title", format!("{t:?}"), NAME_EXPECTED));
+    }
+    if !is_name(&f.design.name) {
+        return Err(invalid(
+            "design.name",
+            format!("{:?}", f.design.name),
+            NAME_EXPECTED,
+        ));
+    }
     let r = f.design.material_rate;
     let material_rate = MaterialParams {
         young: r.young,

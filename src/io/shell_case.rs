@@ -1215,11 +1215,11 @@ impl Checker<'_> {
         let mut monitors: Vec<Monitor> = Vec::with_capacity(f.monitor.len());
         for (k, m) in f.monitor.iter().enumerate() {
             let key = format!("monitor[{k}]");
-            if m.name.trim().is_empty() {
+            if !super::is_name(&m.name) {
                 return Err(self.err(
                     format!("{key}.name"),
                     format!("{:?}", m.name),
-                    "a non-empty name",
+                    super::NAME_EXPECTED,
                 ));
             }
             if monitors.iter().any(|o| o.name == m.name) {
@@ -1245,6 +1245,9 @@ impl Checker<'_> {
             },
         };
 
+        if let Some(t) = f.problem.title.as_ref().filter(|t| !super::is_name(t)) {
+            return Err(self.err("problem.title", format!("{t:?}"), super::NAME_EXPECTED));
+        }
         let dsa = super::dsa_case::check(
             self.path, f.design, f.dsa, thickness, &material, &monitors, &surface,
         )?;
@@ -1378,11 +1381,11 @@ impl Checker<'_> {
     /// [`RigidTool`] (a normal at every sample of its coarse grid).
     fn tool(&self, k: usize, t: &ToolFile, earlier: &[ToolFile]) -> Result<RigidTool, CaseError> {
         let key = format!("tool[{k}]");
-        if t.name.trim().is_empty() {
+        if !super::is_name(&t.name) {
             return Err(self.err(
                 format!("{key}.name"),
                 format!("{:?}", t.name),
-                "a non-empty name",
+                super::NAME_EXPECTED,
             ));
         }
         if let Some(j) = earlier.iter().position(|o| o.name == t.name) {

@@ -40,16 +40,26 @@
 //!
 //! # results.json
 //!
-//! `{"case", "title", "wall_time_s", "status", "steps": [...]}`. While running, `status` is
-//! `"running"` and `steps` lists the converged steps; at the end it is `"complete"` or
-//! `"failed: <reason>"` and `steps` lists every step attempt in order (converged or cut), each
-//! `{"step", "load_factor", "iterations", "residual_norms", "converged", "monitors"}`, with
-//! `"monitors": {NAME: {"displacement": [ux, uy, uz]}}` for converged steps and `null` (plus
-//! `"failure"`) for rejected ones. The file is written to `results.json.tmp` and renamed, so a
-//! reader never sees half a file.
+//! `{"case", "title", "wall_time_s", "status", "steps": [...]}`, one top-level entry per line
+//! and one step per line. While running, `status` is `"running"` and `steps` lists the converged
+//! steps; at the end it is `"complete"` or `"failed: <reason>"` and `steps` lists every step
+//! attempt in order (converged or cut), each `{"step", "load_factor", "iterations",
+//! "residual_norms", "converged", "monitors"}`, with `"monitors": {NAME: {"displacement": [ux,
+//! uy, uz]}}` for converged steps and `null` (plus `"failure"`) for rejected ones. The file is
+//! written to `results.json.tmp` and renamed ([`replace_file`]), so a reader, or a run killed
+//! at any moment, never sees half a file. It and the PVD are rewritten after every converged
+//! step while the run is short and then less and less often (`Rewrites`: the total written
+//! stays linear in the number of steps); every step is also appended to `steps.jsonl` as it
+//! converges (one line of JSON each, serialised once and reused by every rewrite).
+//!
+//! # Output failures
+//!
+//! A file that cannot be written (a full disk, a removed directory) is an [`OutputError`]
+//! naming it; its temporary file is removed, and [`ShellOutput::finish`] still tries to leave
+//! a final `status` in results.json.
 
 use super::shell_case::{Monitor, OutputSpec};
-use super::vtu::{PvdCollection, VtuError, VtuMesh, VtuWriter};
+use super::vtu::{replace_file, PvdCollection, VtuError, VtuMesh, VtuWriter};
 use crate::contact::{ContactReport, ToolReport};
 use crate::geometry::Surface;
 use crate::kinematics::{global_stress, local_stress, stress_from_vec5};
@@ -101,6 +111,17 @@ pub enum OutputError {
     /// The output grid does not match the model's quadrature.
     #[error("output grid: {0}")]
     Grid(String),
+}
+
+/// A CSV field (RFC 4180): quoted, with its quotes doubled, when it holds a comma, a quote, a
+/// line break or leading or trailing white space; as it is otherwise.
+pub fn csv_field(text: &str) -> String {
+    let plain = !text.contains([',', '"', '\n', '\r']) && text.trim() == text;
+    if plain {
+        text.to_string()
+    } else {
+        format!("\"{}\"", text.replace('"', "\"\""))
+    }
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError + '_ {
@@ -559,9 +580,44 @@ pub struct ShellOutput {
     final_load: f64,
     pvd: PvdCollection,
     steps: Vec<StepSummary>,
+    /// Each converged step's record as one line of compact JSON (serialised once).
+    step_lines: Vec<String>,
+    /// `steps.jsonl`, open for appending, and its length after the last whole line.
+    step_log: Option<(std::fs::File, u64)>,
+    rewrites: Rewrites,
     start: Instant,
     info: serde_json::Map<String, Value>,
     contact: Option<ContactTracking>,
+}
+
+/// When `results.json` and the PVD are rewritten whole while the run goes on: after every
+/// converged step up to [`Rewrites::EVERY_STEP_UP_TO`], then once the number of steps has grown
+/// by a sixteenth since the last rewrite, or once the last rewrite is older than
+/// [`Rewrites::MIN_INTERVAL_S`] and 100 times its own duration. Each step record is then
+/// written about 17 times in all (a geometric series), and rewrites take at most about 1 % of
+/// the wall time, so the cost per step stays bounded however long the run. The append-only
+/// `steps.jsonl` has every converged step as soon as it converges.
+#[derive(Debug)]
+struct Rewrites {
+    /// Steps in the last rewrite.
+    steps: usize,
+    /// When it ended.
+    at: Instant,
+    /// How long it took.
+    took: std::time::Duration,
+}
+
+impl Rewrites {
+    const EVERY_STEP_UP_TO: usize = 32;
+    const GROWTH: usize = 16;
+    const MIN_INTERVAL_S: f64 = 10.0;
+
+    fn due(&self, steps: usize) -> bool {
+        let since = self.at.elapsed().as_secs_f64();
+        steps <= Self::EVERY_STEP_UP_TO
+            || steps >= self.steps + (self.steps / Self::GROWTH).max(1)
+            || since >= Self::MIN_INTERVAL_S.max(100.0 * self.took.as_secs_f64())
+    }
 }
 
 /// What [`ShellOutput`] tracks of the contact over the run.
@@ -583,6 +639,9 @@ struct ContactTracking {
 pub const PVD_FILE: &str = "shell.pvd";
 /// Results file inside the output directory.
 pub const RESULTS_FILE: &str = "results.json";
+/// Append-only record of the converged steps inside the output directory: one line of JSON per
+/// step (the same object as in results.json's `steps`), appended as each step converges.
+pub const STEPS_LOG_FILE: &str = "steps.jsonl";
 /// Plot file inside the output directory.
 pub const PLOT_FILE: &str = "load_displacement.png";
 /// Tool force table inside the output directory (cases with tools).
@@ -620,6 +679,13 @@ impl ShellOutput {
             final_load,
             pvd: PvdCollection::new(dir.join(PVD_FILE)),
             steps: Vec::new(),
+            step_lines: Vec::new(),
+            step_log: None,
+            rewrites: Rewrites {
+                steps: 0,
+                at: start,
+                took: std::time::Duration::ZERO,
+            },
             start,
             info: serde_json::Map::new(),
             contact: None,
@@ -677,7 +743,7 @@ impl ShellOutput {
         });
         shell_vtu_with_contact(model, surface, &self.grid, pressure.as_deref())?
             .write(&self.dir.join(&rel))?;
-        self.pvd.add_and_write(time, &rel)?;
+        self.pvd.add(time, &rel)?;
         Ok(rel)
     }
 
@@ -688,10 +754,13 @@ impl ShellOutput {
         surface: &Surface<f64>,
     ) -> Result<(), OutputError> {
         self.grid.check_model(model)?;
+        let log = self.dir.join(STEPS_LOG_FILE);
+        let file = std::fs::File::create(&log).map_err(io_err(&log))?;
+        self.step_log = Some((file, 0));
         if self.spec.vtu {
             self.write_vtu(model, surface, 0, 0.0)?;
         }
-        self.write_results("running", None)
+        self.rewrite("running")
     }
 
     /// Record a converged (and committed) step: monitors, the VTU if due (every `every`-th
@@ -770,13 +839,21 @@ impl ShellOutput {
             contact,
             separation,
         });
-        self.write_results("running", None)?;
+        let summary = self.steps.last().expect("just pushed");
+        let line = serde_json::to_string(&self.step_json(summary))?;
+        self.append_step(&line)?;
+        self.step_lines.push(line);
+        if self.rewrites.due(self.steps.len()) {
+            self.rewrite("running")?;
+        }
         Ok(self.steps.last().expect("just pushed"))
     }
 
     /// End of the run: the VTU of the last converged step if it was skipped by `every`, the
-    /// final results.json (`status` is `"complete"` or `"failed: ..."`; `attempts` every step
-    /// attempt of the driver, in order) and the plot.
+    /// PVD, the plot and tool forces, then the final results.json (`status` is `"complete"` or
+    /// `"failed: ..."`; `attempts` every step attempt of the driver, in order). If a file cannot
+    /// be written, results.json gets the status `"failed: writing results: ..."` naming it
+    /// (if the disk still takes that) and the first such error is returned.
     pub fn finish(
         &mut self,
         model: &ShellModel,
@@ -784,14 +861,6 @@ impl ShellOutput {
         status: &str,
         attempts: &[StepRecord],
     ) -> Result<(), OutputError> {
-        if self.spec.vtu {
-            if let Some(k) = self.steps.len().checked_sub(1) {
-                if self.steps[k].vtu.is_none() {
-                    let (step, load) = (self.steps[k].step, self.steps[k].load_factor);
-                    self.steps[k].vtu = Some(self.write_vtu(model, surface, step, load)?);
-                }
-            }
-        }
         if let Some(track) = self.contact.as_mut() {
             let never: Vec<&str> = track
                 .touched
@@ -806,7 +875,35 @@ impl ShellOutput {
                 ));
             }
         }
-        self.write_results(status, Some(attempts))?;
+        let written = self.finish_files(model, surface);
+        let status = match &written {
+            Ok(()) => status.to_string(),
+            Err(e) if !status.starts_with("failed: writing results") => {
+                format!("failed: writing results: {e}")
+            }
+            Err(_) => status.to_string(),
+        };
+        self.write_final(&status, attempts)?;
+        written
+    }
+
+    /// The files of [`Self::finish`] other than results.json.
+    fn finish_files(
+        &mut self,
+        model: &ShellModel,
+        surface: &Surface<f64>,
+    ) -> Result<(), OutputError> {
+        if self.spec.vtu {
+            if let Some(k) = self.steps.len().checked_sub(1) {
+                if self.steps[k].vtu.is_none() {
+                    let (step, load) = (self.steps[k].step, self.steps[k].load_factor);
+                    let rel = self.write_vtu(model, surface, step, load)?;
+                    self.steps[k].vtu = Some(rel);
+                    self.step_lines[k] = serde_json::to_string(&self.step_json(&self.steps[k]))?;
+                }
+            }
+            self.pvd.write()?;
+        }
         if self.spec.plot && !self.monitors.is_empty() {
             self.plot(&self.dir.join(PLOT_FILE))?;
         }
@@ -840,7 +937,8 @@ impl ShellOutput {
         let mut text = String::from("step,t,stroke");
         for (name, _) in &track.touched {
             for c in ["x", "y", "z", "fx", "fy", "fz", "active_points"] {
-                text.push_str(&format!(",{name}_{c}"));
+                text.push(',');
+                text.push_str(&csv_field(&format!("{name}_{c}")));
             }
         }
         text.push('\n');
@@ -858,7 +956,7 @@ impl ShellOutput {
             }
             text.push('\n');
         }
-        std::fs::write(path, text).map_err(io_err(path))
+        replace_file(path, text.as_bytes()).map_err(io_err(path))
     }
 
     /// `force_stroke.png`: the magnitude of each tool's force against the stroke (the
@@ -953,34 +1051,51 @@ impl ShellOutput {
 
     /// The results.json document.
     pub fn results_json(&self, status: &str, attempts: Option<&[StepRecord]>) -> Value {
-        let steps: Vec<Value> = match attempts {
+        let mut doc = self.header_json(status);
+        let steps = match attempts {
             None => self.steps.iter().map(|s| self.step_json(s)).collect(),
-            Some(att) => {
-                let mut conv = self.steps.iter();
-                let mut out = Vec::with_capacity(att.len());
-                let mut n = 0;
-                for a in att {
-                    if a.converged {
-                        if let Some(s) = conv.next() {
-                            n = s.step;
-                            out.push(self.step_json(s));
-                            continue;
-                        }
-                    }
-                    out.push(json!({
-                        "step": n + 1,
-                        "load_factor": a.load,
-                        "step_size": a.step_size,
-                        "iterations": a.iterations,
-                        "residual_norms": a.residual_norms,
-                        "converged": false,
-                        "failure": a.failure.as_ref().map(|f| f.to_string()),
-                        "monitors": Value::Null,
-                    }));
-                }
-                out
-            }
+            Some(att) => self
+                .attempt_entries(att)
+                .into_iter()
+                .map(|e| match e {
+                    Ok(k) => self.step_json(&self.steps[k]),
+                    Err(v) => v,
+                })
+                .collect(),
         };
+        doc.insert("steps".into(), Value::Array(steps));
+        Value::Object(doc)
+    }
+
+    /// Every step attempt in order: `Ok(k)` for the `k`-th converged step, `Err(entry)` for a
+    /// rejected attempt (`"converged": false`, its failure, no monitors).
+    fn attempt_entries(&self, attempts: &[StepRecord]) -> Vec<Result<usize, Value>> {
+        let mut next = 0;
+        let mut n = 0;
+        attempts
+            .iter()
+            .map(|a| {
+                if a.converged && next < self.steps.len() {
+                    n = self.steps[next].step;
+                    next += 1;
+                    return Ok(next - 1);
+                }
+                Err(json!({
+                    "step": n + 1,
+                    "load_factor": a.load,
+                    "step_size": a.step_size,
+                    "iterations": a.iterations,
+                    "residual_norms": a.residual_norms,
+                    "converged": false,
+                    "failure": a.failure.as_ref().map(|f| f.to_string()),
+                    "monitors": Value::Null,
+                }))
+            })
+            .collect()
+    }
+
+    /// Every top-level entry of results.json but `steps`.
+    fn header_json(&self, status: &str) -> serde_json::Map<String, Value> {
         let mut doc = serde_json::Map::new();
         doc.insert("case".into(), json!(self.case));
         doc.insert("title".into(), json!(self.title));
@@ -1024,20 +1139,103 @@ impl ShellOutput {
             );
             doc.insert("warnings".into(), json!(track.warnings));
         }
-        doc.insert("steps".into(), Value::Array(steps));
-        Value::Object(doc)
+        doc
     }
 
-    fn write_results(
+    /// results.json as text: one top-level entry per line and one step per line, the step
+    /// lines those serialised when each step converged (so a rewrite costs a copy, not a
+    /// serialisation, of the steps).
+    fn results_text(
         &self,
         status: &str,
         attempts: Option<&[StepRecord]>,
-    ) -> Result<(), OutputError> {
-        let text = serde_json::to_string_pretty(&self.results_json(status, attempts))?;
+    ) -> Result<String, OutputError> {
+        let mut text = String::from("{\n");
+        for (k, v) in self.header_json(status) {
+            text.push_str(&format!(
+                "  {}: {},\n",
+                serde_json::to_string(&k)?,
+                serde_json::to_string(&v)?
+            ));
+        }
+        text.push_str("  \"steps\": [");
+        let mut first = true;
+        let mut push = |line: &str| {
+            text.push_str(if first { "\n    " } else { ",\n    " });
+            text.push_str(line);
+            first = false;
+        };
+        match attempts {
+            None => self.step_lines.iter().for_each(|l| push(l)),
+            Some(att) => {
+                for e in self.attempt_entries(att) {
+                    match e {
+                        Ok(k) => push(&self.step_lines[k]),
+                        Err(v) => push(&serde_json::to_string(&v)?),
+                    }
+                }
+            }
+        }
+        text.push_str(if first { "]\n}\n" } else { "\n  ]\n}\n" });
+        Ok(text)
+    }
+
+    /// Append one step's line to `steps.jsonl` (one `write` call). On failure the file is cut
+    /// back to its last whole line.
+    fn append_step(&mut self, line: &str) -> Result<(), OutputError> {
+        use std::io::Write;
+        let path = self.dir.join(STEPS_LOG_FILE);
+        let Some((file, len)) = self.step_log.as_mut() else {
+            return Ok(());
+        };
+        let mut bytes = Vec::with_capacity(line.len() + 1);
+        bytes.extend_from_slice(line.as_bytes());
+        bytes.push(b'\n');
+        match file.write_all(&bytes) {
+            Ok(()) => {
+                *len += bytes.len() as u64;
+                Ok(())
+            }
+            Err(e) => {
+                let _ = file.set_len(*len);
+                Err(io_err(&path)(e))
+            }
+        }
+    }
+
+    /// Rewrite the PVD and results.json (with the converged steps so far).
+    fn rewrite(&mut self, status: &str) -> Result<(), OutputError> {
+        let t = Instant::now();
+        if self.spec.vtu {
+            self.pvd.write()?;
+        }
+        let text = self.results_text(status, None)?;
         let path = self.dir.join(RESULTS_FILE);
-        let tmp = self.dir.join(format!("{RESULTS_FILE}.tmp"));
-        std::fs::write(&tmp, text).map_err(io_err(&tmp))?;
-        std::fs::rename(&tmp, &path).map_err(io_err(&path))
+        replace_file(&path, text.as_bytes()).map_err(io_err(&path))?;
+        self.rewrites = Rewrites {
+            steps: self.steps.len(),
+            at: Instant::now(),
+            took: t.elapsed(),
+        };
+        Ok(())
+    }
+
+    /// The final results.json. If it cannot be written (a full disk), a short one with the
+    /// status and without the step list (every converged step is in `steps.jsonl`) is tried
+    /// before giving up, so that the status does not stay `"running"`; the error is returned
+    /// either way.
+    fn write_final(&mut self, status: &str, attempts: &[StepRecord]) -> Result<(), OutputError> {
+        let path = self.dir.join(RESULTS_FILE);
+        let text = self.results_text(status, Some(attempts))?;
+        let Err(e) = replace_file(&path, text.as_bytes()) else {
+            return Ok(());
+        };
+        let mut short = self.header_json(&format!("{status}; results.json: {e}"));
+        short.insert("steps_file".into(), json!(STEPS_LOG_FILE));
+        short.insert("steps".into(), json!([]));
+        let _ = serde_json::to_string_pretty(&Value::Object(short))
+            .map(|t| replace_file(&path, t.as_bytes()));
+        Err(io_err(&path)(e))
     }
 
     /// Load factor against each monitor's displacement components, one panel per monitor,

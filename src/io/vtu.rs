@@ -571,15 +571,25 @@ fn xml_escape(text: &str) -> String {
 
 /// Write `text` to `path.tmp`, then rename it over `path`.
 fn write_atomically(path: &Path, text: &str) -> Result<(), VtuError> {
-    let io = |source| VtuError::Io {
+    replace_file(path, text.as_bytes()).map_err(|source| VtuError::Io {
         path: path.to_owned(),
         source,
-    };
+    })
+}
+
+/// Replace `path` by `bytes` so that a reader, or a run killed at any moment, sees either the
+/// old file or the new one, never half a file: the bytes go to `path.tmp` beside it, which is
+/// then renamed over `path`. If writing or renaming fails (a full disk, a removed directory),
+/// the temporary file is removed again and the old `path` is left as it was.
+pub fn replace_file(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     let mut tmp = path.as_os_str().to_owned();
     tmp.push(".tmp");
     let tmp = PathBuf::from(tmp);
-    std::fs::write(&tmp, text).map_err(io)?;
-    std::fs::rename(&tmp, path).map_err(io)
+    let written = std::fs::write(&tmp, bytes).and_then(|()| std::fs::rename(&tmp, path));
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
 }
 
 /// One entry of a [`PvdCollection`].
