@@ -597,7 +597,12 @@ fn a_killed_run_leaves_valid_results() {
     for after in [1usize, 40, 150] {
         let out = dir.join(format!("out-{after}"));
         let mut child = shelldsa()
-            .args(["run", case.to_str().unwrap(), "--out", out.to_str().unwrap()])
+            .args([
+                "run",
+                case.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ])
             .stdout(Stdio::piped())
             .spawn()
             .unwrap();
