@@ -455,3 +455,188 @@ fn names_with_control_characters_are_rejected_naming_the_key() {
         assert!(!e.contains('\u{1b}') && !e.contains('\u{7}'), "{e:?}");
     }
 }
+
+/// Fields of one CSV line (RFC 4180: quoted fields with doubled quotes).
+fn csv_line(line: &str) -> Vec<String> {
+    let mut fields = vec![String::new()];
+    let (mut quoted, mut chars) = (false, line.chars().peekable());
+    while let Some(c) = chars.next() {
+        match (c, quoted) {
+            ('"', true) if chars.peek() == Some(&'"') => {
+                chars.next();
+                fields.last_mut().unwrap().push('"');
+            }
+            ('"', _) => quoted = !quoted,
+            (',', false) => fields.push(String::new()),
+            (c, _) => fields.last_mut().unwrap().push(c),
+        }
+    }
+    fields
+}
+
+/// A tool named with a comma and quotes: tool_forces.csv quotes its header fields, so that a
+/// CSV reader finds the same number of fields in the header as in every row.
+#[test]
+fn tool_names_with_commas_are_quoted_in_tool_forces_csv() {
+    let name = "punch, \\\"A\\\""; // TOML for: punch, "A"
+    let case = format!(
+        r#"
+thickness = 0.1
+[problem]
+kind = "shell"
+title = "plate and tools"
+[surface]
+type = "rectangle"
+origin = [0.0, 0.0, 0.0]
+edge_u = [4.0, 0.0, 0.0]
+edge_v = [0.0, 1.0, 0.0]
+[particles]
+grid = [9, 3]
+[kernel]
+basis = "quadratic"
+support = 3.0
+[integration]
+cells = "per-particle-spacing"
+gauss = 2
+thickness_points = 3
+thickness_rule = "lobatto"
+[material]
+young = 1000.0
+poisson = 0.3
+sigma0 = 1e30
+hardening = 0.0
+beta = 1.0
+[[boundary]]
+kind = "fixed"
+everywhere = true
+components = ["ux", "uy"]
+[[load]]
+kind = "gravity"
+per_area = [0.0, 0.0, -1e-3]
+scaling = "constant"
+[steps]
+initial_step = 0.5
+min_step = 0.1
+max_step = 0.5
+predictor = "zero"
+residual_atol = 1e-12
+[[monitor]]
+name = "mid"
+at = [0.5, 0.5]
+[output]
+vtu = false
+plot = false
+[[tool]]
+name = "{name}"
+side = "positive"
+[tool.surface]
+type = "cylinder-sector"
+origin = [2.0, -1.0, 1.05]
+axis = [0.0, 1.0, 0.0]
+reference = [1.0, 0.0, 0.0]
+radius = 1.0
+angle_deg = [0.0, 180.0]
+length = [0.0, 3.0]
+[tool.path]
+stroke = [0.0, 0.0, 0.5]
+[[tool]]
+name = "die"
+side = "positive"
+[tool.surface]
+type = "rectangle"
+origin = [-1.0, -1.0, -0.0499]
+edge_u = [6.0, 0.0, 0.0]
+edge_v = [0.0, 3.0, 0.0]
+[tool.path]
+keys = [{{ t = 0.0, translation = [0.0, 0.0, 0.0] }}]
+"#
+    );
+    let dir = unique_dir("csv-quoting");
+    let path = write_case(&dir, &case);
+    let out = dir.join("out");
+    let o = shelldsa()
+        .args([
+            "run",
+            path.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert_no_panic(&o);
+    assert_eq!(
+        o.status.code(),
+        Some(EXIT_OK),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let csv = std::fs::read_to_string(out.join("tool_forces.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header = csv_line(lines.next().unwrap());
+    assert_eq!(header.len(), 3 + 2 * 7, "{header:?}");
+    assert_eq!(header[3], "punch, \"A\"_x");
+    assert_eq!(header[9], "punch, \"A\"_active_points");
+    assert_eq!(header[10], "die_x");
+    let mut rows = 0;
+    for l in lines {
+        assert_eq!(csv_line(l).len(), header.len(), "{l}");
+        rows += 1;
+    }
+    assert!(rows >= 2, "{csv}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// SIGKILL at some moment of a run (after 1, 40 and 150 progress lines of a 300-step run, with
+/// the rewrites of results.json and the PVD spaced out past step 32): results.json and the PVD
+/// are whole and valid (the one from the last rewrite), steps.jsonl holds at least every step
+/// results.json lists, each line valid JSON but possibly a last one cut by the kill.
+#[test]
+fn a_killed_run_leaves_valid_results() {
+    let dir = unique_dir("sigkill");
+    let case = write_case(&dir, &elastic(300));
+    for after in [1usize, 40, 150] {
+        let out = dir.join(format!("out-{after}"));
+        let mut child = shelldsa()
+            .args([
+                "run",
+                case.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ])
+            .stdout(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let mut reader = BufReader::new(child.stdout.take().unwrap());
+        let mut line = String::new();
+        for _ in 0..after + 1 {
+            line.clear();
+            reader.read_line(&mut line).unwrap();
+        }
+        child.kill().unwrap();
+        child.wait().unwrap();
+        let res = json(&out.join("results.json"));
+        let listed = res["steps"].as_array().unwrap().len();
+        assert!(
+            ["running", "complete"].contains(&res["status"].as_str().unwrap()),
+            "{}",
+            res["status"]
+        );
+        let pvd = std::fs::read_to_string(out.join("shell.pvd")).unwrap();
+        assert!(pvd.trim_end().ends_with("</VTKFile>"), "{pvd}");
+        assert!(pvd.matches("<DataSet").count() > listed, "{pvd}");
+        let log = std::fs::read_to_string(out.join("steps.jsonl")).unwrap();
+        let whole: Vec<&str> = if log.ends_with('\n') {
+            log.lines().collect()
+        } else {
+            let mut l: Vec<&str> = log.lines().collect();
+            l.pop();
+            l
+        };
+        for l in &whole {
+            let _: Value = serde_json::from_str(l).unwrap();
+        }
+        assert!(whole.len() >= listed, "{} < {listed}", whole.len());
+        assert!(whole.len() >= after, "{} < {after}", whole.len());
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -748,7 +748,21 @@ impl ShellOutput {
     }
 
     /// The initial (unloaded) state as step 0 at load factor 0, and a first results.json.
+    /// If a file cannot be written, results.json gets the status `"failed: writing results:
+    /// ..."` (if the disk still takes that) and the error is returned.
     pub fn initial(
+        &mut self,
+        model: &ShellModel,
+        surface: &Surface<f64>,
+    ) -> Result<(), OutputError> {
+        let written = self.initial_files(model, surface);
+        if let Err(e) = &written {
+            let _ = self.write_final(&format!("failed: writing results: {e}"), &[]);
+        }
+        written
+    }
+
+    fn initial_files(
         &mut self,
         model: &ShellModel,
         surface: &Surface<f64>,
