@@ -109,6 +109,8 @@ fn lu_and_cholesky_match_dense_lu_on_random_sparse_matrices() {
         (true, Method::Lu),
         (true, Method::Cholesky),
         (false, Method::DenseLu),
+        (false, Method::SupernodalLu),
+        (true, Method::SupernodalLu),
     ] {
         // The shift keeps cond(A) moderate (< 1e4 for these sizes), so the dense and sparse
         // solutions must agree to ~cond·ε ≈ 1e-12; the backward error of a stable factorisation
@@ -152,7 +154,12 @@ fn symbolic_reuse_equals_fresh_factorisation_bit_for_bit() {
     let v1 = random_values(&p, &mut rng, false, 3.0);
     let v2 = random_values(&p, &mut rng, false, 3.0);
     let b: Vec<f64> = (0..n).map(|_| rng.next()).collect();
-    for method in [Method::Lu, Method::Cholesky, Method::DenseLu] {
+    for method in [
+        Method::Lu,
+        Method::Cholesky,
+        Method::DenseLu,
+        Method::SupernodalLu,
+    ] {
         let (v1, v2) = if method == Method::Cholesky {
             (
                 random_values(&p, &mut rng, true, 1.0),
@@ -181,7 +188,7 @@ fn auto_method_is_dense_only_for_nearly_full_patterns() {
     // (n·(2·7+1) − 7·8) / n² ≈ 34 % ≥ DENSE_FILL (25 %), cells of 4 about 17 % < DENSE_FILL.
     let chain: Vec<Vec<usize>> = (0..39).map(|i| vec![i, i + 1]).collect();
     let p = SparsityPattern::from_cells(40, &chain).unwrap();
-    assert_eq!(Method::auto(&p), Method::Lu);
+    assert_eq!(Method::auto(&p), Method::SupernodalLu);
     let full = SparsityPattern::from_cells(40, &[(0..40).collect::<Vec<_>>()]).unwrap();
     assert_eq!(Method::auto(&full), Method::DenseLu);
     let banded: Vec<Vec<usize>> = (0..33).map(|i| (i..i + 8).collect()).collect();
@@ -193,7 +200,7 @@ fn auto_method_is_dense_only_for_nearly_full_patterns() {
     let b = SparsityPattern::from_cells(40, &narrow).unwrap();
     let fill = b.nnz() as f64 / 1600.0;
     assert!(fill < Method::DENSE_FILL, "{fill}");
-    assert_eq!(Method::auto(&b), Method::Lu);
+    assert_eq!(Method::auto(&b), Method::SupernodalLu);
 }
 
 #[test]

@@ -23,6 +23,7 @@ pub mod linear;
 pub mod newton;
 pub mod observe;
 pub mod pattern;
+pub mod supernodal;
 
 pub use assembly::{
     assemble, assemble_vector, assemble_with, AssemblyBuffers, AssemblyError, Execution,
@@ -35,6 +36,7 @@ pub use newton::{
     Predictor, ProblemError, StepRecord, StepTiming,
 };
 pub use pattern::SparsityPattern;
+pub use supernodal::FillOrdering;
 
 /// Errors of the linear-algebra layer. Every variant names where the problem was found.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -1,0 +1,888 @@
+//! Multifrontal supernodal LU on the symmetric structure of the pattern.
+//!
+//! The meshfree tangents are structurally symmetric (every pair of DOFs of a cell is stored
+//! both ways) but numerically unsymmetric (the Petrov–Galerkin VCI gradients, the follower loads,
+//! the plastic update). LU with partial row pivoting over all rows must bound its fill by the
+//! Cholesky factor of `AᵀA`; here instead the fill-reducing ordering (AMD on the pattern) and the
+//! supernodes of the Cholesky factor of `A` are computed once, and the numeric LU keeps that
+//! structure: `L` has the Cholesky factor's pattern and `U` its transpose. Row pivoting is
+//! allowed inside each supernode's diagonal block, which does not change the structure (the
+//! rows of a supernode share their column pattern). A pivot that this restriction makes tiny is
+//! caught by the solver's probe solve, and the caller falls back to the unrestricted LU.
+//!
+//! Each supernode is eliminated from a dense frontal matrix (its columns, its rows and the rows
+//! of its pattern): the entries of `A`, then the children's update matrices (extend-add), then a
+//! blocked right-looking LU of its leading columns, whose Schur complement is the update matrix
+//! handed to the parent. Independent subtrees run as rayon tasks and the large trailing
+//! updates are cut into column blocks of a fixed width. Every floating-point operation, and its
+//! order, is fixed by the pattern alone: the factors are bit-identical for any number of threads.
+
+use super::{SolverError, SparsityPattern};
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::lu::partial_pivoting::factor as dense_lu;
+use faer::linalg::matmul::matmul;
+use faer::linalg::triangular_solve as tri;
+use faer::reborrow::{IntoConst, Reborrow, ReborrowMut};
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholeskyRaw, SymmetricOrdering,
+};
+use faer::sparse::linalg::SupernodalThreshold;
+use faer::{Accum, Mat, MatMut, MatRef, Par, Side};
+use rayon::prelude::*;
+use std::sync::Mutex;
+
+/// Panel width of the blocked LU of a front.
+const PANEL: usize = 64;
+/// Column-block width of the trailing updates cut into parallel tasks.
+const UPDATE_BLOCK: usize = 128;
+/// Trailing updates below this many flops run as one task.
+const PAR_UPDATE_FLOPS: f64 = 4.0e6;
+/// Subtrees below this many flops are factorised in one task.
+const PAR_SUBTREE_FLOPS: f64 = 2.0e6;
+
+/// Fill-reducing ordering of [`super::Method::SupernodalLu`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FillOrdering {
+    /// Nested dissection by level-set separators of the graph of supervariables (DOFs with
+    /// identical columns), leaves of at most [`ND_LEAF`] DOFs kept in their numbering.
+    #[default]
+    NestedDissection,
+    /// faer's approximate minimum degree.
+    Amd,
+}
+
+/// Largest part (in DOFs) nested dissection does not cut further.
+pub const ND_LEAF: usize = 128;
+
+/// The symbolic analysis: ordering, supernodes, assembly and extend-add maps.
+#[derive(Debug)]
+pub(crate) struct SupernodalSymbolic {
+    n: usize,
+    /// `perm[new] = old`.
+    perm: Vec<usize>,
+    /// First column of every supernode, and `n` at the end.
+    begin: Vec<usize>,
+    /// Rows below the diagonal block of every supernode (new numbering, ascending).
+    rows_ptr: Vec<usize>,
+    rows: Vec<usize>,
+    /// Position of each of those rows in the parent's front.
+    rel: Vec<u32>,
+    /// Children of every supernode, ascending.
+    children_ptr: Vec<usize>,
+    children: Vec<usize>,
+    roots: Vec<usize>,
+    /// Entries of `A` per supernode: (slot, column-major position in the front).
+    asm_ptr: Vec<usize>,
+    asm: Vec<(u32, u32)>,
+    /// Floating-point operations of every subtree's factorisation.
+    subtree_flops: Vec<f64>,
+    /// Operations of one numeric factorisation.
+    pub flops: f64,
+    /// Stored entries of `L` and `U` together.
+    pub factor_entries: usize,
+    /// Order of the largest front.
+    pub max_front: usize,
+}
+
+/// The numeric factors of every supernode.
+#[derive(Debug)]
+struct SupernodeFactor {
+    /// `m × k`: `L₁₁ \ U₁₁` in rows `0..k` (rows in pivot order), `L₂₁` below.
+    panel: Mat<f64>,
+    /// `k × r`: `U₁₂` (rows in pivot order).
+    u12: Mat<f64>,
+    /// Row `i` of the factored block is the block's row `piv[i]`.
+    piv: Vec<usize>,
+}
+
+impl Default for SupernodeFactor {
+    fn default() -> Self {
+        SupernodeFactor {
+            panel: Mat::new(),
+            u12: Mat::new(),
+            piv: Vec::new(),
+        }
+    }
+}
+
+/// A front: `m × m`, column-major, contiguous.
+struct Front {
+    m: usize,
+    data: Vec<f64>,
+}
+
+/// Numeric factorisation over a [`SupernodalSymbolic`].
+#[derive(Debug, Default)]
+pub(crate) struct SupernodalNumeric {
+    factors: Vec<Mutex<SupernodeFactor>>,
+}
+
+impl SupernodalSymbolic {
+    /// Ordering and supernodes of `pattern` (AMD on its structure, faer's supernodal symbolic
+    /// Cholesky), with the maps the numeric phase uses.
+    pub fn new(pattern: &SparsityPattern, ordering: FillOrdering) -> Result<Self, SolverError> {
+        let n = pattern.n_dofs();
+        let faer_err = |e: faer::sparse::FaerError| SolverError::Faer(format!("{e:?}"));
+        let nd = match ordering {
+            FillOrdering::NestedDissection => {
+                let fwd = nested_dissection(pattern);
+                let mut inv = vec![0usize; n];
+                for (new, &old) in fwd.iter().enumerate() {
+                    inv[old] = new;
+                }
+                Some((fwd, inv))
+            }
+            FillOrdering::Amd => None,
+        };
+        let sym = factorize_symbolic_cholesky(
+            pattern.symbolic(),
+            Side::Lower,
+            match &nd {
+                Some((fwd, inv)) => {
+                    SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(fwd, inv, n))
+                }
+                None => SymmetricOrdering::Amd,
+            },
+            CholeskySymbolicParams {
+                supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+                ..Default::default()
+            },
+        )
+        .map_err(faer_err)?;
+        let perm: Vec<usize> = match sym.perm() {
+            Some(p) => p.arrays().0.to_vec(),
+            None => (0..n).collect(),
+        };
+        let mut perm_inv = vec![0usize; n];
+        for (new, &old) in perm.iter().enumerate() {
+            perm_inv[old] = new;
+        }
+        let SymbolicCholeskyRaw::Supernodal(sn) = sym.raw() else {
+            return Err(SolverError::Faer(
+                "supernodal symbolic analysis expected".into(),
+            ));
+        };
+        let ns = sn.n_supernodes();
+        let mut begin: Vec<usize> = sn.supernode_begin().to_vec();
+        begin.push(n);
+        let mut rows_ptr = vec![0usize];
+        let mut rows = Vec::new();
+        for s in 0..ns {
+            rows.extend_from_slice(sn.supernode(s).pattern());
+            rows_ptr.push(rows.len());
+        }
+        let mut sn_of = vec![0usize; n];
+        for s in 0..ns {
+            sn_of[begin[s]..begin[s + 1]].fill(s);
+        }
+        // Parent: the supernode of the first row below the diagonal block.
+        let parent: Vec<Option<usize>> = (0..ns)
+            .map(|s| {
+                rows[rows_ptr[s]..rows_ptr[s + 1]]
+                    .first()
+                    .map(|&r| sn_of[r])
+            })
+            .collect();
+        let mut n_children = vec![0usize; ns + 1];
+        for p in parent.iter().flatten() {
+            n_children[p + 1] += 1;
+        }
+        for s in 0..ns {
+            n_children[s + 1] += n_children[s];
+        }
+        let children_ptr = n_children.clone();
+        let mut fill = n_children;
+        let mut children = vec![0usize; children_ptr[ns]];
+        let mut roots = Vec::new();
+        for (s, p) in parent.iter().enumerate() {
+            match p {
+                Some(p) => {
+                    children[fill[*p]] = s;
+                    fill[*p] += 1;
+                }
+                None => roots.push(s),
+            }
+        }
+        // Position of an index in the front of supernode s.
+        let local = |s: usize, x: usize| -> Option<usize> {
+            let (f, l) = (begin[s], begin[s + 1]);
+            if (f..l).contains(&x) {
+                Some(x - f)
+            } else {
+                rows[rows_ptr[s]..rows_ptr[s + 1]]
+                    .binary_search(&x)
+                    .ok()
+                    .map(|p| l - f + p)
+            }
+        };
+        let mut rel = vec![0u32; rows.len()];
+        for s in 0..ns {
+            if let Some(p) = parent[s] {
+                for q in rows_ptr[s]..rows_ptr[s + 1] {
+                    let pos = local(p, rows[q]).ok_or_else(|| {
+                        SolverError::Faer(format!(
+                            "supernode {s}: row {} missing from its parent's front",
+                            rows[q]
+                        ))
+                    })?;
+                    rel[q] = pos as u32;
+                }
+            }
+        }
+        // Entries of A, bucketed by supernode.
+        let front = |s: usize| begin[s + 1] - begin[s] + rows_ptr[s + 1] - rows_ptr[s];
+        let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
+        let mut count = vec![0usize; ns + 1];
+        for j in 0..n {
+            for &i in &ri[cp[j]..cp[j + 1]] {
+                count[sn_of[perm_inv[i].min(perm_inv[j])] + 1] += 1;
+            }
+        }
+        for s in 0..ns {
+            count[s + 1] += count[s];
+        }
+        let asm_ptr = count.clone();
+        let mut fill = count;
+        let mut asm = vec![(0u32, 0u32); asm_ptr[ns]];
+        for j in 0..n {
+            for (q, &i) in ri[cp[j]..cp[j + 1]].iter().enumerate() {
+                let (pi, pj) = (perm_inv[i], perm_inv[j]);
+                let s = sn_of[pi.min(pj)];
+                let m = front(s);
+                let (li, lj) = (local(s, pi), local(s, pj));
+                let (Some(li), Some(lj)) = (li, lj) else {
+                    return Err(SolverError::Faer(format!(
+                        "entry ({i}, {j}) outside the front of supernode {s}"
+                    )));
+                };
+                asm[fill[s]] = ((cp[j] + q) as u32, (lj * m + li) as u32);
+                fill[s] += 1;
+            }
+        }
+        // Operations: per pivot column with c entries below it in L (and c right of it in U),
+        // c divisions and 2c² for the rank-one update.
+        let mut flops_of = vec![0.0f64; ns];
+        let mut factor_entries = 0usize;
+        let mut max_front = 0usize;
+        for s in 0..ns {
+            let k = begin[s + 1] - begin[s];
+            let m = front(s);
+            max_front = max_front.max(m);
+            factor_entries += k * (2 * m - k);
+            flops_of[s] = (0..k)
+                .map(|i| {
+                    let c = (m - i - 1) as f64;
+                    c + 2.0 * c * c
+                })
+                .sum();
+        }
+        let mut subtree_flops = flops_of.clone();
+        for s in 0..ns {
+            if let Some(p) = parent[s] {
+                subtree_flops[p] += subtree_flops[s];
+            }
+        }
+        if asm.len() > u32::MAX as usize || max_front.pow(2) > u32::MAX as usize {
+            return Err(SolverError::TooManyEntries { nnz: asm.len() });
+        }
+        Ok(Self {
+            n,
+            perm,
+            begin,
+            rows_ptr,
+            rows,
+            rel,
+            children_ptr,
+            children,
+            roots,
+            asm_ptr,
+            asm,
+            subtree_flops,
+            flops: flops_of.iter().sum(),
+            factor_entries,
+            max_front,
+        })
+    }
+
+    /// Number of supernodes.
+    pub fn n_supernodes(&self) -> usize {
+        self.begin.len() - 1
+    }
+
+    fn k(&self, s: usize) -> usize {
+        self.begin[s + 1] - self.begin[s]
+    }
+
+    fn r(&self, s: usize) -> usize {
+        self.rows_ptr[s + 1] - self.rows_ptr[s]
+    }
+
+    fn kids(&self, s: usize) -> &[usize] {
+        &self.children[self.children_ptr[s]..self.children_ptr[s + 1]]
+    }
+
+    /// Numeric factorisation of the matrix with `values` over the pattern analysed.
+    pub fn factorize(&self, values: &[f64], numeric: &mut SupernodalNumeric) {
+        let ns = self.n_supernodes();
+        if numeric.factors.len() != ns {
+            numeric.factors = (0..ns).map(|_| Mutex::default()).collect();
+        }
+        let factors = &numeric.factors;
+        self.roots
+            .par_iter()
+            .with_max_len(1)
+            .for_each(|&s| drop(self.factor_subtree(s, values, factors)));
+    }
+
+    /// Factorise the subtree rooted at `s`; returns its front (update matrix in rows and
+    /// columns `k..`).
+    fn factor_subtree(
+        &self,
+        s: usize,
+        values: &[f64],
+        factors: &[Mutex<SupernodeFactor>],
+    ) -> Front {
+        let kids = self.kids(s);
+        let updates: Vec<Front> = if kids.len() > 1 && self.subtree_flops[s] > PAR_SUBTREE_FLOPS {
+            kids.par_iter()
+                .with_max_len(1)
+                .map(|&c| self.factor_subtree(c, values, factors))
+                .collect()
+        } else {
+            kids.iter()
+                .map(|&c| self.factor_subtree(c, values, factors))
+                .collect()
+        };
+        let (k, r) = (self.k(s), self.r(s));
+        let m = k + r;
+        let mut data = vec![0.0f64; m * m];
+        for &(slot, pos) in &self.asm[self.asm_ptr[s]..self.asm_ptr[s + 1]] {
+            data[pos as usize] += values[slot as usize];
+        }
+        for (&c, upd) in kids.iter().zip(&updates) {
+            let (kc, mc) = (self.k(c), upd.m);
+            let rel = &self.rel[self.rows_ptr[c]..self.rows_ptr[c + 1]];
+            for (b, &pb) in rel.iter().enumerate() {
+                let src = &upd.data[(kc + b) * mc + kc..(kc + b + 1) * mc];
+                let dst = &mut data[pb as usize * m..(pb as usize + 1) * m];
+                for (&pa, &v) in rel.iter().zip(src) {
+                    dst[pa as usize] += v;
+                }
+            }
+        }
+        drop(updates);
+        let mut piv: Vec<usize> = (0..k).collect();
+        {
+            let f = MatMut::from_column_major_slice_mut(&mut data, m, m);
+            partial_lu(f, k, &mut piv);
+        }
+        let f = MatRef::from_column_major_slice(&data, m, m);
+        let mut fac = factors[s].lock().unwrap_or_else(|e| e.into_inner());
+        fac.panel.resize_with(m, k, |_, _| 0.0);
+        fac.panel.copy_from(f.subcols(0, k));
+        fac.u12.resize_with(k, r, |_, _| 0.0);
+        fac.u12.copy_from(f.submatrix(0, k, k, r));
+        fac.piv = piv;
+        drop(fac);
+        Front { m, data }
+    }
+
+    /// Solve in place for every column of `rhs` with the factors in `numeric`.
+    pub fn solve(&self, numeric: &SupernodalNumeric, mut rhs: MatMut<'_, f64>) {
+        let n = self.n;
+        let nrhs = rhs.ncols();
+        let mut x = Mat::<f64>::zeros(n, nrhs);
+        for j in 0..nrhs {
+            for (new, &old) in self.perm.iter().enumerate() {
+                x[(new, j)] = rhs[(old, j)];
+            }
+        }
+        let mut tmp = Mat::<f64>::zeros(0, 0);
+        let ns = self.n_supernodes();
+        // Forward: L y = P b.
+        for s in 0..ns {
+            let fac = factors_ref(numeric, s);
+            let (f0, k, r) = (self.begin[s], self.k(s), self.r(s));
+            tmp.resize_with(k.max(r), nrhs, |_, _| 0.0);
+            for j in 0..nrhs {
+                for (i, &p) in fac.piv.iter().enumerate() {
+                    tmp[(i, j)] = x[(f0 + p, j)];
+                }
+                for i in 0..k {
+                    x[(f0 + i, j)] = tmp[(i, j)];
+                }
+            }
+            let panel = fac.panel.as_ref();
+            tri::solve_unit_lower_triangular_in_place(
+                panel.submatrix(0, 0, k, k),
+                x.as_mut().subrows_mut(f0, k),
+                Par::Seq,
+            );
+            if r > 0 {
+                let mut t = tmp.as_mut().submatrix_mut(0, 0, r, nrhs);
+                matmul(
+                    t.rb_mut(),
+                    Accum::Replace,
+                    panel.submatrix(k, 0, r, k),
+                    x.as_ref().subrows(f0, k),
+                    1.0,
+                    Par::Seq,
+                );
+                let rows = &self.rows[self.rows_ptr[s]..self.rows_ptr[s + 1]];
+                for j in 0..nrhs {
+                    for (a, &ra) in rows.iter().enumerate() {
+                        x[(ra, j)] -= t[(a, j)];
+                    }
+                }
+            }
+        }
+        // Backward: U x = y.
+        for s in (0..ns).rev() {
+            let fac = factors_ref(numeric, s);
+            let (f0, k, r) = (self.begin[s], self.k(s), self.r(s));
+            if r > 0 {
+                tmp.resize_with(r, nrhs, |_, _| 0.0);
+                let rows = &self.rows[self.rows_ptr[s]..self.rows_ptr[s + 1]];
+                for j in 0..nrhs {
+                    for (a, &ra) in rows.iter().enumerate() {
+                        tmp[(a, j)] = x[(ra, j)];
+                    }
+                }
+                matmul(
+                    x.as_mut().subrows_mut(f0, k),
+                    Accum::Add,
+                    fac.u12.as_ref(),
+                    tmp.as_ref(),
+                    -1.0,
+                    Par::Seq,
+                );
+            }
+            tri::solve_upper_triangular_in_place(
+                fac.panel.as_ref().submatrix(0, 0, k, k),
+                x.as_mut().subrows_mut(f0, k),
+                Par::Seq,
+            );
+        }
+        for j in 0..nrhs {
+            for (new, &old) in self.perm.iter().enumerate() {
+                rhs[(old, j)] = x[(new, j)];
+            }
+        }
+    }
+}
+
+fn factors_ref(
+    numeric: &SupernodalNumeric,
+    s: usize,
+) -> std::sync::MutexGuard<'_, SupernodeFactor> {
+    numeric.factors[s].lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Reorder rows `0..p.len()` of `a` so that new row `i` is old row `p[i]`.
+fn permute_rows(mut a: MatMut<'_, f64>, p: &[usize], tmp: &mut Vec<f64>) {
+    tmp.resize(p.len(), 0.0);
+    for j in 0..a.ncols() {
+        let mut col = a.rb_mut().col_mut(j);
+        for (t, &pi) in tmp.iter_mut().zip(p) {
+            *t = col[pi];
+        }
+        for (i, t) in tmp.iter().enumerate() {
+            col[i] = *t;
+        }
+    }
+}
+
+/// `c −= a b`, cut into column blocks of [`UPDATE_BLOCK`] run as rayon tasks when large. The
+/// blocks depend on the shapes only.
+fn update(c: MatMut<'_, f64>, a: MatRef<'_, f64>, b: MatRef<'_, f64>) {
+    let flops = 2.0 * c.nrows() as f64 * c.ncols() as f64 * a.ncols() as f64;
+    if flops < PAR_UPDATE_FLOPS || c.ncols() <= UPDATE_BLOCK {
+        matmul(c, Accum::Add, a, b, -1.0, Par::Seq);
+        return;
+    }
+    let mut blocks = Vec::new();
+    let mut rest = c;
+    let mut j0 = 0;
+    while rest.ncols() > 0 {
+        let w = UPDATE_BLOCK.min(rest.ncols());
+        let (head, tail) = rest.split_at_col_mut(w);
+        blocks.push((j0, head));
+        rest = tail;
+        j0 += w;
+    }
+    blocks
+        .into_par_iter()
+        .with_max_len(1)
+        .for_each(|(j0, blk)| {
+            let w = blk.ncols();
+            matmul(blk, Accum::Add, a, b.subcols(j0, w), -1.0, Par::Seq);
+        });
+}
+
+/// Blocked right-looking LU of the leading `k` columns of the `m × m` front `f`, pivoting among
+/// its first `k` rows only; the trailing `(m − k) × (m − k)` block becomes the Schur complement.
+/// `piv` (initially `0..k`) receives the pivot order of the first `k` rows.
+fn partial_lu(mut f: MatMut<'_, f64>, k: usize, piv: &mut [usize]) {
+    let m = f.nrows();
+    let params: dense_lu::PartialPivLuParams = faer::Auto::<f64>::auto();
+    let mut fwd = vec![0usize; k];
+    let mut bwd = vec![0usize; k];
+    let mut tmp = Vec::new();
+    let mut buf = MemBuffer::new(dense_lu::lu_in_place_scratch::<usize, f64>(
+        k,
+        PANEL.min(k),
+        Par::Seq,
+        params.into(),
+    ));
+    let mut j = 0;
+    while j < k {
+        let w = PANEL.min(k - j);
+        let h = k - j;
+        // Panel LU with pivoting among the block's remaining rows j..k.
+        let (fwd, bwd) = (&mut fwd[..h], &mut bwd[..h]);
+        dense_lu::lu_in_place(
+            f.rb_mut().submatrix_mut(j, j, h, w),
+            fwd,
+            bwd,
+            Par::Seq,
+            MemStack::new(&mut buf),
+            params.into(),
+        );
+        permute_rows(f.rb_mut().submatrix_mut(j, 0, h, j), fwd, &mut tmp);
+        permute_rows(
+            f.rb_mut().submatrix_mut(j, j + w, h, m - j - w),
+            fwd,
+            &mut tmp,
+        );
+        let old: Vec<usize> = piv[j..k].to_vec();
+        for (i, &p) in fwd.iter().enumerate() {
+            piv[j + i] = old[p];
+        }
+        // Rows below the block: X U = B with the panel's upper triangle U (Uᵀ Xᵀ = Bᵀ).
+        if m > k {
+            let (block, below) = f.rb_mut().submatrix_mut(j, j, m - j, w).split_at_row_mut(h);
+            tri::solve_lower_triangular_in_place(
+                block.rb().submatrix(0, 0, w, w).transpose(),
+                below.transpose_mut(),
+                Par::Seq,
+            );
+        }
+        let (left, right) = f.rb_mut().split_at_col_mut(j + w);
+        let left = left.into_const();
+        let diag = left.submatrix(j, j, w, w);
+        // U row block: L₁₁ X = B over the trailing columns.
+        let (top, bottom) = right.split_at_row_mut(j + w);
+        let mut u_rows = top.submatrix_mut(j, 0, w, m - j - w);
+        tri::solve_unit_lower_triangular_in_place(diag, u_rows.rb_mut(), Par::Seq);
+        // Trailing update of rows j+w..m.
+        update(
+            bottom,
+            left.submatrix(j + w, j, m - j - w, w),
+            u_rows.into_const(),
+        );
+        j += w;
+    }
+}
+
+/// Nested-dissection ordering (`perm[new] = old`) of the pattern's graph.
+///
+/// DOFs whose columns have identical patterns (the five DOFs of a particle) form one
+/// supervariable. A part is cut by a level set of a breadth-first search from a
+/// pseudo-peripheral node: every edge joins equal or adjacent levels, so one level separates
+/// the levels before it from those after; the lightest level that leaves between a quarter and
+/// three quarters of the weight on each side is taken, and its nodes without a neighbour after
+/// it move to the first side. Parts are ordered first, separators last, recursively down to
+/// parts of at most [`ND_LEAF`] DOFs. Everything depends on the pattern only.
+pub fn nested_dissection(pattern: &SparsityPattern) -> Vec<usize> {
+    let n = pattern.n_dofs();
+    let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
+    // Supervariables: columns with identical row patterns.
+    let hash = |j: usize| {
+        ri[cp[j]..cp[j + 1]]
+            .iter()
+            .fold(0xcbf2_9ce4_8422_2325u64, |h, &r| {
+                (h ^ r as u64).wrapping_mul(0x0100_0000_01b3)
+            })
+    };
+    let mut cols: Vec<(usize, u64, usize)> =
+        (0..n).map(|j| (cp[j + 1] - cp[j], hash(j), j)).collect();
+    cols.sort_unstable();
+    let mut sv_of = vec![0usize; n];
+    let mut sv_cols: Vec<Vec<usize>> = Vec::new();
+    for (idx, &(len, h, j)) in cols.iter().enumerate() {
+        let same = idx > 0 && {
+            let (l0, h0, j0) = cols[idx - 1];
+            l0 == len && h0 == h && ri[cp[j0]..cp[j0 + 1]] == ri[cp[j]..cp[j + 1]]
+        };
+        if !same {
+            sv_cols.push(Vec::new());
+        }
+        let s = sv_cols.len() - 1;
+        sv_cols[s].push(j);
+        sv_of[j] = s;
+    }
+    // Number supervariables by their first column (the DOF numbering's locality).
+    let mut by_first: Vec<usize> = (0..sv_cols.len()).collect();
+    by_first.sort_unstable_by_key(|&s| sv_cols[s].iter().min().copied());
+    let mut renumber = vec![0usize; sv_cols.len()];
+    for (new, &old) in by_first.iter().enumerate() {
+        renumber[old] = new;
+    }
+    let sv_cols: Vec<Vec<usize>> = by_first
+        .iter()
+        .map(|&s| {
+            let mut c = sv_cols[s].clone();
+            c.sort_unstable();
+            c
+        })
+        .collect();
+    for s in sv_of.iter_mut() {
+        *s = renumber[*s];
+    }
+    let ns = sv_cols.len();
+    let weight: Vec<usize> = sv_cols.iter().map(Vec::len).collect();
+    let mut adj_ptr = vec![0usize];
+    let mut adj = Vec::new();
+    let mut mark = vec![usize::MAX; ns];
+    for (s, c) in sv_cols.iter().enumerate() {
+        let j = c[0];
+        mark[s] = s;
+        for &r in &ri[cp[j]..cp[j + 1]] {
+            let t = sv_of[r];
+            if mark[t] != s {
+                mark[t] = s;
+                adj.push(t);
+            }
+        }
+        adj_ptr.push(adj.len());
+    }
+    let mut nd = Dissection {
+        adj_ptr: &adj_ptr,
+        adj: &adj,
+        weight: &weight,
+        stamp: vec![0usize; ns],
+        level: vec![0usize; ns],
+        next_stamp: 0,
+        order: Vec::with_capacity(ns),
+    };
+    nd.dissect((0..ns).collect());
+    nd.order
+        .iter()
+        .flat_map(|&s| sv_cols[s].iter().copied())
+        .collect()
+}
+
+struct Dissection<'a> {
+    adj_ptr: &'a [usize],
+    adj: &'a [usize],
+    weight: &'a [usize],
+    stamp: Vec<usize>,
+    level: Vec<usize>,
+    next_stamp: usize,
+    order: Vec<usize>,
+}
+
+impl Dissection<'_> {
+    fn neighbours(&self, s: usize) -> &[usize] {
+        &self.adj[self.adj_ptr[s]..self.adj_ptr[s + 1]]
+    }
+
+    /// Breadth-first levels of the part stamped `id` reachable from `root`.
+    fn levels(&mut self, root: usize, id: usize) -> Vec<Vec<usize>> {
+        let visit = id + 1;
+        let mut levels = vec![vec![root]];
+        self.stamp[root] = visit;
+        loop {
+            let mut next = Vec::new();
+            for &s in levels.last().expect("non-empty") {
+                for k in self.adj_ptr[s]..self.adj_ptr[s + 1] {
+                    let t = self.adj[k];
+                    if self.stamp[t] == id {
+                        self.stamp[t] = visit;
+                        next.push(t);
+                    }
+                }
+            }
+            if next.is_empty() {
+                break;
+            }
+            levels.push(next);
+        }
+        // Restore the part's stamp.
+        for l in &levels {
+            for &s in l {
+                self.stamp[s] = id;
+            }
+        }
+        levels
+    }
+
+    fn dissect(&mut self, nodes: Vec<usize>) {
+        let total: usize = nodes.iter().map(|&s| self.weight[s]).sum();
+        if total <= ND_LEAF || nodes.len() < 3 {
+            let mut nodes = nodes;
+            nodes.sort_unstable();
+            self.order.extend(nodes);
+            return;
+        }
+        self.next_stamp += 2;
+        let id = self.next_stamp;
+        for &s in &nodes {
+            self.stamp[s] = id;
+        }
+        // Pseudo-peripheral root: restart from the last node of the deepest level while the
+        // depth grows (at most a few sweeps).
+        let mut root = nodes[0];
+        let mut levels = self.levels(root, id);
+        for _ in 0..4 {
+            let cand = *levels
+                .last()
+                .expect("non-empty")
+                .iter()
+                .min()
+                .expect("non-empty");
+            let l2 = self.levels(cand, id);
+            if l2.len() <= levels.len() {
+                break;
+            }
+            root = cand;
+            levels = l2;
+        }
+        let _ = root;
+        let reached: usize = levels.iter().map(Vec::len).sum();
+        if reached < nodes.len() {
+            // Disconnected: the component reached, then the rest.
+            let visit = id + 1;
+            for l in &levels {
+                for &s in l {
+                    self.stamp[s] = visit;
+                }
+            }
+            let (comp, rest): (Vec<usize>, Vec<usize>) =
+                nodes.iter().partition(|&&s| self.stamp[s] == visit);
+            self.dissect(comp);
+            self.dissect(rest);
+            return;
+        }
+        if levels.len() < 3 {
+            self.order.extend(nodes);
+            return;
+        }
+        // Lightest balanced level.
+        let w: Vec<usize> = levels
+            .iter()
+            .map(|l| l.iter().map(|&s| self.weight[s]).sum())
+            .collect();
+        let mut before = 0usize;
+        let mut best: Option<(usize, usize)> = None;
+        for k in 0..levels.len() {
+            let after = total - before - w[k];
+            if k > 0 && k + 1 < levels.len() && 4 * before >= total && 4 * after >= total {
+                if best.is_none_or(|(_, bw)| w[k] < bw) {
+                    best = Some((k, w[k]));
+                }
+            }
+            before += w[k];
+        }
+        let k = match best {
+            Some((k, _)) => k,
+            // No balanced level: the middle one by weight.
+            None => {
+                let mut acc = 0;
+                let mut k = 1;
+                for (i, &wi) in w.iter().enumerate() {
+                    acc += wi;
+                    if 2 * acc >= total {
+                        k = i.clamp(1, levels.len() - 2);
+                        break;
+                    }
+                }
+                k
+            }
+        };
+        // Second candidate: a window of consecutive numbers as wide as the longest edge of the
+        // part in its numbering (the DOF numbering of a grid of particles makes it a straight
+        // band); no edge jumps over it.
+        let mut sorted = nodes.clone();
+        sorted.sort_unstable();
+        for (p, &s) in sorted.iter().enumerate() {
+            self.level[s] = p;
+        }
+        let mut span = 0usize;
+        for &s in &sorted {
+            for &t in self.neighbours(s) {
+                if self.stamp[t] == id {
+                    span = span.max(self.level[t].abs_diff(self.level[s]));
+                }
+            }
+        }
+        let window = if span > 0 && span + 2 <= sorted.len() {
+            // Start c: the parts before and after the window (c..c+span) most balanced.
+            let mut prefix = vec![0usize; sorted.len() + 1];
+            for (p, &s) in sorted.iter().enumerate() {
+                prefix[p + 1] = prefix[p] + self.weight[s];
+            }
+            (1..sorted.len() - span)
+                .map(|c| {
+                    let (wa, wb) = (prefix[c], total - prefix[c + span]);
+                    (wa.abs_diff(wb), c, prefix[c + span] - prefix[c])
+                })
+                .min()
+                .filter(|&(_, c, _)| {
+                    4 * prefix[c] >= total && 4 * (total - prefix[c + span]) >= total
+                })
+        } else {
+            None
+        };
+        let (mut a, b, cand): (Vec<usize>, Vec<usize>, Vec<usize>) = match window {
+            Some((_, c, ww)) if ww < w[k] => {
+                for (p, &s) in sorted.iter().enumerate() {
+                    self.level[s] = if p < c {
+                        0
+                    } else if p < c + span {
+                        1
+                    } else {
+                        2
+                    };
+                }
+                (
+                    sorted[..c].to_vec(),
+                    sorted[c + span..].to_vec(),
+                    sorted[c..c + span].to_vec(),
+                )
+            }
+            _ => {
+                for (i, l) in levels.iter().enumerate() {
+                    for &s in l {
+                        self.level[s] = match i.cmp(&k) {
+                            std::cmp::Ordering::Less => 0,
+                            std::cmp::Ordering::Equal => 1,
+                            std::cmp::Ordering::Greater => 2,
+                        };
+                    }
+                }
+                (
+                    levels[..k].concat(),
+                    levels[k + 1..].concat(),
+                    levels[k].clone(),
+                )
+            }
+        };
+        // Separator nodes without a neighbour on the far side join the near side.
+        let mut sep = Vec::new();
+        for &s in &cand {
+            if self
+                .neighbours(s)
+                .iter()
+                .any(|&t| self.stamp[t] == id && self.level[t] == 2)
+            {
+                sep.push(s);
+            } else {
+                a.push(s);
+            }
+        }
+        self.dissect(a);
+        self.dissect(b);
+        self.order.extend(sep);
+    }
+}

@@ -1,0 +1,260 @@
+//! The supernodal LU (`Method::SupernodalLu`) on shell-like patterns: agreement with the
+//! unrestricted sparse LU, both fill-reducing orderings, many right-hand sides, and results that
+//! do not depend on the number of threads (in-process thread pools for the factorisation, and
+//! `shelldsa run` in subprocesses with `RAYON_NUM_THREADS` and `SHELLDSA_LU_THREADS` for a whole
+//! analysis).
+
+use serde_json::Value;
+use shelldsa::solver::*;
+use std::path::PathBuf;
+
+/// A meshfree-shell-like pattern: `nx × nx` particles with 5 DOFs, each particle's cell coupling
+/// the particles within 2 spacings (as `benches/solver.rs`), and unsymmetric values: a
+/// diagonally weighted graph Laplacian plus a skew part of relative size `skew`.
+fn shell_like(nx: usize, skew: f64) -> (SparsityPattern, Vec<f64>) {
+    let dof = 5;
+    let mut cells = Vec::new();
+    for i in 0..nx {
+        for j in 0..nx {
+            let mut dofs = Vec::new();
+            for a in i.saturating_sub(2)..(i + 3).min(nx) {
+                for b in j.saturating_sub(2)..(j + 3).min(nx) {
+                    dofs.extend((0..dof).map(|d| (a * nx + b) * dof + d));
+                }
+            }
+            cells.push(dofs);
+        }
+    }
+    let n = nx * nx * dof;
+    let p = SparsityPattern::from_cells(n, &cells).unwrap();
+    let (cp, ri) = (p.col_ptr().to_vec(), p.row_idx().to_vec());
+    let mut values = vec![0.0; p.nnz()];
+    for j in 0..n {
+        for q in cp[j]..cp[j + 1] {
+            let i = ri[q];
+            values[q] = if i == j {
+                0.0
+            } else {
+                // Symmetric coupling −1/(1 + |i − j| mod 7) plus a skew part.
+                let sym = -1.0 / (1.0 + ((i.abs_diff(j)) % 7) as f64);
+                let sk = if i < j { skew } else { -skew } * ((i + 2 * j) % 5) as f64 / 5.0;
+                sym + sk
+            };
+        }
+    }
+    // Diagonal: the row sum of the symmetric part's magnitudes plus one (diagonally dominant
+    // symmetric part: nonsingular, moderately conditioned).
+    for j in 0..n {
+        let mut s = 1.0;
+        for q in cp[j]..cp[j + 1] {
+            if ri[q] != j {
+                s += values[q].abs();
+            }
+        }
+        values[p.diag_slot(j)] = s;
+    }
+    (p, values)
+}
+
+fn rhs(n: usize, k: usize) -> Vec<f64> {
+    (0..n * k)
+        .map(|i| ((i as f64 + 1.0) * 0.754_877_666).fract() - 0.5)
+        .collect()
+}
+
+fn relative_residual(p: &SparsityPattern, values: &[f64], x: &[f64], b: &[f64]) -> f64 {
+    let mut ax = vec![0.0; b.len()];
+    p.mat_vec(values, x, &mut ax).unwrap();
+    let r: f64 = ax.iter().zip(b).map(|(a, b)| (a - b).powi(2)).sum();
+    (r / b.iter().map(|v| v * v).sum::<f64>()).sqrt()
+}
+
+#[test]
+fn supernodal_lu_matches_the_sparse_lu_for_both_orderings() {
+    let (p, values) = shell_like(14, 0.2);
+    let n = p.n_dofs();
+    let b = rhs(n, 1);
+    let mut reference = LinearSolver::new(&p, Method::Lu, SolverOptions::default()).unwrap();
+    reference.factorize(&values).unwrap();
+    let mut x_ref = b.clone();
+    reference.solve_in_place(&mut x_ref).unwrap();
+    for ordering in [FillOrdering::NestedDissection, FillOrdering::Amd] {
+        let mut s = LinearSolver::supernodal(&p, ordering, SolverOptions::default()).unwrap();
+        assert_eq!(s.method(), Method::SupernodalLu);
+        s.factorize(&values).unwrap();
+        let mut x = b.clone();
+        s.solve_in_place(&mut x).unwrap();
+        // Both are backward stable: residuals at a small multiple of ε, and solutions equal to
+        // cond(A)·ε (the diagonally dominant symmetric part keeps cond(A) below ~1e2).
+        let res = relative_residual(&p, &values, &x, &b);
+        assert!(res < 1e-14, "{ordering:?}: relative residual {res:.2e}");
+        let diff = x
+            .iter()
+            .zip(&x_ref)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max)
+            / x_ref.iter().map(|v| v.abs()).fold(0.0, f64::max);
+        assert!(
+            diff < 1e-12,
+            "{ordering:?}: differs from the sparse LU by {diff:.2e}"
+        );
+        assert!(s.structure().is_some_and(|t| t.contains("supernodes")));
+    }
+}
+
+#[test]
+fn supernodal_lu_solves_many_right_hand_sides_as_single_ones() {
+    let (p, values) = shell_like(10, 0.3);
+    let n = p.n_dofs();
+    let k = 5;
+    let b = rhs(n, k);
+    let mut s = LinearSolver::new(&p, Method::SupernodalLu, SolverOptions::default()).unwrap();
+    s.factorize(&values).unwrap();
+    let mut multi = b.clone();
+    s.solve_columns_in_place(&mut multi, k).unwrap();
+    for c in 0..k {
+        let mut single = b[c * n..(c + 1) * n].to_vec();
+        s.solve_in_place(&mut single).unwrap();
+        // The same factors; the dense kernels may block k columns differently from one, so
+        // the two agree to round-off (cond(A) < 1e2 here: 1e-13 relative with margin).
+        let scale = single.iter().map(|v| v.abs()).fold(0.0, f64::max);
+        let diff = multi[c * n..(c + 1) * n]
+            .iter()
+            .zip(&single)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            diff <= 1e-13 * scale,
+            "column {c}: {diff:.2e} of {scale:.2e}"
+        );
+    }
+}
+
+#[test]
+fn supernodal_factors_do_not_depend_on_the_number_of_threads() {
+    // 20 × 20 particles, 2000 unknowns: fronts large enough for parallel subtrees and cut
+    // trailing updates.
+    let (p, values) = shell_like(20, 0.2);
+    let n = p.n_dofs();
+    let k = 3;
+    let solve_with = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let mut s =
+                LinearSolver::new(&p, Method::SupernodalLu, SolverOptions::default()).unwrap();
+            s.factorize(&values).unwrap();
+            let mut x = rhs(n, k);
+            s.solve_columns_in_place(&mut x, k).unwrap();
+            x
+        })
+    };
+    let x1 = solve_with(1);
+    assert!(relative_residual(&p, &values, &x1[..n], &rhs(n, 1)) < 1e-14);
+    for threads in [2, 3, 4] {
+        let x = solve_with(threads);
+        let differ = x
+            .iter()
+            .zip(&x1)
+            .filter(|(a, b)| a.to_bits() != b.to_bits())
+            .count();
+        assert_eq!(
+            differ,
+            0,
+            "{threads} threads: {differ} of {} values differ",
+            x.len()
+        );
+    }
+}
+
+/// Numbers of a results.json, by path, without the timings.
+fn numbers(v: &Value, path: &str, out: &mut Vec<(String, u64)>) {
+    match v {
+        Value::Object(m) => {
+            for (k, x) in m {
+                if !(k.contains("tim") || k.contains("wall")) {
+                    numbers(x, &format!("{path}/{k}"), out);
+                }
+            }
+        }
+        Value::Array(a) => {
+            for (i, x) in a.iter().enumerate() {
+                numbers(x, &format!("{path}/{i}"), out);
+            }
+        }
+        Value::Number(x) => out.push((path.to_string(), x.as_f64().unwrap().to_bits())),
+        _ => {}
+    }
+}
+
+#[test]
+fn a_whole_run_is_bit_identical_for_any_number_of_threads() {
+    // The elastoplastic hemisphere reduced to 15 × 15 particles (1126 unknowns, above the
+    // dense limit: the supernodal LU) and P = 20, yielding from P ≈ 18 with the CI case's σ0.
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let text =
+        std::fs::read_to_string(root.join("verification/hemisphere-plastic-dsa/ci.toml")).unwrap();
+    let text: String = text
+        .lines()
+        .map(|l| {
+            if l.starts_with("grid =") {
+                "grid = [15, 15]".to_string()
+            } else if l.starts_with("final_load =") {
+                "final_load = 20.0".to_string()
+            } else {
+                l.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    let dir = std::env::temp_dir().join(format!("shelldsa-threads-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let case = dir.join("case.toml");
+    std::fs::write(&case, text).unwrap();
+    let run = |name: &str, env: &[(&str, &str)]| {
+        let out = dir.join(name);
+        let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_shelldsa"));
+        cmd.arg("run").arg(&case).arg("--out").arg(&out);
+        cmd.env_remove("RAYON_NUM_THREADS")
+            .env_remove("SHELLDSA_LU_THREADS");
+        for (k, v) in env {
+            cmd.env(k, v);
+        }
+        let status = cmd.output().unwrap();
+        assert!(status.status.success(), "{name}: {status:?}");
+        let json: Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap())
+                .unwrap();
+        assert!(json["linear_solver"]
+            .as_str()
+            .is_some_and(|s| s.starts_with("SupernodalLu")));
+        let mut v = Vec::new();
+        numbers(&json, "", &mut v);
+        v
+    };
+    let two = run("t2", &[("RAYON_NUM_THREADS", "2")]);
+    assert!(two.len() > 100, "{} numbers", two.len());
+    for (name, env) in [
+        ("t1", vec![("RAYON_NUM_THREADS", "1")]),
+        ("t3", vec![("RAYON_NUM_THREADS", "3")]),
+        ("lu1", vec![("SHELLDSA_LU_THREADS", "1")]),
+    ] {
+        let other = run(name, &env);
+        assert_eq!(other.len(), two.len(), "{name}");
+        let differ: Vec<&String> = two
+            .iter()
+            .zip(&other)
+            .filter(|(a, b)| a != b)
+            .map(|(a, _)| &a.0)
+            .collect();
+        assert!(
+            differ.is_empty(),
+            "{name}: {} numbers differ, first {:?}",
+            differ.len(),
+            differ.first()
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
