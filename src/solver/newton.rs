@@ -32,7 +32,12 @@
 //!   (`‖r_j‖ ≥ stagnation_ratio · ‖r_{j−1}‖` for `j = k, k−1`, which quadratic convergence above
 //!   the floor never shows twice in a row) and `‖r_k‖ ≤ √residual_rtol · r_ref`. Without the
 //!   energy test a slowly falling residual with no root below it (a load beyond a limit point,
-//!   `tests/solver.rs`) would pass.
+//!   `tests/solver.rs`) would pass; or
+//! - **residual at round-off** ([`Acceptance::ResidualRoundoff`]): from `k ≥ 1`, the residual
+//!   tolerance holds and `‖r_k‖ ≤ 10³ ε r_ref`, whatever the energy product. Tested after the
+//!   tolerances and before the energy's divergence test: a step whose residual fell from
+//!   1.1e-3 to 6.3e-18 while `|Δu_kᵀ r_k|` grew (a nearly singular tangent) is converged, not
+//!   diverged.
 //!
 //! The essential conditions must be met (`g = 0`) for any acceptance. The converged increment
 //! `Δu_k` is *not* applied: the committed state is exactly the
@@ -54,8 +59,9 @@
 //! (`tests/solver.rs`); one tangent assembly and one factorisation per step are saved. The
 //! converged step then reports [`FactorisedAt::PreviousIterate`].
 //!
-//! A step fails on a non-finite or diverging residual (`‖r_k‖` or the energy growing by more
-//! than `divergence_factor` over iteration 0), too many iterations, a singular tangent, or a
+//! A step fails on a non-finite or diverging residual (`‖r_k‖` growing by more than
+//! `divergence_factor` over `r_ref`, or the energy over iteration 0 while the residual
+//! tolerance is not met), too many iterations, a singular tangent, or a
 //! recoverable [`ProblemError`]; it is then restored ([`NonlinearProblem::restore`]) and retried
 //! with `cut_factor · Δλ` (with the secant predictor scaled down accordingly). After a step that
 //! converged in at most `easy_iterations`, `Δλ` grows by `grow_factor` up to `max_step`. A step
@@ -381,7 +387,17 @@ pub enum Acceptance {
     /// Energy test met and the residual stopped falling for two iterations, within
     /// `√residual_rtol · r_ref`.
     Stagnation,
+    /// Residual tolerance met with `‖r_k‖ ≤ 10³ ε r_ref` (at the round-off of its reference,
+    /// `k ≥ 1`), the energy test not: the energy product of a round-off residual is not a
+    /// measure of convergence (near a singular tangent it is large).
+    ResidualRoundoff,
 }
+
+/// `‖r_k‖ ≤ ROUNDOFF_BAND · ε · r_ref` is a residual at the round-off of its reference
+/// ([`Acceptance::ResidualRoundoff`]): 10³ is the largest ratio of the stalled residual to
+/// `ε` times the summed terms measured on the shells with large rotations (module
+/// documentation, round-off floor).
+const ROUNDOFF_BAND: f64 = 1e3;
 
 /// Record of one step attempt.
 #[derive(Debug, Clone, PartialEq)]
@@ -845,13 +861,22 @@ impl NewtonSolver {
                 } else {
                     e
                 };
-            } else if e0 > 0.0 && e > o.divergence_factor * e0 {
-                return Err(FailureReason::Diverged { ratio: e / e0 });
             }
             let energy_ok = e <= (o.energy_rtol * e0).max(o.energy_atol);
             if res_ok && energy_ok {
                 let at = accepted_at(factorised_here, residual_first, solver, &w.values, rec)?;
                 return Ok((bc, Acceptance::Tolerance, at));
+            }
+            // The residual tests come before the energy's divergence test: a residual at the
+            // round-off of its reference is converged whatever `Δu_kᵀ r_k` says (near a
+            // singular tangent the update of a round-off residual is large, and the energy
+            // product with it).
+            if k >= 1 && res_ok && rnorm <= ROUNDOFF_BAND * f64::EPSILON * r_ref {
+                let at = accepted_at(factorised_here, residual_first, solver, &w.values, rec)?;
+                return Ok((bc, Acceptance::ResidualRoundoff, at));
+            }
+            if k >= 1 && !res_ok && e0 > 0.0 && e > o.divergence_factor * e0 {
+                return Err(FailureReason::Diverged { ratio: e / e0 });
             }
             // Two consecutive iterations without progress: round-off, not a slow approach.
             let stalled = |a: f64, b: f64| a >= o.stagnation_ratio * b;
@@ -929,9 +954,13 @@ impl NewtonSolver {
         rec.timing.solve_s += clock.elapsed().as_secs_f64();
         solved.map_err(FailureReason::LinearSolver)?;
         let e = free_dot(bc, &w.du, &w.rhs).abs();
-        // As in the full path: the residual tolerance holds, and either the energy test or the
-        // round-off floor (where the energy product is round-off too).
-        if e > (o.energy_rtol * e0).max(o.energy_atol) && rnorm > floor {
+        // As in the full path: the residual tolerance holds, and either the energy test, the
+        // round-off floor (where the energy product is round-off too) or the residual at the
+        // round-off of its reference.
+        if e > (o.energy_rtol * e0).max(o.energy_atol)
+            && rnorm > floor
+            && rnorm > ROUNDOFF_BAND * f64::EPSILON * r_ref
+        {
             return Ok(None);
         }
         rec.residual_norms.push(rnorm);
