@@ -97,12 +97,13 @@ fn arc_length_passes_the_limit_point_under_the_point_load_and_reports_it() {
     let pattern = built.problem.pattern().clone();
     let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
     let n = built.problem.n_dofs();
-    // Stop after 24 attempts, beyond the limit point (measured: about 16 steps reach it).
+    // Stop after 36 attempts, beyond the limit point (measured: 24 steps reach λ = 0.7393,
+    // 0.0008 below it).
     let arc = ArcLength {
         end: 1.0,
         initial_length: 1.0,
         max_length: 2.0,
-        max_attempts: 24,
+        max_attempts: 36,
         ..ArcLength::default()
     };
     let mut seen: Vec<CriticalPoint> = Vec::new();
@@ -118,7 +119,7 @@ fn arc_length_passes_the_limit_point_under_the_point_load_and_reports_it() {
         Ok(r) => r.report,
         Err(f) => {
             assert!(
-                matches!(f.reason, FailureReason::TooManyAttempts(24)),
+                matches!(f.reason, FailureReason::TooManyAttempts(36)),
                 "{}",
                 f.reason
             );

@@ -279,21 +279,31 @@ fn follower_edge_force_and_arc_length_with_dsa_are_refused_up_front() {
     let e = shell_build::build(&case).unwrap_err().to_string();
     assert!(e.contains("load[0].follower"), "{e}");
     // A degree key names degrees.
-    let bad = r#"
-thickness = 1.0
-[problem]
-kind = "shell"
-[surface]
-type = "cylinder-sector"
-origin = [0.0, 0.0, 0.0]
-axis = [1.0, 0.0, 0.0]
-reference = [0.0, 0.0, 1.0]
-radius = 10.0
-angle_deg = [0.0, 400.0]
-length = [0.0, 1.0]
-"#;
-    let e = parse_shell_case(bad, Path::new("c.toml"))
+    let start = PLATE.find("[surface]").unwrap();
+    let end = PLATE.find("[particles]").unwrap();
+    let bad = format!(
+        "{}[surface]\ntype = \"cylinder-sector\"\norigin = [0.0, 0.0, 0.0]\n\
+         axis = [1.0, 0.0, 0.0]\nreference = [0.0, 0.0, 1.0]\nradius = 10.0\n\
+         angle_deg = [0.0, 400.0]\nlength = [0.0, 1.0]\n{}",
+        &PLATE[..start],
+        &PLATE[end..]
+    )
+    .replace("LOAD", "");
+    let e = parse_shell_case(&bad, Path::new("c.toml"))
         .unwrap_err()
         .to_string();
     assert!(e.contains("angle_deg") && e.contains("400"), "{e}");
+    // shelldsa dsa refuses an arc-length case before any analysis.
+    let text = PLATE.replace("LOAD", "").replace(
+        "[steps]\n",
+        "[steps]\ncontrol = \"arc-length\"\narc_length = 0.1\n",
+    );
+    let case = parse_shell_case(&text, Path::new("arc.toml")).unwrap();
+    let e = shelldsa::io::dsa_case::check_load_control(&case)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("steps.control") && e.contains("arc-length"),
+        "{e}"
+    );
 }
