@@ -492,7 +492,7 @@ pub fn check_tool_names(path: &Path, tools: &[RigidTool], spec: &DsaSpec) -> Res
 /// constant (`scaling = "constant"`) is a [`DualLoad::Constant`]. The contact with the case's
 /// tools is added by the run with the built problem's [`crate::contact::ShellContact`]
 /// ([`dual_contact`]). Rejects, before any analysis, what the reference cannot carry yet: edge
-/// moments (they act through the director).
+/// moments (they act through the director) and edge forces.
 pub fn dual_loads(case: &ShellCase) -> Result<Vec<DualLoad>, CaseError> {
     let path = case.path.as_path();
     let mut out = Vec::with_capacity(case.loads.len());
@@ -522,6 +522,16 @@ pub fn dual_loads(case: &ShellCase) -> Result<Vec<DualLoad>, CaseError> {
                      by it yet)",
                 ))
             }
+            Load::EdgeForce { .. } => {
+                return Err(invalid(
+                    path,
+                    format!("{key}.kind"),
+                    "\"edge-force\"",
+                    "\"point-force\", \"pressure\" or \"gravity\" for the sensitivity \
+                     methods (the design derivative of an edge force, through the edge's \
+                     length element, is not carried by them yet)",
+                ))
+            }
         };
         out.push(if constant {
             DualLoad::Constant(Box::new(load))
@@ -530,6 +540,23 @@ pub fn dual_loads(case: &ShellCase) -> Result<Vec<DualLoad>, CaseError> {
         });
     }
     Ok(out)
+}
+
+/// Rejects, before any analysis, a case on an arc-length path (`[steps] control =
+/// "arc-length"`): the sensitivity methods differentiate at fixed load levels (and their
+/// finite-difference re-runs compare equal levels), which an arc-length path does not have
+/// (`docs/sensitivity.md`).
+pub fn check_load_control(case: &ShellCase) -> Result<(), CaseError> {
+    if case.steps.arc_length.is_some() {
+        return Err(invalid(
+            &case.path,
+            "steps.control",
+            "\"arc-length\"",
+            "\"load\" for shelldsa dsa (design derivatives are computed at fixed load \
+             factors; on an arc-length path the load factor is an unknown of every step)",
+        ));
+    }
+    Ok(())
 }
 
 /// The contact load of the reference for the built problem's contact `contact` (the case's

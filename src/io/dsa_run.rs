@@ -12,7 +12,7 @@
 //! `|ψ(τ + h) − ψ(τ) − h ψ'|` of every step size reuses the `τ + h` re-run.
 
 use super::dsa_case::{
-    check_tool_names, dual_contact, dual_loads, DesignEntry, DsaMethod, DsaSpec,
+    check_load_control, check_tool_names, dual_contact, dual_loads, DesignEntry, DsaMethod, DsaSpec,
 };
 use super::shell_build;
 use super::shell_case::ShellCase;
@@ -286,6 +286,7 @@ pub fn validate(case: &ShellCase, methods: &[DsaMethod]) -> Result<DsaSpec, DsaE
         .clone()
         .ok_or_else(|| DsaError::NoDesign(case.path.display().to_string()))?;
     spec.methods = methods.to_vec();
+    check_load_control(case)?;
     check_tool_names(&case.path, &case.tools, &spec)?;
     if methods.contains(&DsaMethod::Dual) || methods.contains(&DsaMethod::Continuum) {
         // Shape variables with contact are carried by both methods: the slave sites take the

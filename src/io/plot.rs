@@ -161,7 +161,8 @@ pub fn figure(path: &Path, width: u32, height: u32, panels: &[Panel]) -> Result<
                 .configure_mesh()
                 .x_desc(p.x_label)
                 .y_desc(p.y_label)
-                .y_label_formatter(&|v| format!("{v:.3e}"))
+                .x_label_formatter(&|v| plain_tick(*v))
+                .y_label_formatter(&|v| plain_tick(*v))
                 .draw()
                 .map_err(|x| e(&x))?;
             draw_series(&mut chart, &p.series, false, xs, ys).map_err(|x| e(&x))?;
@@ -169,6 +170,30 @@ pub fn figure(path: &Path, width: u32, height: u32, panels: &[Panel]) -> Result<
     }
     root.present().map_err(|x| e(&x))?;
     Ok(())
+}
+
+/// A tick label in plain notation (`0.25`, `1500`, `-3.2`), with exponents only outside
+/// `[1e-3, 1e6)`: six significant digits at most, trailing zeros removed.
+fn plain_tick(v: f64) -> String {
+    let a = v.abs();
+    if v == 0.0 || !v.is_finite() {
+        return if v == 0.0 { "0".into() } else { v.to_string() };
+    }
+    if !(1e-3..1e6).contains(&a) {
+        return format!("{v:.2e}");
+    }
+    let decimals = (5 - a.log10().floor() as i32).clamp(0, 8) as usize;
+    let s = format!("{v:.decimals$}");
+    let s = if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    };
+    if s == "-0" {
+        "0".into()
+    } else {
+        s
+    }
 }
 
 fn draw_series<'a, DB: DrawingBackend + 'a, CT>(

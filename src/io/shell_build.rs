@@ -14,7 +14,8 @@
 //!   using it fails before any computation, naming what is missing.
 
 use super::shell_case::{
-    Boundary, CellLayout, Component, Load, LoadScalingSpec, Location, PredictorKind, ShellCase,
+    Boundary, CellLayout, Component, Load, LoadScalingSpec, Location, MonitorDirection,
+    PredictorKind, ShellCase,
 };
 use super::shell_output::{OutputError, OutputGrid, Separation, ShellOutput, StepSummary};
 use crate::contact::ShellContact;
@@ -27,7 +28,7 @@ use crate::shell::constraints::{
 };
 use crate::shell::integration::{apply_vci, boundary_rule};
 use crate::shell::load::LoadScaling;
-use crate::shell::load::{ExternalLoad, Gravity, Moment, PointForce, Pressure};
+use crate::shell::load::{EdgeForce, ExternalLoad, Gravity, Moment, PointForce, Pressure};
 use crate::shell::model::{Discretisation, ShellModel};
 use crate::shell::point::DOFS_PER_PARTICLE;
 use crate::shell::problem::ShellProblem;
@@ -35,9 +36,9 @@ use crate::shell::symmetry::SymmetryPlane;
 use crate::shell::ShellError;
 use crate::solver::observe::{Observed, StepObserver};
 use crate::solver::{
-    ConvergedStep, LinearSolver, LinearUpdates, LoadStepping, Method, NewtonOptions, NewtonSolver,
-    NonlinearProblem, Parallelism, Predictor, ProblemError, SolverError, SolverOptions,
-    SparsityPattern, StepRecord,
+    ArcLength, ConvergedStep, LinearSolver, LinearUpdates, LoadStepping, Method, NewtonOptions,
+    NewtonSolver, NonlinearProblem, Parallelism, Predictor, ProblemError, SolverError,
+    SolverOptions, SparsityPattern, StepRecord,
 };
 use nalgebra::Vector3;
 use serde_json::json;
@@ -180,8 +181,68 @@ pub fn newton_settings(case: &ShellCase) -> (NewtonOptions, LoadStepping) {
 /// Features of `case` the current [`ShellProblem`] and driver cannot express, each as the
 /// error [`connect`] or [`driver`] would return. Empty when the case can run (everything the
 /// case format describes runs in this build; the seam stays for future features).
-pub fn unsupported(_case: &ShellCase) -> Vec<BuildError> {
-    Vec::new()
+pub fn unsupported(case: &ShellCase) -> Vec<BuildError> {
+    case.loads
+        .iter()
+        .enumerate()
+        .filter(|(_, l)| matches!(l, Load::EdgeForce { follower: true, .. }))
+        .map(|(k, _)| BuildError::Unsupported {
+            key: format!("load[{k}].follower"),
+            what: "a follower edge force".into(),
+            needs: "its load stiffness; use follower = false (a dead force in global axes)".into(),
+        })
+        .collect()
+}
+
+/// The label of the constraint row of the `prescribed` entry `boundary[k]` (to find its
+/// reaction among the problem's rows).
+pub fn prescribed_label(k: usize, component: Component) -> String {
+    format!("boundary[{k}]: prescribed {}", component.name())
+}
+
+/// The reaction of every `prescribed` entry of the case, in case order: `(boundary[k], the
+/// force (or moment) the support exerts on the shell along the prescribed component)`, from
+/// the committed multipliers. An entry whose row was dropped as redundant has none.
+pub fn prescribed_reactions(case: &ShellCase, problem: &ShellProblem) -> Vec<(String, f64)> {
+    let reactions = problem.reactions();
+    case.boundary
+        .iter()
+        .enumerate()
+        .filter_map(|(k, b)| match b {
+            Boundary::Prescribed { component, .. } => {
+                let label = prescribed_label(k, *component);
+                problem
+                    .constraints()
+                    .iter()
+                    .position(|c| c.label == label)
+                    .map(|i| (format!("boundary[{k}]"), reactions[i]))
+            }
+            _ => None,
+        })
+        .collect()
+}
+
+/// The unit direction of each monitor with a `direction` (the initial surface normal at the
+/// monitor's point for `"normal"`), in monitor order.
+pub fn monitor_directions(case: &ShellCase) -> Result<Vec<Option<[f64; 3]>>, BuildError> {
+    case.monitors
+        .iter()
+        .enumerate()
+        .map(
+            |(k, m)| match case.monitor_directions.get(k).copied().flatten() {
+                None => Ok(None),
+                Some(MonitorDirection::Fixed(d)) => Ok(Some(d)),
+                Some(MonitorDirection::Normal) => {
+                    let n = case
+                        .surface
+                        .eval(m.at[0], m.at[1])
+                        .normal()
+                        .map_err(|e| model_err(&format!("monitor[{k}].direction"), e))?;
+                    Ok(Some([n[0], n[1], n[2]]))
+                }
+            },
+        )
+        .collect()
 }
 
 /// The global axis of a displacement component, or the rotation index of a rotation one.
@@ -346,12 +407,13 @@ pub fn connect_with_contact(
                 at,
                 component,
                 value,
-            } => match component_target(*component) {
-                Ok(d) => constraints
-                    .push(LinearConstraint::displacement(&model, *at, d, *value).map_err(err)?),
-                Err(r) => constraints
-                    .push(LinearConstraint::rotation(&model, *at, r, *value).map_err(err)?),
-            },
+            } => {
+                let row = match component_target(*component) {
+                    Ok(d) => LinearConstraint::displacement(&model, *at, d, *value),
+                    Err(r) => LinearConstraint::rotation(&model, *at, r, *value),
+                };
+                constraints.push(row.map_err(err)?.labelled(prescribed_label(k, *component)));
+            }
         }
     }
 
@@ -376,6 +438,19 @@ pub fn connect_with_contact(
                 };
                 Box::new(
                     Moment::on_edge(&model, &case.surface, *edge, *per_length, along - 1, 4)
+                        .map_err(err)?,
+                )
+            }
+            // The same edge rule as the moment's (a follower one is refused by `unsupported`).
+            Load::EdgeForce {
+                edge, per_length, ..
+            } => {
+                let along = match edge {
+                    Edge::UMin | Edge::UMax => case.particles.counts[1],
+                    Edge::VMin | Edge::VMax => case.particles.counts[0],
+                };
+                Box::new(
+                    EdgeForce::on_edge(&model, &case.surface, *edge, *per_length, along - 1, 4)
                         .map_err(err)?,
                 )
             }
@@ -572,6 +647,12 @@ pub fn run(
         );
         output.set_info("penalty", json!(c.penalty()));
     }
+    output.set_monitor_directions(monitor_directions(case)?);
+    let controlled = case.boundary.iter().find_map(|b| match b {
+        Boundary::Prescribed { value, .. } => Some(if *value < 0.0 { -1.0 } else { 1.0 }),
+        _ => None,
+    });
+    output.set_displacement_control(controlled);
     output.initial(problem_model(&built.problem), &case.surface)?;
 
     let pattern = problem_pattern(&built.problem).clone();
@@ -613,22 +694,62 @@ pub fn run(
                 ),
                 None => None,
             };
+            output.set_step_reactions(prescribed_reactions(case, p));
             let s = output.converged_with_contact(model, surface, rec, report.as_ref())?;
             progress(s);
             Ok::<(), OutputError>(())
         },
     };
     let mut obs = Observed::new(&mut built.problem, hook);
-    let result =
-        built
-            .newton
-            .run_with_progress(&mut obs, &pattern, &mut solver, &vec![0.0; n], |_| {});
+    let mut critical = Vec::new();
+    let result = match case.steps.arc_length {
+        None => {
+            built
+                .newton
+                .run_with_progress(&mut obs, &pattern, &mut solver, &vec![0.0; n], |_| {})
+        }
+        Some([initial, min, max]) => {
+            let s = &case.steps;
+            let arc = ArcLength {
+                start: 0.0,
+                end: s.final_load,
+                initial_length: initial,
+                min_length: min,
+                max_length: max,
+                cut_factor: s.cut_factor,
+                grow_factor: s.grow_factor,
+                easy_iterations: s.easy_iterations,
+                ..ArcLength::default()
+            };
+            built
+                .newton
+                .run_arc_length(&mut obs, &pattern, &mut solver, &vec![0.0; n], &arc, |cp| {
+                    println!("{cp}");
+                    critical.push(cp.clone());
+                })
+                .map(|r| r.report)
+        }
+    };
     let hook_error = obs.observer.error.take();
     drop(obs);
     let (status, attempts) = match result {
         Ok(report) => (RunStatus::Complete, report.attempts),
         Err(f) => (RunStatus::Failed(f.to_string()), f.report.attempts.clone()),
     };
+    if case.steps.arc_length.is_some() {
+        let cps: Vec<serde_json::Value> = critical
+            .iter()
+            .map(|c| {
+                json!({
+                    "kind": format!("limit point (load {})", c.kind),
+                    "between_steps": [c.before_step + 1, c.after_step + 1],
+                    "load_factors": c.loads,
+                    "stiffness_parameter": c.stiffness,
+                })
+            })
+            .collect();
+        output.set_info("critical_points", json!(cps));
+    }
     let model = problem_model(&built.problem);
     if let Some(e) = hook_error {
         // Writing a step's results failed and stopped the run: that is the error to report.

@@ -142,6 +142,8 @@ struct LoadFile {
     #[serde(default, deserialize_with = "exact_opt")]
     per_length: Option<[f64; 3]>,
     #[serde(default)]
+    follower: Option<bool>,
+    #[serde(default)]
     scaling: Option<String>,
 }
 
@@ -220,6 +222,14 @@ struct StepsFile {
     stops: Vec<f64>,
     #[serde(default = "default_max_attempts")]
     max_attempts: i64,
+    #[serde(default)]
+    control: Option<String>,
+    #[serde(default)]
+    arc_length: Option<f64>,
+    #[serde(default)]
+    min_arc_length: Option<f64>,
+    #[serde(default)]
+    max_arc_length: Option<f64>,
 }
 
 fn default_max_attempts() -> i64 {
@@ -258,6 +268,16 @@ struct MonitorFile {
     name: String,
     #[serde(deserialize_with = "exact")]
     at: [f64; 2],
+    #[serde(default)]
+    direction: Option<DirectionFile>,
+}
+
+/// `[[monitor]] direction`: a vector or the word `"normal"`.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum DirectionFile {
+    Vector([f64; 3]),
+    Word(String),
 }
 
 #[derive(Debug, Deserialize)]
@@ -453,6 +473,18 @@ pub enum Load {
         /// Moment per unit length (global axes).
         per_length: [f64; 3],
     },
+    /// Force per unit initial length along a parametric edge: dead (fixed global vector) or
+    /// follower (components in the current edge frame: along the edge's outward normal in the
+    /// surface, along the current mid-surface normal, along the edge tangent).
+    EdgeForce {
+        /// The edge.
+        edge: Edge,
+        /// Force per unit length: global `[fx, fy, fz]` (dead) or `[f_out, f_normal, f_tangent]`
+        /// (follower).
+        per_length: [f64; 3],
+        /// Whether it follows the deforming edge.
+        follower: bool,
+    },
 }
 
 /// Driver choice of the first iterate of a step.
@@ -504,6 +536,19 @@ pub struct StepsSpec {
     /// Step attempts (converged or cut) before the run stops (default
     /// [`DEFAULT_MAX_ATTEMPTS`]).
     pub max_attempts: usize,
+    /// Arc-length continuation (`control = "arc-length"`): `[initial, min, max]` arc length;
+    /// `None` for load stepping (`control = "load"`, the default).
+    pub arc_length: Option<[f64; 3]>,
+}
+
+/// A monitor's scalar: the displacement along a fixed unit vector, or along the initial unit
+/// normal of the mid-surface at the monitor's point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum MonitorDirection {
+    /// A fixed unit vector (global axes).
+    Fixed([f64; 3]),
+    /// The initial mid-surface normal `x̄,u × x̄,v / |x̄,u × x̄,v|` at the point.
+    Normal,
 }
 
 /// A named point whose displacement is recorded at every converged step.
@@ -621,6 +666,9 @@ pub struct ShellCase {
     pub steps: StepsSpec,
     /// Monitors, in file order.
     pub monitors: Vec<Monitor>,
+    /// Per monitor (same order): the direction whose displacement component is also recorded
+    /// (`[[monitor]] direction`), if any.
+    pub monitor_directions: Vec<Option<MonitorDirection>>,
     /// Output settings.
     pub output: OutputSpec,
     /// `[[design]]` and `[dsa]` (`None` without `[[design]]` tables; [`super::dsa_case`]).
@@ -1026,6 +1074,7 @@ impl Checker<'_> {
             }
         };
         let limits = self.limits(f.limits.as_ref())?;
+        self.check_degrees("surface", &f.surface)?;
         let surface = f.surface.build().map_err(|source| CaseError::Surface {
             path: self.path.into(),
             source,
@@ -1211,9 +1260,34 @@ impl Checker<'_> {
             .map(|(k, t)| self.tool(k, t, &f.tool[..k]))
             .collect::<Result<Vec<_>, _>>()?;
         let contact = self.contact(f.contact.as_ref(), &tools)?;
+        if steps.arc_length.is_some() && !tools.is_empty() {
+            return Err(self.err(
+                "steps.control",
+                "\"arc-length\"",
+                "\"load\" with [[tool]] entries (the tools move with the load factor, which \
+                 arc-length continuation makes an unknown)",
+            ));
+        }
 
         let mut monitors: Vec<Monitor> = Vec::with_capacity(f.monitor.len());
+        let mut monitor_directions = Vec::with_capacity(f.monitor.len());
         for (k, m) in f.monitor.iter().enumerate() {
+            let dk = format!("monitor[{k}].direction");
+            monitor_directions.push(match &m.direction {
+                None => None,
+                Some(DirectionFile::Word(w)) if w == "normal" => Some(MonitorDirection::Normal),
+                Some(DirectionFile::Word(w)) => {
+                    return Err(self.err(dk, format!("{w:?}"), "\"normal\" or a vector [x, y, z]"))
+                }
+                Some(DirectionFile::Vector(v)) => {
+                    self.finite_vec(&dk, v)?;
+                    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                    if !(n > 0.0 && n.is_finite()) {
+                        return Err(self.err(dk, fmt_arr(v), "a non-zero vector [x, y, z]"));
+                    }
+                    Some(MonitorDirection::Fixed([v[0] / n, v[1] / n, v[2] / n]))
+                }
+            });
             let key = format!("monitor[{k}]");
             if !super::is_name(&m.name) {
                 return Err(self.err(
@@ -1277,6 +1351,7 @@ impl Checker<'_> {
             contact,
             steps,
             monitors,
+            monitor_directions,
             output,
         })
     }
@@ -1407,6 +1482,7 @@ impl Checker<'_> {
                 ))
             }
         };
+        self.check_degrees(&format!("{key}.surface"), &t.surface)?;
         let surface = t.surface.build().map_err(|e| {
             self.err(
                 format!("{key}.surface"),
@@ -1896,6 +1972,7 @@ impl Checker<'_> {
             ("per_area", l.per_area.is_some()),
             ("edge", l.edge.is_some()),
             ("per_length", l.per_length.is_some()),
+            ("follower", l.follower.is_some()),
         ];
         let kind = l.kind.as_str();
         let vec3 = |this: &Self,
@@ -1958,11 +2035,76 @@ impl Checker<'_> {
                     )?,
                 })
             }
+            "edge-force" => {
+                self.only(&key, kind, &present, &["edge", "per_length", "follower"])?;
+                let ek = format!("{key}.edge");
+                let s = l.edge.as_deref().ok_or_else(|| {
+                    self.err(
+                        ek.clone(),
+                        "(missing)",
+                        format!("one of {EDGE_NAMES:?} (required for kind = \"edge-force\")"),
+                    )
+                })?;
+                let follower = l.follower.unwrap_or(false);
+                Ok(Load::EdgeForce {
+                    edge: self.edge(&ek, s)?,
+                    per_length: vec3(
+                        self,
+                        "per_length",
+                        l.per_length,
+                        if follower {
+                            "a force per unit length [f_out, f_normal, f_tangent]"
+                        } else {
+                            "a force per unit length [fx, fy, fz]"
+                        },
+                    )?,
+                    follower,
+                })
+            }
             other => Err(self.err(
                 format!("{key}.kind"),
                 format!("{other:?}"),
-                "one of [\"point-force\", \"pressure\", \"gravity\", \"moment\"]",
+                "one of [\"point-force\", \"pressure\", \"gravity\", \"moment\", \"edge-force\"]",
             )),
+        }
+    }
+
+    /// The angle ranges of a surface in the degrees they are written in (`*_deg` keys):
+    /// finite, ascending, a span of at most 360°, latitudes within [−90°, 90°].
+    fn check_degrees(&self, key: &str, spec: &SurfaceSpec) -> Result<(), CaseError> {
+        let range = |name: &str, a: &[f64; 2], lat: bool| -> Result<(), CaseError> {
+            let k = format!("{key}.{name}");
+            self.finite_vec(&k, a)?;
+            if a[0] >= a[1] {
+                return Err(self.err(k, fmt_arr(a), "an ascending range [start, end] in degrees"));
+            }
+            if lat && !(a[0] >= -90.0 && a[1] <= 90.0) {
+                return Err(self.err(k, fmt_arr(a), "latitudes in degrees within [-90, 90]"));
+            }
+            if a[1] - a[0] > 360.0 {
+                return Err(self.err(
+                    k,
+                    fmt_arr(a),
+                    format!(
+                        "a span of at most 360 degrees (this one spans {} degrees)",
+                        a[1] - a[0]
+                    ),
+                ));
+            }
+            Ok(())
+        };
+        match spec {
+            SurfaceSpec::AnnulusSector { angle_deg, .. }
+            | SurfaceSpec::CylinderSector { angle_deg, .. } => range("angle_deg", angle_deg, false),
+            SurfaceSpec::SphereZone {
+                latitude_deg,
+                longitude_deg,
+                ..
+            } => {
+                range("latitude_deg", latitude_deg, true)?;
+                range("longitude_deg", longitude_deg, false)
+            }
+            _ => Ok(()),
         }
     }
 
@@ -2036,6 +2178,67 @@ impl Checker<'_> {
                 ))
             }
         };
+        let arc_length = match s.control.as_deref() {
+            None | Some("load") => {
+                for (k, given) in [
+                    ("arc_length", s.arc_length.is_some()),
+                    ("min_arc_length", s.min_arc_length.is_some()),
+                    ("max_arc_length", s.max_arc_length.is_some()),
+                ] {
+                    if given {
+                        return Err(self.err(
+                            format!("steps.{k}"),
+                            "(given)",
+                            "no arc length with load stepping (set control = \"arc-length\")",
+                        ));
+                    }
+                }
+                None
+            }
+            Some("arc-length") => {
+                let initial = self.positive(
+                    "steps.arc_length",
+                    s.arc_length.ok_or_else(|| {
+                        self.err(
+                            "steps.arc_length",
+                            "(missing)",
+                            "the first arc length (> 0; required with control = \"arc-length\")",
+                        )
+                    })?,
+                )?;
+                let min = self.positive(
+                    "steps.min_arc_length",
+                    s.min_arc_length.unwrap_or(1e-4 * initial),
+                )?;
+                let max =
+                    self.positive("steps.max_arc_length", s.max_arc_length.unwrap_or(initial))?;
+                if !(min <= initial && initial <= max) {
+                    return Err(self.err(
+                        "steps.arc_length",
+                        initial.to_string(),
+                        format!(
+                            "an arc length within [steps.min_arc_length, steps.max_arc_length] \
+                             = [{min}, {max}]"
+                        ),
+                    ));
+                }
+                if !s.stops.is_empty() {
+                    return Err(self.err(
+                        "steps.stops",
+                        fmt_arr(&s.stops),
+                        "no stops with control = \"arc-length\" (the load factor is an unknown)",
+                    ));
+                }
+                Some([initial, min, max])
+            }
+            Some(other) => {
+                return Err(self.err(
+                    "steps.control",
+                    format!("{other:?}"),
+                    "\"load\" or \"arc-length\"",
+                ))
+            }
+        };
         let mut prev = 0.0;
         for (k, &v) in s.stops.iter().enumerate() {
             if !(v.is_finite() && v > prev && v <= final_load) {
@@ -2067,6 +2270,7 @@ impl Checker<'_> {
             krylov_updates,
             stops: s.stops.clone(),
             max_attempts,
+            arc_length,
         })
     }
 }

@@ -500,6 +500,10 @@ pub fn shell_vtu_with_contact(
     Ok(w)
 }
 
+fn dot3(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
 /// Displacement `ū(ξ)` of the committed state at each monitor.
 pub fn monitor_displacements(
     model: &ShellModel,
@@ -541,6 +545,9 @@ pub struct StepSummary {
     pub contact: Option<StepContact>,
     /// Set on the step at which the `[contact] release` tool separated from the sheet.
     pub separation: Option<Separation>,
+    /// Reactions of the `prescribed` entries (displacement control): `(boundary[k], the force
+    /// or moment the support exerts on the shell along the prescribed component)`.
+    pub reactions: Vec<(String, f64)>,
 }
 
 /// The tools at one converged step.
@@ -588,6 +595,14 @@ pub struct ShellOutput {
     start: Instant,
     info: serde_json::Map<String, Value>,
     contact: Option<ContactTracking>,
+    /// Per monitor: the unit direction of its `along` value, if any.
+    directions: Vec<Option<[f64; 3]>>,
+    /// Displacement control: the load–displacement plot shows the reaction of the first
+    /// `prescribed` entry times this sign (that of its prescribed value: the load along the
+    /// prescribed motion).
+    displacement_control: Option<f64>,
+    /// Reactions of the step being recorded (set before [`Self::converged_with_contact`]).
+    pending_reactions: Vec<(String, f64)>,
 }
 
 /// When `results.json` and the PVD are rewritten whole while the run goes on: after every
@@ -689,7 +704,28 @@ impl ShellOutput {
             start,
             info: serde_json::Map::new(),
             contact: None,
+            directions: Vec::new(),
+            displacement_control: None,
+            pending_reactions: Vec::new(),
         })
+    }
+
+    /// Per monitor (case order), the unit direction whose displacement component is recorded as
+    /// `"along"` in results.json and plotted instead of the three components.
+    pub fn set_monitor_directions(&mut self, directions: Vec<Option<[f64; 3]>>) {
+        self.directions = directions;
+    }
+
+    /// Displacement control, with the sign of the first `prescribed` entry's value: the
+    /// load–displacement plot then shows that entry's reaction times the sign (the load along
+    /// the prescribed motion) on its load axis.
+    pub fn set_displacement_control(&mut self, sign: Option<f64>) {
+        self.displacement_control = sign;
+    }
+
+    /// The reactions of the `prescribed` entries at the step recorded next.
+    pub fn set_step_reactions(&mut self, reactions: Vec<(String, f64)>) {
+        self.pending_reactions = reactions;
     }
 
     /// Record contact with the named tools (in case order): per-step tool positions, forces
@@ -852,6 +888,7 @@ impl ShellOutput {
             vtu,
             contact,
             separation,
+            reactions: std::mem::take(&mut self.pending_reactions),
         });
         let summary = self.steps.last().expect("just pushed");
         let line = serde_json::to_string(&self.step_json(summary))?;
@@ -1021,8 +1058,13 @@ impl ShellOutput {
 
     fn monitors_json(&self, values: &[[f64; 3]]) -> Value {
         let mut m = serde_json::Map::new();
-        for (mon, v) in self.monitors.iter().zip(values) {
-            m.insert(mon.name.clone(), json!({ "displacement": v }));
+        for (k, (mon, v)) in self.monitors.iter().zip(values).enumerate() {
+            let mut e = json!({ "displacement": v });
+            if let (Some(Some(d)), Value::Object(o)) = (self.directions.get(k), &mut e) {
+                o.insert("along".into(), json!(dot3(v, d)));
+                o.insert("direction".into(), json!(d));
+            }
+            m.insert(mon.name.clone(), e);
         }
         Value::Object(m)
     }
@@ -1041,6 +1083,14 @@ impl ShellOutput {
             "monitors": self.monitors_json(&s.monitors),
             "vtu": s.vtu,
         });
+        if let (false, Value::Object(o)) = (s.reactions.is_empty(), &mut v) {
+            let r: serde_json::Map<String, Value> = s
+                .reactions
+                .iter()
+                .map(|(k, f)| (k.clone(), json!(f)))
+                .collect();
+            o.insert("reactions".into(), Value::Object(r));
+        }
         if let (Some(c), Value::Object(o)) = (&s.contact, &mut v) {
             let mut m = serde_json::Map::new();
             for t in &c.tools {
@@ -1252,40 +1302,76 @@ impl ShellOutput {
         Err(io_err(&path)(e))
     }
 
-    /// Load factor against each monitor's displacement components, one panel per monitor,
-    /// starting from the unloaded state.
+    /// One panel per monitor, from the unloaded state, a marker per converged step: the load
+    /// (under displacement control, the reaction of the first `prescribed` entry; otherwise the
+    /// load factor) against the monitor's displacement along its `direction`, or against its
+    /// three components.
     fn plot(&self, path: &Path) -> Result<(), OutputError> {
         use super::plot::{figure, Panel, Scale, Series};
+        let sign = self
+            .displacement_control
+            .filter(|_| self.steps.first().is_some_and(|s| !s.reactions.is_empty()));
+        let load = |s: &StepSummary| match sign {
+            Some(g) => g * s.reactions[0].1,
+            None => s.load_factor,
+        };
+        let y_label = match sign {
+            Some(_) => format!(
+                "load at {} (reaction along the prescribed motion)",
+                self.steps[0].reactions[0].0
+            ),
+            None => "load factor".to_string(),
+        };
         let titles: Vec<String> = self
             .monitors
             .iter()
-            .map(|m| {
-                format!(
-                    "{}: monitor {} at (u, v) = ({}, {})",
-                    self.title, m.name, m.at[0], m.at[1]
-                )
+            .map(|m| format!("monitor {} at (u, v) = ({}, {})", m.name, m.at[0], m.at[1]))
+            .collect();
+        let labels: Vec<String> = self
+            .directions
+            .iter()
+            .map(|d| match d {
+                Some(d) => format!("u · ({:.3}, {:.3}, {:.3})", d[0], d[1], d[2]),
+                None => String::new(),
             })
             .collect();
         let panels: Vec<Panel> = (0..self.monitors.len())
-            .map(|k| Panel {
-                title: &titles[k],
-                x_label: "displacement",
-                y_label: "load factor",
-                y_scale: Scale::Linear,
-                series: ["ux", "uy", "uz"]
-                    .iter()
-                    .enumerate()
-                    .map(|(c, label)| Series {
-                        label,
+            .map(|k| {
+                let direction = self.directions.get(k).copied().flatten();
+                let series = match direction {
+                    Some(d) => vec![Series {
+                        label: &labels[k],
                         points: std::iter::once((0.0, 0.0))
-                            .chain(self.steps.iter().map(|s| (s.monitors[k][c], s.load_factor)))
+                            .chain(
+                                self.steps
+                                    .iter()
+                                    .map(|s| (dot3(&s.monitors[k], &d), load(s))),
+                            )
                             .collect(),
-                        markers: false,
-                    })
-                    .collect(),
+                        markers: true,
+                    }],
+                    None => ["ux", "uy", "uz"]
+                        .iter()
+                        .enumerate()
+                        .map(|(c, label)| Series {
+                            label,
+                            points: std::iter::once((0.0, 0.0))
+                                .chain(self.steps.iter().map(|s| (s.monitors[k][c], load(s))))
+                                .collect(),
+                            markers: true,
+                        })
+                        .collect(),
+                };
+                Panel {
+                    title: &titles[k],
+                    x_label: "displacement",
+                    y_label: &y_label,
+                    y_scale: Scale::Linear,
+                    series,
+                }
             })
             .collect();
-        let height = 360 * panels.len() as u32;
+        let height = 420 * panels.len() as u32;
         figure(path, 900, height, &panels).map_err(OutputError::Plot)
     }
 }

@@ -13,7 +13,9 @@
 //! - [`Pressure`]: a follower pressure normal to the current mid-surface,
 //!   `f_I = ∫ p Ψ_I (x,1 × x,2) dξ`;
 //! - [`Moment`]: a line moment per unit initial length on a parametric edge, acting through the
-//!   rotation of the interpolated director, `δW = ∫ m · (d × δd)/|d|² ds`.
+//!   rotation of the interpolated director, `δW = ∫ m · (d × δd)/|d|² ds`;
+//! - [`EdgeForce`]: a dead force per unit initial length on a parametric edge,
+//!   `f_I = ∫ Ψ_I p ds⁰`.
 //!
 //! Every load goes from global to point-local degrees of freedom through the model's one seam
 //! ([`ShellModel::gather_local`], [`ShellModel::scatter_local`],
@@ -647,6 +649,137 @@ impl ExternalLoad for Pressure {
     }
 }
 
+/// The rule of a line load on `edge` of the parameter domain of `surface`: `intervals` equal
+/// intervals of the edge's parameter line with `points` Gauss–Legendre points each, the
+/// weights times the initial arc-length element `|x̄⁰,t|`, the initial normals and the RK shape
+/// functions (`what` names the load in errors).
+fn edge_rule(
+    model: &ShellModel,
+    surface: &Surface<f64>,
+    edge: Edge,
+    intervals: usize,
+    points: usize,
+    what: &str,
+) -> Result<Vec<EdgePoint>, ShellError> {
+    if intervals == 0 {
+        return Err(ShellError::InvalidInput(format!(
+            "{what} edge rule: intervals = 0, expected at least 1"
+        )));
+    }
+    let rule = gauss_legendre(points)
+        .map_err(|e| ShellError::InvalidInput(format!("{what} edge rule: {e}")))?;
+    let dom = surface.domain();
+    // Fixed coordinate index and value, and the running coordinate's range.
+    let (fixed, value, run) = match edge {
+        Edge::UMin => (0, dom[0][0], dom[1]),
+        Edge::UMax => (0, dom[0][1], dom[1]),
+        Edge::VMin => (1, dom[1][0], dom[0]),
+        Edge::VMax => (1, dom[1][1], dom[0]),
+    };
+    let mut sv = ShapeValues::new();
+    let mut pts = Vec::with_capacity(intervals * points);
+    for i in 0..intervals {
+        let a = run[0] + (run[1] - run[0]) * i as f64 / intervals as f64;
+        let b = run[0] + (run[1] - run[0]) * (i + 1) as f64 / intervals as f64;
+        let (xs, ws) = rule.mapped(a, b);
+        for (&t, &w) in xs.iter().zip(&ws) {
+            let mut uv = [0.0; 2];
+            uv[fixed] = value;
+            uv[1 - fixed] = t;
+            let sd = surface.eval(uv[0], uv[1]);
+            let n0 = sd
+                .normal()
+                .map_err(|e| ShellError::InvalidInput(format!("{what} edge point {uv:?}: {e}")))?;
+            let tangent = if fixed == 0 { sd.xv } else { sd.xu };
+            model
+                .shape_functions
+                .evaluate(uv, &mut sv)
+                .map_err(|e| ShellError::InvalidInput(format!("{what} edge point {uv:?}: {e}")))?;
+            pts.push(EdgePoint {
+                uv,
+                weight: w * tangent.norm(),
+                n0,
+                shape: sv.iter().map(|(j, psi, _)| (j, psi)).collect(),
+            });
+        }
+    }
+    Ok(pts)
+}
+
+/// A dead force `p` per unit initial length on a parametric edge (global axes):
+/// `f_I = ∫_edge Ψ_I p ds⁰ = Σ_g Ψ_I(ξ_g) p |x̄⁰,t(ξ_g)| w_g`, with the Gauss rule of
+/// [`edge_rule`] on the edge's parameter line (translations only; `docs/loads.md`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct EdgeForce {
+    force: [f64; 3],
+    n_dofs: usize,
+    points: Vec<EdgePoint>,
+}
+
+impl EdgeForce {
+    /// The force `force` per unit initial length on `edge` of `surface` (the surface `model`
+    /// was built on), integrated with `intervals` intervals of `points` Gauss points.
+    pub fn on_edge(
+        model: &ShellModel,
+        surface: &Surface<f64>,
+        edge: Edge,
+        force: [f64; 3],
+        intervals: usize,
+        points: usize,
+    ) -> Result<Self, ShellError> {
+        check_finite("edge force per unit length", &force)?;
+        Ok(EdgeForce {
+            force,
+            n_dofs: model.n_dofs(),
+            points: edge_rule(model, surface, edge, intervals, points, "edge force")?,
+        })
+    }
+
+    /// The force per unit length.
+    pub fn force(&self) -> [f64; 3] {
+        self.force
+    }
+
+    /// Total edge length in the initial configuration (the sum of the rule's weights).
+    pub fn edge_length(&self) -> f64 {
+        self.points.iter().map(|p| p.weight).sum()
+    }
+}
+
+impl ExternalLoad for EdgeForce {
+    fn add_force(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        factor: f64,
+        f: &mut [f64],
+    ) -> Result<(), ShellError> {
+        if model.n_dofs() != self.n_dofs {
+            return Err(ShellError::InvalidInput(format!(
+                "edge force built for a model with {} DOFs, used with one of {}",
+                self.n_dofs,
+                model.n_dofs()
+            )));
+        }
+        check_sizes(model, q.len(), Some(f.len()))?;
+        for ep in &self.points {
+            let s = ep.weight * factor;
+            for &(j, psi) in &ep.shape {
+                let c = psi * s;
+                let local = [
+                    c * self.force[0],
+                    c * self.force[1],
+                    c * self.force[2],
+                    0.0,
+                    0.0,
+                ];
+                model.scatter_particle(j, &local, f);
+            }
+        }
+        Ok(())
+    }
+}
+
 /// One point of an edge rule, with its shape functions.
 #[derive(Clone, Debug, PartialEq)]
 struct EdgePoint {
@@ -698,51 +831,10 @@ impl Moment {
         points: usize,
     ) -> Result<Self, ShellError> {
         check_finite("moment per unit length", &moment)?;
-        if intervals == 0 {
-            return Err(ShellError::InvalidInput(
-                "moment edge rule: intervals = 0, expected at least 1".into(),
-            ));
-        }
-        let rule = gauss_legendre(points)
-            .map_err(|e| ShellError::InvalidInput(format!("moment edge rule: {e}")))?;
-        let dom = surface.domain();
-        // Fixed coordinate index and value, and the running coordinate's range.
-        let (fixed, value, run) = match edge {
-            Edge::UMin => (0, dom[0][0], dom[1]),
-            Edge::UMax => (0, dom[0][1], dom[1]),
-            Edge::VMin => (1, dom[1][0], dom[0]),
-            Edge::VMax => (1, dom[1][1], dom[0]),
-        };
-        let mut sv = ShapeValues::new();
-        let mut pts = Vec::with_capacity(intervals * points);
-        for i in 0..intervals {
-            let a = run[0] + (run[1] - run[0]) * i as f64 / intervals as f64;
-            let b = run[0] + (run[1] - run[0]) * (i + 1) as f64 / intervals as f64;
-            let (xs, ws) = rule.mapped(a, b);
-            for (&t, &w) in xs.iter().zip(&ws) {
-                let mut uv = [0.0; 2];
-                uv[fixed] = value;
-                uv[1 - fixed] = t;
-                let sd = surface.eval(uv[0], uv[1]);
-                let n0 = sd.normal().map_err(|e| {
-                    ShellError::InvalidInput(format!("moment edge point {uv:?}: {e}"))
-                })?;
-                let tangent = if fixed == 0 { sd.xv } else { sd.xu };
-                model.shape_functions.evaluate(uv, &mut sv).map_err(|e| {
-                    ShellError::InvalidInput(format!("moment edge point {uv:?}: {e}"))
-                })?;
-                pts.push(EdgePoint {
-                    uv,
-                    weight: w * tangent.norm(),
-                    n0,
-                    shape: sv.iter().map(|(j, psi, _)| (j, psi)).collect(),
-                });
-            }
-        }
         Ok(Moment {
             moment,
             n_dofs: model.n_dofs(),
-            points: pts,
+            points: edge_rule(model, surface, edge, intervals, points, "moment")?,
         })
     }
 

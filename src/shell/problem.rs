@@ -591,6 +591,50 @@ impl NonlinearProblem for ShellProblem {
     fn essential(&self, _load: f64) -> Vec<(usize, f64)> {
         self.fixed.iter().map(|&d| (d, 0.0)).collect()
     }
+    /// `∂r/∂λ`: `−f_ext(q)` of the proportional loads (linear in λ, followers included),
+    /// `−k_c g_c` on the constraint rows, and the central difference in λ (step
+    /// `1e-6 max(1, |λ|)`) of the prescribed loads' `−f(q; λ)` (zero for constant loads).
+    fn load_derivative(
+        &mut self,
+        u: &[f64],
+        load: f64,
+        out: &mut [f64],
+    ) -> Result<bool, ProblemError> {
+        let n_q = self.n_q;
+        let q: Vec<f64> = u[..n_q]
+            .iter()
+            .zip(&self.committed)
+            .map(|(a, b)| a - b)
+            .collect();
+        out.fill(0.0);
+        let h = 1e-6 * load.abs().max(1.0);
+        for l in &self.loads {
+            match l.scaling() {
+                LoadScaling::Proportional => l
+                    .add_force(&self.model, &q, -1.0, &mut out[..n_q])
+                    .map_err(load_error)?,
+                LoadScaling::Prescribed => {
+                    let mut minus = vec![0.0; n_q];
+                    let mut plus = vec![0.0; n_q];
+                    l.add_force(&self.model, &q, load - h, &mut minus)
+                        .map_err(load_error)?;
+                    l.add_force(&self.model, &q, load + h, &mut plus)
+                        .map_err(load_error)?;
+                    for ((o, m), p) in out[..n_q].iter_mut().zip(&minus).zip(&plus) {
+                        *o += (m - p) / (2.0 * h);
+                    }
+                }
+            }
+        }
+        for (c, (row, &k)) in self.constraints.iter().zip(&self.scales).enumerate() {
+            out[n_q + c] = -k * row.value;
+        }
+        Ok(true)
+    }
+    /// The arc length measures the generalised DOFs (not the multipliers).
+    fn path_dofs(&self) -> usize {
+        self.n_q
+    }
     fn force_norm(&self, load: f64) -> f64 {
         // The prescribed loads' force (contact) at the last evaluation: at the driver's first
         // evaluation of a step, the predicted state.

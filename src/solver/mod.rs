@@ -31,9 +31,9 @@ pub use assembly::{
 pub use dirichlet::EssentialBc;
 pub use linear::{LinearSolver, Method, Parallelism, SolverOptions};
 pub use newton::{
-    Acceptance, ConvergedStep, ConvergedTangent, FactorisedAt, FailureReason, LinearUpdates,
-    LoadStepping, NewtonFailure, NewtonOptions, NewtonReport, NewtonSolver, NonlinearProblem,
-    Predictor, ProblemError, StepRecord, StepTiming,
+    Acceptance, ArcLength, ArcLengthReport, ConvergedStep, ConvergedTangent, CriticalPoint,
+    FactorisedAt, FailureReason, LinearUpdates, LoadStepping, NewtonFailure, NewtonOptions,
+    NewtonReport, NewtonSolver, NonlinearProblem, Predictor, ProblemError, StepRecord, StepTiming,
 };
 pub use pattern::SparsityPattern;
 pub use supernodal::FillOrdering;

@@ -32,7 +32,12 @@
 //!   (`‖r_j‖ ≥ stagnation_ratio · ‖r_{j−1}‖` for `j = k, k−1`, which quadratic convergence above
 //!   the floor never shows twice in a row) and `‖r_k‖ ≤ √residual_rtol · r_ref`. Without the
 //!   energy test a slowly falling residual with no root below it (a load beyond a limit point,
-//!   `tests/solver.rs`) would pass.
+//!   `tests/solver.rs`) would pass; or
+//! - **residual at round-off** ([`Acceptance::ResidualRoundoff`]): from `k ≥ 1`, the residual
+//!   tolerance holds and `‖r_k‖ ≤ 10³ ε r_ref`, whatever the energy product. Tested after the
+//!   tolerances and before the energy's divergence test: a step whose residual fell from
+//!   1.1e-3 to 6.3e-18 while `|Δu_kᵀ r_k|` grew (a nearly singular tangent) is converged, not
+//!   diverged.
 //!
 //! The essential conditions must be met (`g = 0`) for any acceptance. The converged increment
 //! `Δu_k` is *not* applied: the committed state is exactly the
@@ -54,8 +59,9 @@
 //! (`tests/solver.rs`); one tangent assembly and one factorisation per step are saved. The
 //! converged step then reports [`FactorisedAt::PreviousIterate`].
 //!
-//! A step fails on a non-finite or diverging residual (`‖r_k‖` or the energy growing by more
-//! than `divergence_factor` over iteration 0), too many iterations, a singular tangent, or a
+//! A step fails on a non-finite or diverging residual (`‖r_k‖` growing by more than
+//! `divergence_factor` over `r_ref`, or the energy over iteration 0 while the residual
+//! tolerance is not met), too many iterations, a singular tangent, or a
 //! recoverable [`ProblemError`]; it is then restored ([`NonlinearProblem::restore`]) and retried
 //! with `cut_factor · Δλ` (with the secant predictor scaled down accordingly). After a step that
 //! converged in at most `easy_iterations`, `Δλ` grows by `grow_factor` up to `max_step`. A step
@@ -135,6 +141,22 @@ pub trait NonlinearProblem {
     /// documentation, "residual-first acceptance").
     fn converged_tangent(&self) -> ConvergedTangent {
         ConvergedTangent::Required
+    }
+    /// `∂r/∂λ` at `(u, load)` into `out` (for [`NonlinearProblem::residual`]'s sign convention,
+    /// `−f_ext` of proportional loads); `Ok(false)` when the problem cannot give it (default),
+    /// which arc-length continuation ([`NewtonSolver::run_arc_length`]) then refuses.
+    fn load_derivative(
+        &mut self,
+        _u: &[f64],
+        _load: f64,
+        _out: &mut [f64],
+    ) -> Result<bool, ProblemError> {
+        Ok(false)
+    }
+    /// The number of leading unknowns measured by the arc length (default all; a problem
+    /// with Lagrange multipliers after its displacements gives the displacements' count).
+    fn path_dofs(&self) -> usize {
+        self.n_dofs()
     }
     /// Accept the converged state `u` at `load` (trial history becomes committed).
     fn commit(&mut self, u: &[f64], load: f64);
@@ -381,7 +403,17 @@ pub enum Acceptance {
     /// Energy test met and the residual stopped falling for two iterations, within
     /// `√residual_rtol · r_ref`.
     Stagnation,
+    /// Residual tolerance met with `‖r_k‖ ≤ 10³ ε r_ref` (at the round-off of its reference,
+    /// `k ≥ 1`), the energy test not: the energy product of a round-off residual is not a
+    /// measure of convergence (near a singular tangent it is large).
+    ResidualRoundoff,
 }
+
+/// `‖r_k‖ ≤ ROUNDOFF_BAND · ε · r_ref` is a residual at the round-off of its reference
+/// ([`Acceptance::ResidualRoundoff`]): 10³ is the largest ratio of the stalled residual to
+/// `ε` times the summed terms measured on the shells with large rotations (module
+/// documentation, round-off floor).
+const ROUNDOFF_BAND: f64 = 1e3;
 
 /// Record of one step attempt.
 #[derive(Debug, Clone, PartialEq)]
@@ -845,13 +877,22 @@ impl NewtonSolver {
                 } else {
                     e
                 };
-            } else if e0 > 0.0 && e > o.divergence_factor * e0 {
-                return Err(FailureReason::Diverged { ratio: e / e0 });
             }
             let energy_ok = e <= (o.energy_rtol * e0).max(o.energy_atol);
             if res_ok && energy_ok {
                 let at = accepted_at(factorised_here, residual_first, solver, &w.values, rec)?;
                 return Ok((bc, Acceptance::Tolerance, at));
+            }
+            // The residual tests come before the energy's divergence test: a residual at the
+            // round-off of its reference is converged whatever `Δu_kᵀ r_k` says (near a
+            // singular tangent the update of a round-off residual is large, and the energy
+            // product with it).
+            if k >= 1 && res_ok && rnorm <= ROUNDOFF_BAND * f64::EPSILON * r_ref {
+                let at = accepted_at(factorised_here, residual_first, solver, &w.values, rec)?;
+                return Ok((bc, Acceptance::ResidualRoundoff, at));
+            }
+            if k >= 1 && !res_ok && e0 > 0.0 && e > o.divergence_factor * e0 {
+                return Err(FailureReason::Diverged { ratio: e / e0 });
             }
             // Two consecutive iterations without progress: round-off, not a slow approach.
             let stalled = |a: f64, b: f64| a >= o.stagnation_ratio * b;
@@ -929,9 +970,13 @@ impl NewtonSolver {
         rec.timing.solve_s += clock.elapsed().as_secs_f64();
         solved.map_err(FailureReason::LinearSolver)?;
         let e = free_dot(bc, &w.du, &w.rhs).abs();
-        // As in the full path: the residual tolerance holds, and either the energy test or the
-        // round-off floor (where the energy product is round-off too).
-        if e > (o.energy_rtol * e0).max(o.energy_atol) && rnorm > floor {
+        // As in the full path: the residual tolerance holds, and either the energy test, the
+        // round-off floor (where the energy product is round-off too) or the residual at the
+        // round-off of its reference.
+        if e > (o.energy_rtol * e0).max(o.energy_atol)
+            && rnorm > floor
+            && rnorm > ROUNDOFF_BAND * f64::EPSILON * r_ref
+        {
             return Ok(None);
         }
         rec.residual_norms.push(rnorm);
@@ -1030,4 +1075,455 @@ fn free_dot(bc: &EssentialBc, a: &[f64], b: &[f64]) -> f64 {
         .filter(|(i, _)| !bc.is_constrained(*i))
         .map(|(_, (x, y))| x * y)
         .sum()
+}
+
+// ---------------------------------------------------------------------------------------------
+// Arc-length continuation.
+
+/// Settings of [`NewtonSolver::run_arc_length`]: Crisfield's cylindrical arc length, the load
+/// factor an unknown of every step.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArcLength {
+    /// Initial load factor (the problem's committed state must be at this level).
+    pub start: f64,
+    /// The run ends at the first converged step with `λ ≥ end` (`end > start`).
+    pub end: f64,
+    /// Arc length `Δs` of the first step (in the norm of the path unknowns,
+    /// [`NonlinearProblem::path_dofs`]).
+    pub initial_length: f64,
+    /// Smallest arc length tried before giving up.
+    pub min_length: f64,
+    /// Largest arc length.
+    pub max_length: f64,
+    /// Factor applied to `Δs` after a failed step, in (0, 1).
+    pub cut_factor: f64,
+    /// Factor applied to `Δs` after an easy step, ≥ 1.
+    pub grow_factor: f64,
+    /// A step converging in at most this many iterations is easy.
+    pub easy_iterations: usize,
+    /// Largest number of step attempts (converged or not).
+    pub max_attempts: usize,
+}
+
+impl Default for ArcLength {
+    fn default() -> Self {
+        ArcLength {
+            start: 0.0,
+            end: 1.0,
+            initial_length: 0.1,
+            min_length: 1e-6,
+            max_length: 1.0,
+            cut_factor: 0.5,
+            grow_factor: 1.5,
+            easy_iterations: 4,
+            max_attempts: 10_000,
+        }
+    }
+}
+
+/// A limit point of the load factor found on an arc-length path: the current stiffness
+/// parameter `q·K⁻¹q` (`q = −∂r/∂λ`) changed sign between two converged steps, i.e. the
+/// tangent's determinant passed through zero with the load factor at an extremum.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CriticalPoint {
+    /// The converged step (0-based) before the sign change.
+    pub before_step: usize,
+    /// The converged step after it.
+    pub after_step: usize,
+    /// Load factors of the two steps.
+    pub loads: [f64; 2],
+    /// `q·K⁻¹q` at the two steps.
+    pub stiffness: [f64; 2],
+    /// `"maximum"` (the load factor rose then fell) or `"minimum"`.
+    pub kind: &'static str,
+}
+
+impl fmt::Display for CriticalPoint {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "limit point (load {}) between converged steps {} and {}: λ = {:.6e} → {:.6e}, \
+             q·K⁻¹q = {:.3e} → {:.3e}",
+            self.kind,
+            self.before_step + 1,
+            self.after_step + 1,
+            self.loads[0],
+            self.loads[1],
+            self.stiffness[0],
+            self.stiffness[1]
+        )
+    }
+}
+
+/// The result of an arc-length run: the steps and the limit points passed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArcLengthReport {
+    /// Converged state and every attempt (`load` of a record is its converged λ).
+    pub report: NewtonReport,
+    /// Limit points detected, in path order.
+    pub critical: Vec<CriticalPoint>,
+}
+
+impl NewtonSolver {
+    /// Arc-length continuation from the committed state `u0` at `arc.start` until `λ ≥ arc.end`
+    /// (Crisfield's cylindrical method, docs/loads.md "Path following"). Every step solves the
+    /// bordered system with the one factorised tangent and two right-hand sides,
+    /// `K δu_r = −r` and `K δu_q = q` with `q = −∂r/∂λ` ([`NonlinearProblem::load_derivative`]),
+    /// and picks `δλ` from `‖Δu + δu_r + δλ δu_q‖² = Δs²` over the path unknowns (the root
+    /// closer to the previous increment). The predictor's direction follows the previous
+    /// increment (`sign Δλ = sign(Δu_prevᵀ δu_q)`), which passes limit points. Convergence is
+    /// the residual tolerance `‖r‖ ≤ max(rtol · force_norm(λ), atol)` or the round-off floor of
+    /// [`NewtonSolver::run`]. A step failing (no real root, divergence, too many iterations, a
+    /// recoverable problem error, a singular tangent) is retried with `cut_factor · Δs`; easy
+    /// steps grow `Δs` by `grow_factor` up to `max_length`. At every converged step the tangent
+    /// there is factorised and `q·K⁻¹q` evaluated: a sign change is reported as a
+    /// [`CriticalPoint`] through `on_critical` (the essential conditions must not depend on λ).
+    pub fn run_arc_length<P: NonlinearProblem, F: FnMut(&CriticalPoint)>(
+        &self,
+        problem: &mut P,
+        pattern: &SparsityPattern,
+        solver: &mut LinearSolver,
+        u0: &[f64],
+        arc: &ArcLength,
+        mut on_critical: F,
+    ) -> Result<ArcLengthReport, Box<NewtonFailure>> {
+        let n = problem.n_dofs();
+        let np = problem.path_dofs().min(n);
+        let mut out = ArcLengthReport {
+            report: NewtonReport {
+                u: u0.to_vec(),
+                load: arc.start,
+                attempts: Vec::new(),
+            },
+            critical: Vec::new(),
+        };
+        let fail = |out: ArcLengthReport, load: f64, step: f64, reason, res: Vec<f64>| {
+            Box::new(NewtonFailure {
+                converged_load: out.report.load,
+                attempted_load: load,
+                step_size: step,
+                reason,
+                last_residuals: res,
+                report: out.report,
+            })
+        };
+        let setup = if u0.len() != n || pattern.n_dofs() != n || solver.n_dofs() != n {
+            Some(format!(
+                "sizes differ: problem {n}, u0 {}, pattern {}, solver {}",
+                u0.len(),
+                pattern.n_dofs(),
+                solver.n_dofs()
+            ))
+        } else if !(arc.end > arc.start
+            && arc.min_length > 0.0
+            && arc.initial_length >= arc.min_length
+            && arc.max_length >= arc.initial_length
+            && arc.cut_factor > 0.0
+            && arc.cut_factor < 1.0
+            && arc.grow_factor >= 1.0)
+        {
+            Some(format!("invalid arc-length settings {arc:?}"))
+        } else if problem.essential(arc.start) != problem.essential(arc.start + 1.0) {
+            Some("arc-length continuation needs essential conditions independent of λ".into())
+        } else {
+            None
+        };
+        if let Some(msg) = setup {
+            return Err(fail(out, arc.start, 0.0, FailureReason::Setup(msg), vec![]));
+        }
+        let bc = match EssentialBc::new(n, &problem.essential(arc.start)) {
+            Ok(b) => b,
+            Err(e) => {
+                let r = FailureReason::Setup(e.to_string());
+                return Err(fail(out, arc.start, 0.0, r, vec![]));
+            }
+        };
+        let mut w = ArcWork {
+            r: vec![0.0; n],
+            q: vec![0.0; n],
+            du_r: vec![0.0; n],
+            du_q: vec![0.0; n],
+            values: vec![0.0; pattern.nnz()],
+            s: vec![0.0; n],
+        };
+        let mut ds = arc.initial_length.min(arc.max_length);
+        let mut prev: Option<Vec<f64>> = None;
+        // q·K⁻¹q at the last converged state (or the start).
+        let mut last_stiffness: Option<f64> = None;
+        let mut n_converged = 0;
+        while out.report.load < arc.end {
+            if out.report.attempts.len() >= arc.max_attempts {
+                let reason = FailureReason::TooManyAttempts(arc.max_attempts);
+                let load = out.report.load;
+                return Err(fail(out, load, ds, reason, vec![]));
+            }
+            let u_n = out.report.u.clone();
+            let l_n = out.report.load;
+            let mut rec = StepRecord {
+                load_start: l_n,
+                load: l_n,
+                step_size: ds,
+                iterations: 0,
+                residual_norms: Vec::new(),
+                energy_norms: Vec::new(),
+                converged: false,
+                predictor: Predictor::Zero,
+                acceptance: None,
+                roundoff_floors: Vec::new(),
+                residual_only: Vec::new(),
+                factorised_at: None,
+                timing: StepTiming::default(),
+                krylov: Vec::new(),
+                failure: None,
+            };
+            let outcome = self.arc_attempt(
+                problem,
+                pattern,
+                solver,
+                &bc,
+                &u_n,
+                l_n,
+                ds,
+                np,
+                prev.as_deref(),
+                &mut rec,
+                &mut w,
+            );
+            match outcome {
+                Ok((u, load, stiffness, start_stiffness)) => {
+                    rec.converged = true;
+                    rec.load = load;
+                    rec.factorised_at = Some(FactorisedAt::Converged);
+                    let hook = problem.on_converged(&ConvergedStep {
+                        step: n_converged,
+                        load,
+                        u: &u,
+                        record: &rec,
+                        solver,
+                        factorised_at: FactorisedAt::Converged,
+                        essential: &bc,
+                    });
+                    if let Err(e) = hook {
+                        problem.restore();
+                        rec.converged = false;
+                        let reason = FailureReason::Problem(ProblemError::Fatal(format!(
+                            "on_converged: {e}"
+                        )));
+                        rec.failure = Some(reason.clone());
+                        let res = rec.residual_norms.clone();
+                        out.report.attempts.push(rec);
+                        return Err(fail(out, load, ds, reason, res));
+                    }
+                    problem.commit(&u, load);
+                    let before = last_stiffness.unwrap_or(start_stiffness);
+                    if before.signum() != stiffness.signum() && n_converged > 0 {
+                        let cp = CriticalPoint {
+                            before_step: n_converged - 1,
+                            after_step: n_converged,
+                            loads: [l_n, load],
+                            stiffness: [before, stiffness],
+                            kind: if before > 0.0 { "maximum" } else { "minimum" },
+                        };
+                        on_critical(&cp);
+                        out.critical.push(cp);
+                    }
+                    last_stiffness = Some(stiffness);
+                    n_converged += 1;
+                    prev = Some(u[..np].iter().zip(&u_n[..np]).map(|(a, b)| a - b).collect());
+                    if rec.iterations <= arc.easy_iterations {
+                        ds = (ds * arc.grow_factor).min(arc.max_length);
+                    }
+                    out.report.u = u;
+                    out.report.load = load;
+                    out.report.attempts.push(rec);
+                }
+                Err(reason) => {
+                    problem.restore();
+                    rec.failure = Some(reason.clone());
+                    let res = rec.residual_norms.clone();
+                    let load = rec.load;
+                    out.report.attempts.push(rec);
+                    let cut = ds * arc.cut_factor;
+                    if !reason.retryable() || cut < arc.min_length {
+                        return Err(fail(out, load, ds, reason, res));
+                    }
+                    ds = cut;
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// One arc-length step of length `ds` from `(u_n, l_n)`: the converged `(u, λ)`, `q·K⁻¹q`
+    /// there and at the start.
+    #[allow(clippy::too_many_arguments)]
+    fn arc_attempt<P: NonlinearProblem>(
+        &self,
+        problem: &mut P,
+        pattern: &SparsityPattern,
+        solver: &mut LinearSolver,
+        bc: &EssentialBc,
+        u_n: &[f64],
+        l_n: f64,
+        ds: f64,
+        np: usize,
+        prev: Option<&[f64]>,
+        rec: &mut StepRecord,
+        w: &mut ArcWork,
+    ) -> Result<(Vec<f64>, f64, f64, f64), FailureReason> {
+        let o = self.options;
+        let zeros = vec![0.0; bc.dofs().len()];
+        let dot = |a: &[f64], b: &[f64]| -> f64 {
+            a[..np].iter().zip(&b[..np]).map(|(x, y)| x * y).sum()
+        };
+        // Predictor: the tangent at the committed state.
+        self.arc_tangent(problem, pattern, solver, bc, u_n, l_n, rec, w, &zeros)?;
+        let start_stiffness = free_dot(bc, &w.q, &w.du_q);
+        let norm_q = dot(&w.du_q, &w.du_q).sqrt();
+        if !(norm_q > 0.0 && norm_q.is_finite()) {
+            return Err(FailureReason::Setup(
+                "arc length: the load derivative moves no path unknown".into(),
+            ));
+        }
+        let sign = match prev {
+            Some(p) if dot(p, &w.du_q) < 0.0 => -1.0,
+            _ => 1.0,
+        };
+        let mut dl = sign * ds / norm_q;
+        let mut du: Vec<f64> = w.du_q.iter().map(|x| dl * x).collect();
+        let mut u: Vec<f64> = u_n.iter().zip(&du).map(|(a, b)| a + b).collect();
+        rec.predictor = Predictor::Secant;
+        for k in 0..=o.max_iterations {
+            let load = l_n + dl;
+            rec.load = load;
+            self.arc_tangent(problem, pattern, solver, bc, &u, load, rec, w, &zeros)?;
+            let rnorm = free_dot(bc, &w.r, &w.r).sqrt();
+            rec.residual_norms.push(rnorm);
+            if !rnorm.is_finite() {
+                return Err(FailureReason::NonFiniteResidual);
+            }
+            let r_ref = problem.force_norm(load).max(o.residual_atol);
+            let floor = o.roundoff_factor
+                * f64::EPSILON
+                * r_ref.max(problem.residual_scale()).max(unknowns_term_scale(
+                    pattern, &w.values, &u, u_n, bc, &mut w.s,
+                ));
+            rec.roundoff_floors.push(floor);
+            if k >= 1 && (rnorm <= (o.residual_rtol * r_ref).max(o.residual_atol) || rnorm <= floor)
+            {
+                rec.acceptance = Some(if rnorm <= floor {
+                    Acceptance::RoundoffFloor
+                } else {
+                    Acceptance::Tolerance
+                });
+                let stiffness = free_dot(bc, &w.q, &w.du_q);
+                return Ok((u, load, stiffness, start_stiffness));
+            }
+            let r_scale = r_ref.max(rec.residual_norms[0]);
+            if k >= 1 && rnorm > o.divergence_factor * r_scale {
+                return Err(FailureReason::Diverged {
+                    ratio: rnorm / r_scale,
+                });
+            }
+            if k == o.max_iterations {
+                return Err(FailureReason::MaxIterations(o.max_iterations));
+            }
+            // Corrector: Δu + δu_r + δλ δu_q on the cylinder ‖·‖ = Δs.
+            let base: Vec<f64> = du.iter().zip(&w.du_r).map(|(a, b)| a + b).collect();
+            let a = dot(&w.du_q, &w.du_q);
+            let b = 2.0 * dot(&w.du_q, &base);
+            let c = dot(&base, &base) - ds * ds;
+            let disc = b * b - 4.0 * a * c;
+            if disc.is_nan() || disc < 0.0 {
+                return Err(FailureReason::Problem(ProblemError::Recoverable(format!(
+                    "arc length: no real root of the constraint (discriminant {disc:.3e})"
+                ))));
+            }
+            let sq = disc.sqrt();
+            // Roots without cancellation.
+            let t = -0.5 * (b + b.signum() * sq);
+            let roots = [t / a, if t != 0.0 { c / t } else { t / a }];
+            let pick = roots
+                .iter()
+                .copied()
+                .max_by(|x, y| {
+                    let score = |s: f64| {
+                        base.iter()
+                            .zip(&w.du_q)
+                            .zip(&du)
+                            .take(np)
+                            .map(|((bb, q), d)| (bb + s * q) * d)
+                            .sum::<f64>()
+                    };
+                    score(*x).total_cmp(&score(*y))
+                })
+                .unwrap_or(roots[0]);
+            dl += pick;
+            for ((d, bb), q) in du.iter_mut().zip(&base).zip(&w.du_q) {
+                *d = bb + pick * q;
+            }
+            for ((x, a0), d) in u.iter_mut().zip(u_n).zip(&du) {
+                *x = a0 + d;
+            }
+            rec.iterations = k + 1;
+        }
+        unreachable!("the loop returns at k = max_iterations")
+    }
+
+    /// Residual, tangent and load derivative at `(u, load)`; the tangent factorised with the
+    /// essential conditions eliminated; `du_r = −K⁻¹ r`, `du_q = K⁻¹ q` (free DOFs), `r` and
+    /// `q` zeroed on the constrained ones.
+    #[allow(clippy::too_many_arguments)]
+    fn arc_tangent<P: NonlinearProblem>(
+        &self,
+        problem: &mut P,
+        pattern: &SparsityPattern,
+        solver: &mut LinearSolver,
+        bc: &EssentialBc,
+        u: &[f64],
+        load: f64,
+        rec: &mut StepRecord,
+        w: &mut ArcWork,
+        zeros: &[f64],
+    ) -> Result<(), FailureReason> {
+        let clock = Instant::now();
+        let evaluated = problem.residual_and_tangent(u, load, &mut w.r, &mut w.values);
+        rec.timing.residual_and_tangent_s += clock.elapsed().as_secs_f64();
+        evaluated.map_err(FailureReason::Problem)?;
+        let have = problem
+            .load_derivative(u, load, &mut w.q)
+            .map_err(FailureReason::Problem)?;
+        if !have {
+            return Err(FailureReason::Setup(
+                "arc-length continuation needs the problem's load derivative ∂r/∂λ".into(),
+            ));
+        }
+        for x in w.q.iter_mut() {
+            *x = -*x;
+        }
+        for (x, r) in w.du_r.iter_mut().zip(&w.r) {
+            *x = -r;
+        }
+        bc.apply_with(pattern, &mut w.values, &mut w.du_r, zeros)
+            .map_err(FailureReason::LinearSolver)?;
+        bc.zero_constrained(&mut w.q);
+        bc.zero_constrained(&mut w.r);
+        factorise(solver, &w.values, rec)?;
+        w.du_q.copy_from_slice(&w.q);
+        let clock = Instant::now();
+        let solved = solver
+            .solve_in_place(&mut w.du_r)
+            .and_then(|()| solver.solve_in_place(&mut w.du_q));
+        rec.timing.solve_s += clock.elapsed().as_secs_f64();
+        solved.map_err(FailureReason::LinearSolver)
+    }
+}
+
+struct ArcWork {
+    r: Vec<f64>,
+    q: Vec<f64>,
+    du_r: Vec<f64>,
+    du_q: Vec<f64>,
+    values: Vec<f64>,
+    s: Vec<f64>,
 }

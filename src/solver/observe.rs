@@ -119,6 +119,17 @@ impl<P: NonlinearProblem, O: StepObserver<P>> NonlinearProblem for Observed<P, O
     fn essential(&self, load: f64) -> Vec<(usize, f64)> {
         self.problem.essential(load)
     }
+    fn load_derivative(
+        &mut self,
+        u: &[f64],
+        load: f64,
+        out: &mut [f64],
+    ) -> Result<bool, ProblemError> {
+        self.problem.load_derivative(u, load, out)
+    }
+    fn path_dofs(&self) -> usize {
+        self.problem.path_dofs()
+    }
     fn force_norm(&self, load: f64) -> f64 {
         self.problem.force_norm(load)
     }
@@ -168,6 +179,17 @@ impl<P: NonlinearProblem + ?Sized> NonlinearProblem for &mut P {
     }
     fn essential(&self, load: f64) -> Vec<(usize, f64)> {
         (**self).essential(load)
+    }
+    fn load_derivative(
+        &mut self,
+        u: &[f64],
+        load: f64,
+        out: &mut [f64],
+    ) -> Result<bool, ProblemError> {
+        (**self).load_derivative(u, load, out)
+    }
+    fn path_dofs(&self) -> usize {
+        (**self).path_dofs()
     }
     fn force_norm(&self, load: f64) -> f64 {
         (**self).force_norm(load)
