@@ -73,7 +73,28 @@ pub fn main_with_args<I: IntoIterator<Item = String>>(args: I) -> i32 {
     };
     let result = match cli.command {
         Command::Check { case } => read_case(&case).map(|c| {
+            // The boundary entries as the analysis imposes them (overlaps merged, a component
+            // held at two values refused).
+            let boundary = match &c {
+                Case::Shell(s) => match shell_build::check_boundary(s) {
+                    Ok(set) => Some(set),
+                    Err(e) => {
+                        eprintln!("error: {}: {e}", case.display());
+                        return 1;
+                    }
+                },
+                _ => None,
+            };
             println!("{}: ok ({})", case.display(), describe(&c));
+            if let Some(set) = boundary {
+                println!(
+                    "boundary: {} constraint rows, {} DOFs eliminated by symmetry, {} rows \
+                     merged (already held by another entry or a symmetry plane)",
+                    set.rows.len(),
+                    set.fixed.len(),
+                    set.merged.len()
+                );
+            }
             if let Case::Shell(s) = &c {
                 let missing = shell_build::unsupported(s);
                 if !missing.is_empty() {
