@@ -97,8 +97,8 @@ pub enum ConstraintError {
     /// A row that other rows (or symmetry planes) already impose, at a different value: the
     /// same component is held at two values, and no displacement can meet both.
     #[error(
-        "constraint `{label}` holds, at value {value:e}, a component that `{other}` already \
-         holds at {implied:e}: expected one value per component (remove one of the two \
+        "constraint `{label}` holds, at value {value}, a component that `{other}` already \
+         holds at {implied}: expected one value per component (remove one of the two \
          entries, or give them the same value)"
     )]
     Conflict {
@@ -283,21 +283,27 @@ impl LinearConstraint {
 }
 
 /// How the rotation parameters `α_Jγ` of a particle with lamina vectors `e` (an image's are
-/// `Q e` of its source's, its parameters `det Q α`) enter a row about `axis`: the component of
-/// `e_γ` along the axis rounded to the nearest of −1, 0, 1 (`P_Jγβ`), so that a row about
-/// `e_β` of one particle reads each neighbour's rotation about the matching axis of its own
-/// frame, with its sign.
+/// `Q e` of its source's, its parameters `det Q α`) enter a row about `axis`: the lamina vector
+/// more nearly along the axis enters with the sign of its component, the other not (`P_Jγβ`
+/// ∈ {−1, 0, 1}), so that a row about `e_β` of one particle reads each neighbour's rotation
+/// about the matching axis of its own frame, with its sign.
 ///
 /// The lamina frames of neighbouring particles differ by a signed permutation exactly where it
 /// matters most and the rows would otherwise be wrong: the images across a symmetry plane
 /// (`e_img = S e`, `α_img = −α`: the rotation about the plane's normal is symmetric, the one
 /// about an in-plane axis antisymmetric) and the particles on a plane (`e1 = n_s`, turned by 90°
 /// from their neighbours' `e1 = x̄,u` on a `v` edge) — exact on a flat plate. Elsewhere (curved
-/// shells) the frames differ by small angles and this is the first-order reading of
-/// `Σ_J Ψ_J α_Jβ` (docs/shell-formulation.md §6.2). The factors are 0 or ±1 and do not change
-/// under a small design perturbation, so the rows stay independent of the design.
+/// shells) the frames differ by small angles (up to 45° the matching is the identity) and this
+/// is the first-order reading of `Σ_J Ψ_J α_Jβ` (docs/shell-formulation.md §6.2). The factors
+/// do not change under a small design perturbation, so the rows stay independent of the design.
 fn rotation_matching(e: &[Vector3<f64>; 2], axis: &Vector3<f64>) -> [f64; 2] {
-    [0, 1].map(|g| e[g].dot(axis).round().clamp(-1.0, 1.0))
+    let c = [e[0].dot(axis), e[1].dot(axis)];
+    let g = usize::from(c[1].abs() > c[0].abs());
+    let mut p = [0.0; 2];
+    if c[g] != 0.0 {
+        p[g] = c[g].signum();
+    }
+    p
 }
 
 /// A condition on a parametric edge, imposed at the real particles lying on it.
@@ -410,11 +416,15 @@ pub struct ConstraintSet {
 }
 
 /// A row is dependent on the rows kept before it when its residual after projection on their
-/// span is below this, relative to its own norm: far above the round-off of the projection
-/// (~1e-15 for the rows of a component, Gram–Schmidt applied twice) and far below the
-/// separation of rows held at distinct points (the RK functions of particles one spacing apart
-/// differ by O(1) of their size).
+/// span is below this, relative to its own norm: far above the round-off of the explicit
+/// residual (~1e-15 times the size of the combination) and far below the separation of rows
+/// held at distinct points (the RK functions of particles one spacing apart differ by O(1) of
+/// their size).
 const DEPENDENT_TOL: f64 = 1e-8;
+/// Rows whose squared residual by the Gram matrix is above this (a residual above 1e-3 of the
+/// row) are independent without further test: the round-off of that estimate is ~1e-16 times
+/// the squared condition number of the kept rows, far below for any usable set.
+const SCREEN_TOL: f64 = 1e-6;
 /// A dependent row's value conflicts with the value its span implies when they differ by more
 /// than this relative to the largest normalised value of its component: round-off of the
 /// projection is ~1e-15, and a row below [`DEPENDENT_TOL`] can shift the implied value by that
@@ -449,8 +459,9 @@ fn axis_of(n: &Vector3<f64>) -> Option<usize> {
 /// particle held by two edges meeting at a corner (identical rows), or by an edge and a `fixed`
 /// entry, a row parallel to another, or a row the symmetry already meets (it folds to zero, or
 /// to a combination of the others). The rank is found per connected set of rows (rows sharing a
-/// DOF, transitively) by modified Gram–Schmidt applied twice, in the given order, so the first
-/// row of a repeated pair is kept; a dependent row is left out ([`ConstraintSet::merged`]) if its
+/// DOF, transitively), in the given order, so the first row of a repeated pair is kept: each
+/// unit row's residual after projection on the kept rows, from the Cholesky factor of their Gram
+/// matrix, confirmed by the explicit residual when it is small; a dependent row is left out ([`ConstraintSet::merged`]) if its
 /// value is the one the kept rows imply, and is an error naming both rows if not
 /// ([`ConstraintError::Conflict`]), before any analysis.
 pub fn assemble(
@@ -589,7 +600,7 @@ pub fn assemble(
     })
 }
 
-/// Representative of `i` in the union–find forest `parent` (with path halving).
+/// Representative of `i` in the union-find forest `parent` (with path halving).
 fn root(parent: &mut [usize], mut i: usize) -> usize {
     while parent[i] != i {
         parent[i] = parent[parent[i]];
@@ -635,67 +646,99 @@ fn independent_rows(
         .iter()
         .map(|r| r.terms.iter().map(|t| t.1 * t.1).sum::<f64>().sqrt())
         .collect();
+    // `â_c · v` for the unit row `c` and a dense vector `v`.
+    let dot_unit =
+        |c: usize, v: &[f64]| rows[c].terms.iter().map(|&(d, a)| a * v[d]).sum::<f64>() / norms[c];
     let mut keep = vec![true; m];
     let mut merged = Vec::new();
-    let mut local = vec![usize::MAX; n_q];
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let mut unit = vec![0.0; n_q];
+    let mut residual = vec![0.0; n_q];
     for set in sets.iter().filter(|s| s.len() > 1) {
-        // Local numbering of the set's DOFs; rows as dense unit vectors on them.
-        let mut dofs = Vec::new();
-        for &c in set {
-            for &(d, _) in &rows[c].terms {
-                if local[d] == usize::MAX {
-                    local[d] = dofs.len();
-                    dofs.push(d);
-                }
-            }
-        }
-        let unit = |c: usize| {
-            let mut v = vec![0.0; dofs.len()];
-            for &(d, a) in &rows[c].terms {
-                v[local[d]] = a / norms[c];
-            }
-            v
-        };
         let g_max = set
             .iter()
             .map(|&c| (rows[c].value / norms[c]).abs())
             .fold(0.0_f64, f64::max);
-        // Orthonormal basis of the kept rows, each with its value (the same combination).
-        let mut basis: Vec<(Vec<f64>, f64)> = Vec::new();
-        let mut kept: Vec<(usize, Vec<f64>)> = Vec::new();
+        // The kept rows and the Cholesky factor `L` of their Gram matrix (row i: i + 1 entries).
+        let mut kept: Vec<usize> = Vec::new();
+        let mut l: Vec<Vec<f64>> = Vec::new();
         for &c in set {
-            let a = unit(c);
-            let mut v = a.clone();
-            let mut g = rows[c].value / norms[c];
-            for _ in 0..2 {
-                for (q, gq) in &basis {
-                    let p = dot(q, &v);
-                    if p != 0.0 {
-                        v.iter_mut().zip(q).for_each(|(x, y)| *x -= p * y);
-                        g -= p * gq;
+            for &(d, a) in &rows[c].terms {
+                unit[d] = a / norms[c];
+            }
+            // y = L⁻¹ b with b_j = â_j · â_c: the coordinates of the projection of â_c on the
+            // kept rows' span, ‖y‖² its squared length.
+            let mut y: Vec<f64> = kept.iter().map(|&j| dot_unit(j, &unit)).collect();
+            for i in 0..y.len() {
+                let s: f64 = (0..i).map(|k| l[i][k] * y[k]).sum();
+                y[i] = (y[i] - s) / l[i][i];
+            }
+            let d = 1.0 - y.iter().map(|v| v * v).sum::<f64>();
+            // Squared residual by the Gram matrix: fast, but with the round-off of the squared
+            // condition number. Rows well away from the span are independent; the others are
+            // decided by their explicit residual `â_c − Σ_j x_j â_j`, with `Lᵀ x = y`.
+            let mut diagonal = d.max(0.0).sqrt();
+            let mut dependent = None;
+            if d <= SCREEN_TOL {
+                let mut x = y.clone();
+                for i in (0..x.len()).rev() {
+                    let s: f64 = (i + 1..x.len()).map(|k| l[k][i] * x[k]).sum();
+                    x[i] = (x[i] - s) / l[i][i];
+                }
+                let mut touched: Vec<usize> = rows[c].terms.iter().map(|t| t.0).collect();
+                for &d in &touched {
+                    residual[d] = unit[d];
+                }
+                for (&j, &xj) in kept.iter().zip(&x) {
+                    for &(d, a) in &rows[j].terms {
+                        if residual[d] == 0.0 {
+                            touched.push(d);
+                        }
+                        residual[d] -= xj * a / norms[j];
                     }
                 }
+                touched.sort_unstable();
+                touched.dedup();
+                let norm = touched
+                    .iter()
+                    .map(|&d| residual[d] * residual[d])
+                    .sum::<f64>()
+                    .sqrt();
+                for &d in &touched {
+                    residual[d] = 0.0;
+                }
+                if norm <= DEPENDENT_TOL {
+                    dependent = Some(x);
+                } else {
+                    diagonal = norm;
+                }
             }
-            let res = dot(&v, &v).sqrt();
-            if res > DEPENDENT_TOL {
-                v.iter_mut().for_each(|x| *x /= res);
-                basis.push((v, g / res));
-                kept.push((c, a));
+            for &(d, _) in &rows[c].terms {
+                unit[d] = 0.0;
+            }
+            let Some(x) = dependent else {
+                y.push(diagonal);
+                l.push(y);
+                kept.push(c);
                 continue;
-            }
-            // Dependent: `g` is now its value less the value the kept rows imply.
+            };
+            // Dependent: the value the kept rows imply is the same combination of theirs.
+            let implied: f64 = kept
+                .iter()
+                .zip(&x)
+                .map(|(&j, xj)| xj * rows[j].value / norms[j])
+                .sum();
             let other = kept
                 .iter()
-                .max_by(|x, y| dot(&x.1, &a).abs().total_cmp(&dot(&y.1, &a).abs()))
-                .map(|k| k.0)
+                .zip(&x)
+                .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+                .map(|k| *k.0)
                 .unwrap_or(c);
-            if g.abs() > VALUE_TOL * g_max {
+            if (rows[c].value / norms[c] - implied).abs() > VALUE_TOL * g_max {
                 return Err(ConstraintError::Conflict {
                     label: rows[c].label.clone(),
                     value: rows[c].value,
                     other: rows[other].label.clone(),
-                    implied: rows[c].value - g * norms[c],
+                    implied: implied * norms[c],
                 });
             }
             keep[c] = false;
@@ -703,9 +746,6 @@ fn independent_rows(
                 label: rows[c].label.clone(),
                 by: rows[other].label.clone(),
             });
-        }
-        for &d in &dofs {
-            local[d] = usize::MAX;
         }
     }
     let rows = rows

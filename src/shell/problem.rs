@@ -19,7 +19,9 @@
 //! Symmetry conditions of particles on a plane ([`super::symmetry`]) are eliminated as fixed
 //! generalised DOFs through [`NonlinearProblem::essential`] when possible (`α2`, and `ū·n_s`
 //! when `n_s` is a coordinate axis), and become multiplier rows otherwise
-//! ([`SymmetryTreatment`]).
+//! ([`SymmetryTreatment`]). The rows are assembled by [`super::constraints::assemble`]: rows
+//! that others (or the symmetry) already impose, such as a corner held by two edges, are
+//! merged, so the multiplier block has full rank; a component held at two values is an error.
 //!
 //! The sparse pattern is built once from the quadrature points' cells (their neighbours'
 //! source particles, through the image map), the constraint rows and the load-stiffness
@@ -137,8 +139,9 @@ impl ShellProblem {
         Self::with_options(model, loads, constraints, ProblemOptions::default())
     }
 
-    /// The problem: `loads` at load factor 1, `constraints` (rows on the generalised DOFs; the
-    /// symmetry conditions of the model's planes are added here).
+    /// The problem: `loads` at load factor 1, `constraints` (rows on the generalised DOFs, in
+    /// any overlap; the symmetry conditions of the model's planes are added here, and repeated
+    /// rows merged: [`super::constraints::assemble`]).
     pub fn with_options(
         model: ShellModel,
         loads: Vec<Box<dyn ExternalLoad>>,
