@@ -285,3 +285,45 @@ fn a_component_held_at_two_values_is_refused_up_front_naming_both_entries() {
         );
     }
 }
+
+/// A singular tangent names the unknown: a plate held only at its centre in z (free to slide
+/// and turn in its plane) stops at the first step (exit 3) with the linear solver's message
+/// extended by the particle, its parameter coordinates and the component of the offending DOF;
+/// a multiplier is named by its constraint row.
+#[test]
+fn a_singular_tangent_names_the_particle_and_component_of_the_dof() {
+    let held =
+        "[[boundary]]\nkind = \"fixed\"\nat = [0.5, 0.5]\ncomponents = [\"uz\"]\n\n".to_string();
+    let text = plate(&held, 1.0, [0.5, 0.5]);
+    let (case, out) = write_case("singular", &text);
+    let code = cli(&[
+        "run",
+        case.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 3, "the analysis should stop");
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let status = r["status"].as_str().unwrap();
+    println!("{status}");
+    assert!(status.contains("singular matrix"), "{status}");
+    assert!(
+        status.contains(" is particle ")
+            && status.contains("(u, v) = [")
+            && status.contains(", component "),
+        "{status}"
+    );
+
+    let clamped = plate(&entry("clamped", "u-min"), 1.0, [0.5, 0.5]);
+    let parsed = parse_shell_case(&clamped, &case).unwrap();
+    let built = shelldsa::io::shell_build::build(&parsed).unwrap();
+    let n_q = built.problem.n_generalised();
+    let d = built.problem.describe_dof(n_q);
+    assert!(
+        d.starts_with("the multiplier of constraint `boundary[0] (clamped, edge u-min)"),
+        "{d}"
+    );
+    let d = built.problem.describe_dof(5 * 10 + 2);
+    assert_eq!(d, "particle 10 at (u, v) = [0.125, 0.125], component ū_z");
+}
