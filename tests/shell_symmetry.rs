@@ -680,8 +680,11 @@ fn problem_tangent_with_images_multipliers_and_follower_load_matches_central_dif
     let n = problem.n_dofs();
     let nq = problem.n_generalised();
     // 2 point rows, 5 × 3 on the supported edge, symmetry: 8 particles on one plane (ū·n_s,
-    // α2) and the corner (two normals, both rotations).
-    assert_eq!(n - nq, 2 + 5 * 3 + 8 * 2 + 4);
+    // α2) and the corner (two normals, both rotations); the supported edge's row along the
+    // normal of the plane it meets, at the particle on that plane, repeats the symmetry row
+    // `ū·n_s` there and is merged.
+    assert_eq!(n - nq, 2 + 5 * 3 + 8 * 2 + 4 - 1);
+    assert_eq!(problem.redundant_constraints().len(), 1);
     // A state: generalised DOFs at a small finite step (elastic-plastic material, stays
     // elastic at this size), multipliers of order 1e-3.
     let mut rng = XorShift64::new(17);

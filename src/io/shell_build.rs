@@ -14,7 +14,7 @@
 //!   using it fails before any computation, naming what is missing.
 
 use super::shell_case::{
-    Boundary, CellLayout, Component, Load, LoadScalingSpec, Location, MonitorDirection,
+    edge_name, Boundary, CellLayout, Component, Load, LoadScalingSpec, Location, MonitorDirection,
     PredictorKind, ShellCase,
 };
 use super::shell_output::{OutputError, OutputGrid, Separation, ShellOutput, StepSummary};
@@ -24,7 +24,8 @@ use crate::meshfree::vci::VciOrder;
 use crate::meshfree::Edge;
 use crate::meshfree::{jittered_grid, ParticleGrid};
 use crate::shell::constraints::{
-    edge_constraints, ConstraintError, EdgeCondition, LinearConstraint, RowKind,
+    assemble, edge_constraints, ConstraintError, ConstraintSet, EdgeCondition, LinearConstraint,
+    RowKind, SymmetryRows,
 };
 use crate::shell::integration::{apply_vci, boundary_rule};
 use crate::shell::load::LoadScaling;
@@ -117,25 +118,30 @@ pub fn discretisation(
     grid: &ParticleGrid,
     cq: &CellQuadrature,
 ) -> Result<Discretisation, BuildError> {
-    let rule = case
-        .integration
-        .thickness_rule
-        .rule()
-        .map_err(|e| model_err("integration.thickness_points", e))?;
     Ok(Discretisation {
         particle_uv: grid.positions.clone(),
         supports: grid.supports(case.kernel.support),
         basis: case.kernel.basis,
         quadrature: cq.iter().map(|(p, w, _)| (p, w)).collect(),
-        thickness_rule: rule
-            .nodes
-            .iter()
-            .copied()
-            .zip(rule.weights.iter().copied())
-            .collect(),
+        thickness_rule: thickness_rule(case)?,
         thickness: case.thickness,
         symmetry: Vec::new(),
     })
+}
+
+/// The rule through the thickness: `(ζ, weight)` pairs.
+fn thickness_rule(case: &ShellCase) -> Result<Vec<(f64, f64)>, BuildError> {
+    let rule = case
+        .integration
+        .thickness_rule
+        .rule()
+        .map_err(|e| model_err("integration.thickness_points", e))?;
+    Ok(rule
+        .nodes
+        .iter()
+        .copied()
+        .zip(rule.weights.iter().copied())
+        .collect())
 }
 
 /// Load stepping and Newton tolerances of `[steps]` (everything but the predictor, which
@@ -268,11 +274,162 @@ fn symmetry_planes(case: &ShellCase) -> Result<Vec<SymmetryPlane>, BuildError> {
                 normal,
             } => Some(
                 SymmetryPlane::new(*edge, Vector3::from(*point), Vector3::from(*normal))
+                    .map(|p| p.labelled(entry_name(k, b)))
                     .map_err(|e| model_err(&format!("boundary[{k}]"), e)),
             ),
             _ => None,
         })
         .collect()
+}
+
+/// A boundary entry as the case file names it, e.g. `boundary[2] (clamped, edge v-min)`.
+fn entry_name(k: usize, b: &Boundary) -> String {
+    let what = match b {
+        Boundary::Symmetry { edge, .. } => format!("symmetry, edge {}", edge_name(*edge)),
+        Boundary::Clamped { edge } => format!("clamped, edge {}", edge_name(*edge)),
+        Boundary::SimplySupported { edge } => {
+            format!("simply-supported, edge {}", edge_name(*edge))
+        }
+        Boundary::Fixed {
+            location,
+            components,
+        } => {
+            let names: Vec<&str> = components.iter().map(|c| c.name()).collect();
+            let at = match location {
+                Location::Edge(e) => format!("edge {}", edge_name(*e)),
+                Location::Point(at) => format!("at {at:?}"),
+                Location::Everywhere => "everywhere".to_string(),
+            };
+            format!("fixed {}, {at}", names.join(" "))
+        }
+        Boundary::Prescribed {
+            at,
+            component,
+            value,
+        } => format!("prescribed {} = {value} at {at:?}", component.name()),
+    };
+    format!("boundary[{k}] ({what})")
+}
+
+/// The rows of the case's `[[boundary]]` entries other than symmetry planes (which are in the
+/// model), in entry order, each labelled with its entry ([`entry_name`]). They may overlap:
+/// the problem merges rows that repeat others ([`crate::shell::constraints::assemble`]).
+pub fn boundary_constraints(
+    case: &ShellCase,
+    model: &ShellModel,
+) -> Result<Vec<LinearConstraint>, BuildError> {
+    let mut constraints: Vec<LinearConstraint> = Vec::new();
+    for (k, b) in case.boundary.iter().enumerate() {
+        let key = format!("boundary[{k}]");
+        let err = |e: ConstraintError| model_err(&key, e);
+        let entry = entry_name(k, b);
+        let from = constraints.len();
+        match b {
+            Boundary::Symmetry { .. } => {} // in the model (image particles)
+            Boundary::Clamped { edge } => constraints
+                .extend(edge_constraints(model, *edge, &EdgeCondition::Clamped).map_err(err)?),
+            Boundary::SimplySupported { edge } => constraints.extend(
+                edge_constraints(model, *edge, &EdgeCondition::SimplySupported).map_err(err)?,
+            ),
+            Boundary::Fixed {
+                location,
+                components,
+            } => {
+                let (directions, rotations): (Vec<_>, Vec<_>) = components
+                    .iter()
+                    .map(|&c| component_target(c))
+                    .partition(Result::is_ok);
+                let directions: Vec<Vector3<f64>> =
+                    directions.into_iter().filter_map(Result::ok).collect();
+                let rotations: Vec<usize> = rotations.into_iter().filter_map(Result::err).collect();
+                match location {
+                    Location::Edge(e) => constraints.extend(
+                        edge_constraints(
+                            model,
+                            *e,
+                            &EdgeCondition::Fixed {
+                                directions,
+                                rotations,
+                            },
+                        )
+                        .map_err(err)?,
+                    ),
+                    Location::Point(at) => {
+                        for d in directions {
+                            constraints.push(
+                                LinearConstraint::displacement(model, *at, d, 0.0).map_err(err)?,
+                            );
+                        }
+                        for r in rotations {
+                            constraints
+                                .push(LinearConstraint::rotation(model, *at, r, 0.0).map_err(err)?);
+                        }
+                    }
+                    // The generalised DOFs of every real particle (images follow their
+                    // sources); those the symmetry planes eliminate are dropped by the problem.
+                    Location::Everywhere => {
+                        for i in 0..model.n_particles() {
+                            for &c in components {
+                                let kind = match c {
+                                    Component::Rot1 | Component::Rot2 => RowKind::Rotation,
+                                    _ => RowKind::Displacement,
+                                };
+                                constraints.push(
+                                    LinearConstraint::generalised(
+                                        DOFS_PER_PARTICLE * i + c.index(),
+                                        0.0,
+                                        kind,
+                                    )
+                                    .labelled(format!("particle {i}, {}", c.name())),
+                                );
+                            }
+                        }
+                    }
+                }
+            }
+            Boundary::Prescribed {
+                at,
+                component,
+                value,
+            } => match component_target(*component) {
+                Ok(d) => constraints
+                    .push(LinearConstraint::displacement(model, *at, d, *value).map_err(err)?),
+                Err(r) => constraints
+                    .push(LinearConstraint::rotation(model, *at, r, *value).map_err(err)?),
+            },
+        }
+        for c in &mut constraints[from..] {
+            c.label = match b {
+                // The reactions of displacement control are found by this label.
+                Boundary::Prescribed { component, .. } => prescribed_label(k, *component),
+                _ => format!("{entry}: {}", c.label),
+            };
+        }
+    }
+    Ok(constraints)
+}
+
+/// The boundary entries as the problem will impose them, without building the analysis: the
+/// model is made on the particles alone (no quadrature points, no VCI: the constraint rows need
+/// only the shape functions at the particles and the symmetry images), and the rows are
+/// assembled as [`ShellProblem`] does. So `shelldsa check` refuses an inconsistent set (the
+/// same component held at two values: [`ConstraintError::Conflict`], naming both entries)
+/// before any analysis, and reports the rows merged.
+pub fn check_boundary(case: &ShellCase) -> Result<ConstraintSet, BuildError> {
+    let grid = particle_grid(case);
+    let disc = Discretisation {
+        particle_uv: grid.positions.clone(),
+        supports: grid.supports(case.kernel.support),
+        basis: case.kernel.basis,
+        quadrature: Vec::new(),
+        thickness_rule: thickness_rule(case)?,
+        thickness: case.thickness,
+        symmetry: symmetry_planes(case)?,
+    };
+    let model = ShellModel::new(&case.surface, disc, case.material)
+        .map_err(|e| model_err("kernel.support", e))?;
+    let rows = boundary_constraints(case, &model)?;
+    assemble(&model, rows, SymmetryRows::Eliminate).map_err(|e| model_err("boundary", e))
 }
 
 /// Build the model and the shell problem: surface, discretisation (symmetry planes, VCI),
@@ -335,87 +492,7 @@ pub fn connect_with_contact(
             .map_err(|e| model_err("integration.vci", e))?;
     }
 
-    let mut constraints: Vec<LinearConstraint> = Vec::new();
-    for (k, b) in case.boundary.iter().enumerate() {
-        let key = format!("boundary[{k}]");
-        let err = |e: ConstraintError| model_err(&key, e);
-        match b {
-            Boundary::Symmetry { .. } => {} // in the model (image particles)
-            Boundary::Clamped { edge } => constraints
-                .extend(edge_constraints(&model, *edge, &EdgeCondition::Clamped).map_err(err)?),
-            Boundary::SimplySupported { edge } => constraints.extend(
-                edge_constraints(&model, *edge, &EdgeCondition::SimplySupported).map_err(err)?,
-            ),
-            Boundary::Fixed {
-                location,
-                components,
-            } => {
-                let (directions, rotations): (Vec<_>, Vec<_>) = components
-                    .iter()
-                    .map(|&c| component_target(c))
-                    .partition(Result::is_ok);
-                let directions: Vec<Vector3<f64>> =
-                    directions.into_iter().filter_map(Result::ok).collect();
-                let rotations: Vec<usize> = rotations.into_iter().filter_map(Result::err).collect();
-                match location {
-                    Location::Edge(e) => constraints.extend(
-                        edge_constraints(
-                            &model,
-                            *e,
-                            &EdgeCondition::Fixed {
-                                directions,
-                                rotations,
-                            },
-                        )
-                        .map_err(err)?,
-                    ),
-                    Location::Point(at) => {
-                        for d in directions {
-                            constraints.push(
-                                LinearConstraint::displacement(&model, *at, d, 0.0).map_err(err)?,
-                            );
-                        }
-                        for r in rotations {
-                            constraints.push(
-                                LinearConstraint::rotation(&model, *at, r, 0.0).map_err(err)?,
-                            );
-                        }
-                    }
-                    // The generalised DOFs of every real particle (images follow their
-                    // sources); those the symmetry planes eliminate are dropped by the problem.
-                    Location::Everywhere => {
-                        for i in 0..model.n_particles() {
-                            for &c in components {
-                                let kind = match c {
-                                    Component::Rot1 | Component::Rot2 => RowKind::Rotation,
-                                    _ => RowKind::Displacement,
-                                };
-                                constraints.push(
-                                    LinearConstraint::generalised(
-                                        DOFS_PER_PARTICLE * i + c.index(),
-                                        0.0,
-                                        kind,
-                                    )
-                                    .labelled(format!("{key}: particle {i}, {}", c.name())),
-                                );
-                            }
-                        }
-                    }
-                }
-            }
-            Boundary::Prescribed {
-                at,
-                component,
-                value,
-            } => {
-                let row = match component_target(*component) {
-                    Ok(d) => LinearConstraint::displacement(&model, *at, d, *value),
-                    Err(r) => LinearConstraint::rotation(&model, *at, r, *value),
-                };
-                constraints.push(row.map_err(err)?.labelled(prescribed_label(k, *component)));
-            }
-        }
-    }
+    let constraints = boundary_constraints(case, &model)?;
 
     // Loads at load factor 1.
     let mut loads: Vec<Box<dyn ExternalLoad>> = Vec::new();

@@ -19,7 +19,9 @@
 //! Symmetry conditions of particles on a plane ([`super::symmetry`]) are eliminated as fixed
 //! generalised DOFs through [`NonlinearProblem::essential`] when possible (`α2`, and `ū·n_s`
 //! when `n_s` is a coordinate axis), and become multiplier rows otherwise
-//! ([`SymmetryTreatment`]).
+//! ([`SymmetryTreatment`]). The rows are assembled by [`super::constraints::assemble`]: rows
+//! that others (or the symmetry) already impose, such as a corner held by two edges, are
+//! merged, so the multiplier block has full rank; a component held at two values is an error.
 //!
 //! The sparse pattern is built once from the quadrature points' cells (their neighbours'
 //! source particles, through the image map), the constraint rows and the load-stiffness
@@ -28,7 +30,7 @@
 //! A follower load must report the same `(row, column)` entries for every state (values may be
 //! zero): its entries at `q = 0` enter the pattern.
 
-use super::constraints::{ConstraintError, LinearConstraint, RowKind};
+use super::constraints::{assemble, LinearConstraint, MergedRow, RowKind, SymmetryRows};
 use super::load::{ExternalLoad, LoadScaling};
 use super::model::ShellModel;
 use super::point::{PointHistory, DOFS_PER_PARTICLE};
@@ -83,7 +85,7 @@ pub struct ShellProblem {
     /// `‖f_ext(q; λ)‖` of the prescribed loads at the last evaluation (their force scale).
     prescribed_norm: f64,
     execution: Execution,
-    redundant: Vec<String>,
+    redundant: Vec<MergedRow>,
     /// Cell buffers of the tangent assembly, reused over the Newton iterations.
     buffers: AssemblyBuffers,
 }
@@ -127,11 +129,6 @@ fn assembly_error(e: AssemblyError<PointError>) -> ProblemError {
     }
 }
 
-/// Whether the unit vector `n` is a coordinate axis (to round-off); its axis if so.
-fn axis_of(n: &nalgebra::Vector3<f64>) -> Option<usize> {
-    (0..3).find(|&k| (n[k].abs() - 1.0).abs() <= 1e-12)
-}
-
 impl ShellProblem {
     /// The problem with default options ([`SymmetryTreatment::Eliminate`], parallel assembly).
     pub fn new(
@@ -142,8 +139,9 @@ impl ShellProblem {
         Self::with_options(model, loads, constraints, ProblemOptions::default())
     }
 
-    /// The problem: `loads` at load factor 1, `constraints` (rows on the generalised DOFs; the
-    /// symmetry conditions of the model's planes are added here).
+    /// The problem: `loads` at load factor 1, `constraints` (rows on the generalised DOFs, in
+    /// any overlap; the symmetry conditions of the model's planes are added here, and repeated
+    /// rows merged: [`super::constraints::assemble`]).
     pub fn with_options(
         model: ShellModel,
         loads: Vec<Box<dyn ExternalLoad>>,
@@ -151,93 +149,12 @@ impl ShellProblem {
         options: ProblemOptions,
     ) -> Result<Self, ShellError> {
         let n_q = model.n_dofs();
-        let mut fixed = Vec::new();
-        let mut rows = Vec::new();
-        for sc in model.symmetry.self_conditions() {
-            let base = DOFS_PER_PARTICLE * sc.particle;
-            for &b in &sc.rotations {
-                match options.symmetry {
-                    SymmetryTreatment::Eliminate => fixed.push(base + 3 + b),
-                    SymmetryTreatment::Multipliers => rows.push(
-                        LinearConstraint::generalised(base + 3 + b, 0.0, RowKind::Rotation)
-                            .labelled(format!("symmetry: particle {}, α{}", sc.particle, b + 1)),
-                    ),
-                }
-            }
-            for n in &sc.normals {
-                match (options.symmetry, axis_of(n)) {
-                    (SymmetryTreatment::Eliminate, Some(k)) => fixed.push(base + k),
-                    _ => rows.push(LinearConstraint {
-                        label: format!(
-                            "symmetry: particle {}, ū·({}, {}, {})",
-                            sc.particle, n[0], n[1], n[2]
-                        ),
-                        terms: (0..3)
-                            .filter(|&c| n[c] != 0.0)
-                            .map(|c| (base + c, n[c]))
-                            .collect(),
-                        value: 0.0,
-                        kind: RowKind::Displacement,
-                    }),
-                }
-            }
-        }
-        fixed.sort_unstable();
-        fixed.dedup();
-        let mut redundant = Vec::new();
-        // User rows: checked, duplicate DOFs merged, terms on eliminated DOFs dropped (those
-        // DOFs stay zero).
-        for c in constraints {
-            if !c.value.is_finite() {
-                return Err(ConstraintError::InvalidValue {
-                    label: c.label,
-                    value: c.value,
-                }
-                .into());
-            }
-            let mut dense: Vec<(usize, f64)> = Vec::with_capacity(c.terms.len());
-            for &(d, a) in &c.terms {
-                if d >= n_q {
-                    return Err(ConstraintError::DofOutOfRange {
-                        label: c.label,
-                        dof: d,
-                        n_dofs: n_q,
-                    }
-                    .into());
-                }
-                if !a.is_finite() {
-                    return Err(ConstraintError::NonFiniteCoefficient {
-                        label: c.label,
-                        dof: d,
-                        value: a,
-                    }
-                    .into());
-                }
-                if fixed.binary_search(&d).is_ok() {
-                    continue;
-                }
-                match dense.iter_mut().find(|(e, _)| *e == d) {
-                    Some(t) => t.1 += a,
-                    None => dense.push((d, a)),
-                }
-            }
-            // A row at a point of a symmetry plane along the plane's normal folds to
-            // coefficients `Ψ_I − Ψ_image ≈ 0` (equal on the plane) on the free DOFs: the
-            // symmetry already satisfies it. Coefficients below 1e-10 of the row's largest
-            // (round-off of the RK evaluation, ~1e-15 relative, with margin) are dropped, and
-            // an emptied homogeneous row is redundant (kept, it would make the system
-            // singular).
-            let scale = c.terms.iter().fold(0.0_f64, |m, t| m.max(t.1.abs()));
-            dense.retain(|t| t.1.abs() > 1e-10 * scale);
-            if dense.is_empty() {
-                if c.value == 0.0 {
-                    redundant.push(c.label);
-                    continue;
-                }
-                return Err(ConstraintError::EmptyRow { label: c.label }.into());
-            }
-            rows.push(LinearConstraint { terms: dense, ..c });
-        }
+        let treatment = match options.symmetry {
+            SymmetryTreatment::Eliminate => SymmetryRows::Eliminate,
+            SymmetryTreatment::Multipliers => SymmetryRows::Rows,
+        };
+        let set = assemble(&model, constraints, treatment)?;
+        let (rows, fixed, redundant) = (set.rows, set.fixed, set.merged);
         let (e, t) = (model.material.young, model.thickness);
         let scales: Vec<f64> = rows
             .iter()
@@ -349,11 +266,33 @@ impl ShellProblem {
         })
     }
 
-    /// Labels of the homogeneous constraints dropped because the symmetry planes already
-    /// satisfy them (e.g. a diaphragm's component along a symmetry plane's normal at the corner
-    /// where the two meet).
-    pub fn redundant_constraints(&self) -> &[String] {
+    /// The rows left out because others or the symmetry planes already impose them, with what
+    /// imposes each (e.g. a corner particle's rows repeated by the two edges meeting there, or
+    /// a diaphragm's component along a symmetry plane's normal at the corner where they meet).
+    pub fn redundant_constraints(&self) -> &[MergedRow] {
         &self.redundant
+    }
+
+    /// What unknown `dof` is, for messages: a generalised DOF of a particle (its index,
+    /// parameter coordinates and component), or the multiplier of a constraint row (its label).
+    pub fn describe_dof(&self, dof: usize) -> String {
+        const NAMES: [&str; DOFS_PER_PARTICLE] = ["ū_x", "ū_y", "ū_z", "α1", "α2"];
+        if dof < self.n_q {
+            let (i, c) = (dof / DOFS_PER_PARTICLE, dof % DOFS_PER_PARTICLE);
+            let fixed = if self.fixed.binary_search(&dof).is_ok() {
+                ", eliminated by symmetry"
+            } else {
+                ""
+            };
+            format!(
+                "particle {i} at (u, v) = {:?}, component {}{fixed}",
+                self.model.particle_uv[i], NAMES[c]
+            )
+        } else if let Some(row) = self.constraints.get(dof - self.n_q) {
+            format!("the multiplier of constraint `{}`", row.label)
+        } else {
+            format!("unknown {dof} (beyond the {} unknowns)", self.n_dofs())
+        }
     }
 
     /// The sparse pattern of the tangent (give it to the driver and its solver).
@@ -634,6 +573,9 @@ impl NonlinearProblem for ShellProblem {
     /// The arc length measures the generalised DOFs (not the multipliers).
     fn path_dofs(&self) -> usize {
         self.n_q
+    }
+    fn describe_unknown(&self, dof: usize) -> Option<String> {
+        Some(self.describe_dof(dof))
     }
     fn force_norm(&self, load: f64) -> f64 {
         // The prescribed loads' force (contact) at the last evaluation: at the driver's first

@@ -131,6 +131,8 @@ pub struct SymmetryPlane {
     pub point: Vector3<f64>,
     /// Unit normal `n_s` of the plane.
     pub normal: Vector3<f64>,
+    /// A name for errors and reports (default `"symmetry plane on edge <edge>"`).
+    pub label: String,
 }
 
 impl SymmetryPlane {
@@ -157,7 +159,14 @@ impl SymmetryPlane {
             edge,
             point,
             normal: normal / len,
+            label: format!("symmetry plane on edge {edge:?}"),
         })
+    }
+
+    /// With a new label (e.g. the case file's entry).
+    pub fn labelled(mut self, label: impl Into<String>) -> Self {
+        self.label = label.into();
+        self
     }
 
     /// The reflection `S = I − 2 n_s n_sᵀ`.

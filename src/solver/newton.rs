@@ -158,6 +158,11 @@ pub trait NonlinearProblem {
     fn path_dofs(&self) -> usize {
         self.n_dofs()
     }
+    /// What unknown `dof` is, in the problem's terms (e.g. a node and component), for the
+    /// messages of a failed solve (default: none, the index alone).
+    fn describe_unknown(&self, _dof: usize) -> Option<String> {
+        None
+    }
     /// Accept the converged state `u` at `load` (trial history becomes committed).
     fn commit(&mut self, u: &[f64], load: f64);
     /// Reject the current trial state (back to the committed history).
@@ -382,6 +387,26 @@ impl fmt::Display for FailureReason {
 }
 
 impl FailureReason {
+    /// A linear solver failure at a known unknown, with the problem's name for it appended.
+    fn with_unknown_named(self, name: impl Fn(usize) -> Option<String>) -> Self {
+        match self {
+            FailureReason::LinearSolver(SolverError::Singular {
+                dof: Some(d),
+                detail,
+            }) => {
+                let detail = match name(d) {
+                    Some(n) => format!("{detail}; DOF {d} is {n}"),
+                    None => detail,
+                };
+                FailureReason::LinearSolver(SolverError::Singular {
+                    dof: Some(d),
+                    detail,
+                })
+            }
+            other => other,
+        }
+    }
+
     fn retryable(&self) -> bool {
         !matches!(
             self,
@@ -721,6 +746,7 @@ impl NewtonSolver {
                 }
                 Err(reason) => {
                     problem.restore();
+                    let reason = reason.with_unknown_named(|d| problem.describe_unknown(d));
                     rec.failure = Some(reason.clone());
                     let res = rec.residual_norms.clone();
                     report.attempts.push(rec);

@@ -136,6 +136,9 @@ impl<P: NonlinearProblem, O: StepObserver<P>> NonlinearProblem for Observed<P, O
     fn residual_scale(&self) -> f64 {
         self.problem.residual_scale()
     }
+    fn describe_unknown(&self, dof: usize) -> Option<String> {
+        self.problem.describe_unknown(dof)
+    }
     fn on_converged(&mut self, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
         self.check()?;
         self.problem.on_converged(step)?;
@@ -196,6 +199,9 @@ impl<P: NonlinearProblem + ?Sized> NonlinearProblem for &mut P {
     }
     fn residual_scale(&self) -> f64 {
         (**self).residual_scale()
+    }
+    fn describe_unknown(&self, dof: usize) -> Option<String> {
+        (**self).describe_unknown(dof)
     }
     fn on_converged(&mut self, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
         (**self).on_converged(step)
