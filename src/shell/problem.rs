@@ -236,6 +236,19 @@ impl ShellProblem {
                 }
                 return Err(ConstraintError::EmptyRow { label: c.label }.into());
             }
+            // The same row twice (two edge conditions holding one component at their common
+            // corner) would make the system singular: the repeat is redundant.
+            let same = |r: &LinearConstraint| {
+                r.value == c.value
+                    && r.terms.len() == dense.len()
+                    && r.terms.iter().zip(&dense).all(|(a, b)| {
+                        a.0 == b.0 && (a.1 - b.1).abs() <= 1e-12 * scale.max(a.1.abs())
+                    })
+            };
+            if rows.iter().any(same) {
+                redundant.push(c.label);
+                continue;
+            }
             rows.push(LinearConstraint { terms: dense, ..c });
         }
         let (e, t) = (model.material.young, model.thickness);

@@ -23,6 +23,7 @@ pub mod linear;
 pub mod newton;
 pub mod observe;
 pub mod pattern;
+pub mod spectrum;
 
 pub use assembly::{
     assemble, assemble_vector, assemble_with, AssemblyBuffers, AssemblyError, Execution,
