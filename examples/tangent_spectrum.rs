@@ -16,6 +16,8 @@
 //! sign alternating from particle to particle, 0.5 for noise) and where the mode is largest.
 use shelldsa::io::shell_build::build;
 use shelldsa::io::shell_case::{read_shell_case, CellLayout};
+use shelldsa::shell::model::ShellModel;
+use shelldsa::shell::problem::ShellProblem;
 use shelldsa::solver::newton::ConvergedStep;
 use shelldsa::solver::observe::{Observed, StepObserver};
 use shelldsa::solver::spectrum::{smallest_eigenpairs, SpectrumOptions};
@@ -23,8 +25,6 @@ use shelldsa::solver::{
     ConvergedTangent, EssentialBc, LinearSolver, Method, NonlinearProblem, ProblemError,
     SolverOptions,
 };
-use shelldsa::shell::model::ShellModel;
-use shelldsa::shell::problem::ShellProblem;
 
 struct Probe {
     count: usize,
@@ -184,17 +184,15 @@ impl StepObserver<&mut ShellProblem> for Probe {
         self.pending = Some((step.load, out));
         Ok(())
     }
-    fn after_commit(&mut self, problem: &&mut ShellProblem, _u: &[f64], _load: f64) {
-        if let Some((load, out)) = self.pending.take() {
-            let mut line = format!("load {load:>10.4}");
-            for (name, at) in &self.monitors {
-                let d = problem.model.displacement_at(*at).unwrap_or_default();
-                line += &format!("  {name} ({:+.4}, {:+.4}, {:+.4})", d.x, d.y, d.z);
-            }
-            println!("{line}");
-            for l in out {
-                println!("{l}");
-            }
+    fn after_commit(&mut self, problem: &&mut ShellProblem, _u: &[f64], load: f64) {
+        let mut line = format!("load {load:>10.4}");
+        for (name, at) in &self.monitors {
+            let d = problem.model.displacement_at(*at).unwrap_or_default();
+            line += &format!("  {name} ({:+.4}, {:+.4}, {:+.4})", d.x, d.y, d.z);
+        }
+        println!("{line}");
+        for l in self.pending.take().map(|p| p.1).unwrap_or_default() {
+            println!("{l}");
         }
     }
     fn on_restore(&mut self) {
@@ -232,6 +230,10 @@ fn main() {
             }
             "--jitter" => {
                 case.particles.jitter = num(i + 1);
+                i += 2;
+            }
+            "--stabilise" => {
+                case.integration.director_stabilisation = num(i + 1);
                 i += 2;
             }
             "--count" => {
@@ -272,7 +274,10 @@ fn main() {
     let h = {
         let d = built.problem.model.domain;
         let [nu, nv] = case.particles.counts;
-        [(d[0][1] - d[0][0]) / (nu - 1) as f64, (d[1][1] - d[1][0]) / (nv - 1) as f64]
+        [
+            (d[0][1] - d[0][0]) / (nu - 1) as f64,
+            (d[1][1] - d[1][0]) / (nv - 1) as f64,
+        ]
     };
     let h = h[0].max(h[1]);
     {
@@ -288,10 +293,22 @@ fn main() {
             )
         };
         for (name, f) in [
-            ("smooth (all +1)", Box::new(|_: i64, _: i64| 1.0) as Box<dyn Fn(i64, i64) -> f64>),
-            ("zig-zag along u", Box::new(|i: i64, _: i64| if i % 2 == 0 { 1.0 } else { -1.0 })),
-            ("zig-zag along v", Box::new(|_: i64, j: i64| if j % 2 == 0 { 1.0 } else { -1.0 })),
-            ("checkerboard", Box::new(|i: i64, j: i64| if (i + j) % 2 == 0 { 1.0 } else { -1.0 })),
+            (
+                "smooth (all +1)",
+                Box::new(|_: i64, _: i64| 1.0) as Box<dyn Fn(i64, i64) -> f64>,
+            ),
+            (
+                "zig-zag along u",
+                Box::new(|i: i64, _: i64| if i % 2 == 0 { 1.0 } else { -1.0 }),
+            ),
+            (
+                "zig-zag along v",
+                Box::new(|_: i64, j: i64| if j % 2 == 0 { 1.0 } else { -1.0 }),
+            ),
+            (
+                "checkerboard",
+                Box::new(|i: i64, j: i64| if (i + j) % 2 == 0 { 1.0 } else { -1.0 }),
+            ),
         ] {
             let mut x = vec![0.0; 5 * np];
             for (p, q) in model.particle_uv[..np].iter().enumerate() {
@@ -312,7 +329,11 @@ fn main() {
         scale,
         counts: case.particles.counts,
         domain: built.problem.model.domain,
-        monitors: case.monitors.iter().map(|m| (m.name.clone(), m.at)).collect(),
+        monitors: case
+            .monitors
+            .iter()
+            .map(|m| (m.name.clone(), m.at))
+            .collect(),
         lines: Vec::new(),
         pending: None,
         h,
