@@ -98,8 +98,11 @@ fn bordered_system_gives_the_constrained_spectrum() {
         // An eigenvector of the constrained operator: K x − λ x lies in the span of the rows.
         let r = &k * &x - &x * pair.value;
         let rz = z.transpose() * r;
+        // Ritz vectors converge like the square root of the Ritz values' tolerance (1e-10), so
+        // their residual is about 1e-5 |λ| (4.4e-7 absolute measured here); 1e-4 |λ| leaves a
+        // margin.
         assert!(
-            rz.amax() < 1e-6 * pair.value.abs(),
+            rz.amax() < 1e-4 * pair.value.abs(),
             "residual {}",
             rz.amax()
         );
