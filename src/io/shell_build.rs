@@ -539,6 +539,15 @@ pub fn connect_with_contact(
             },
         );
     }
+    if case.integration.director_stabilisation > 0.0 {
+        loads.push(Box::new(
+            crate::shell::stabilisation::DirectorFilter::new(
+                &model,
+                case.integration.director_stabilisation,
+            )
+            .map_err(|e| model_err("integration.director_stabilisation", e))?,
+        ));
+    }
     let contact = match &case.contact {
         Some(spec) if !case.tools.is_empty() => {
             let omega = spec.penalty.omega(case.material.young, case.thickness);

@@ -108,6 +108,8 @@ struct IntegrationFile {
     thickness_rule: String,
     #[serde(default)]
     vci: Option<String>,
+    #[serde(default)]
+    director_stabilisation: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -338,7 +340,7 @@ pub enum CellLayout {
 }
 
 /// `[integration]`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct IntegrationSpec {
     /// Background cells.
     pub cells: CellLayout,
@@ -348,6 +350,8 @@ pub struct IntegrationSpec {
     pub thickness_rule: ThicknessRule,
     /// Variationally consistent correction of the test gradients (docs/integration.md).
     pub vci: VciOrder,
+    /// Factor `ε` of the director-filter stabilisation (docs/stability.md; 0: off).
+    pub director_stabilisation: f64,
 }
 
 /// A displacement or rotation component of a particle's 5 DOFs.
@@ -1209,11 +1213,23 @@ impl Checker<'_> {
                 ))
             }
         };
+        let director_stabilisation = match i.director_stabilisation {
+            None => 0.0,
+            Some(x) if x.is_finite() && x >= 0.0 => x,
+            Some(x) => {
+                return Err(self.err(
+                    "integration.director_stabilisation",
+                    format!("{x}"),
+                    "a finite number >= 0 (0: off)",
+                ))
+            }
+        };
         let integration = IntegrationSpec {
             cells,
             gauss,
             thickness_rule,
             vci,
+            director_stabilisation,
         };
 
         let material = material_from_spec(&f.material, self.path)?;

@@ -14,6 +14,7 @@ pub mod point;
 pub mod point_sensitivity;
 pub mod problem;
 pub mod rotation;
+pub mod stabilisation;
 pub mod symmetry;
 pub mod tangent;
 

@@ -446,6 +446,20 @@ impl ShellModel {
         }
     }
 
+    /// The RK shape functions (real and image particles) at parameter coordinates `uv`.
+    pub fn shape_values(&self, uv: [f64; 2]) -> Result<ShapeValues, ShellError> {
+        let mut sv = ShapeValues::new();
+        self.shape_functions.evaluate(uv, &mut sv).map_err(mf)?;
+        Ok(sv)
+    }
+
+    /// The real particle whose DOFs shape-function particle `j` uses, and `det Q` of its map
+    /// (1 for a real particle): an image's rotation parameters are `det Q` times its source's.
+    pub fn dof_source(&self, j: usize) -> (usize, f64) {
+        let m = self.dof_map(j);
+        (m.source, m.map.map_or(1.0, |(_, det)| det))
+    }
+
     /// The committed RK-interpolated mid-surface displacement `Σ Ψ_J ū_J` at parameter
     /// coordinates `uv` (no surface needed; [`ShellModel::sample`] adds the geometry).
     pub fn displacement_at(&self, uv: [f64; 2]) -> Result<Vector3<f64>, ShellError> {

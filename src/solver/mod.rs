@@ -24,6 +24,7 @@ pub mod newton;
 pub mod observe;
 pub mod pattern;
 pub mod supernodal;
+pub mod spectrum;
 
 pub use assembly::{
     assemble, assemble_vector, assemble_with, AssemblyBuffers, AssemblyError, Execution,
