@@ -1,4 +1,4 @@
-//! Cost of the design sensitivity methods against the analysis (issue 5, item 4): per case
+//! Cost of the design sensitivity methods against the analysis : per case
 //! shipped in `verification/*-dsa/`, criterion times the whole plain analysis
 //! (`analysis`: no hook, residual-first acceptance), the analysis with the continuum DSA of all
 //! the case's design variables in its hook (`continuum`) and with the dual-number reference

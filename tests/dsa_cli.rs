@@ -1,4 +1,4 @@
-//! `shelldsa dsa` (issue 5, part 2): design variables in case files and their errors, and the
+//! `shelldsa dsa` : design variables in case files and their errors, and the
 //! reduced elastoplastic hemisphere (`verification/hemisphere-plastic-dsa/ci.toml`, 9 × 9
 //! particles, σ0 halved, 14 steps to P = 35, four steps into yield) run through the command line: the
 //! dual reference against central differences, the Taylor rate, and bit-identical
@@ -371,7 +371,7 @@ fn hemisphere_dual_against_fd_through_the_cli() {
             // Step size 1: h/τ = 1e-4. Central-difference truncation at this size was measured
             // at ~1e-8 relative (and 1e-6 at h/τ = 1e-3: it falls as h²); the bound 1e-6 leaves
             // room for re-run noise up to 1e-10 of the response (1e-6 · h/τ), far above the
-            // round-off of converged runs and far below any real disagreement (issue 5 asks
+            // round-off of converged runs and far below any real disagreement (the three-way check asks
             // 0.1 % of continuum against FD).
             if s["fd_flagged"][1].as_bool().unwrap() {
                 continue;
@@ -380,7 +380,7 @@ fn hemisphere_dual_against_fd_through_the_cli() {
                 let dual = c["dual"].as_f64().unwrap();
                 let fd = c["fd_central"][1].as_f64().unwrap();
                 let cont = c["continuum"].as_f64().unwrap();
-                // Continuum = dual (issue 5: 1e-8 relative on components with
+                // Continuum = dual (required: 1e-8 relative on components with
                 // |ψ'| ≥ 1e-6 max|ψ'|); zero where the dual is exactly zero.
                 if dual == 0.0 {
                     assert_eq!(cont, 0.0, "{name} {label}");
@@ -410,7 +410,7 @@ fn hemisphere_dual_against_fd_through_the_cli() {
             }
         }
         assert!(compared > 0, "{name}: no component compared");
-        // Taylor rate 2 (issue 5: 2.0 ± 0.1) wherever two unflagged, non-exact sizes exist.
+        // Taylor rate 2 (required: 2.0 ± 0.1) wherever two unflagged, non-exact sizes exist.
         for f in v["taylor"]["per_step"].as_array().unwrap() {
             if let Some(r) = f["rate"].as_f64() {
                 assert!((r - 2.0).abs() < 0.1, "{name} step {}: rate {r}", f["step"]);
@@ -424,7 +424,7 @@ fn hemisphere_dual_against_fd_through_the_cli() {
     assert_eq!(s0["fd_central"][0].as_f64().unwrap(), 0.0);
 }
 
-/// Issue 5, items 1–3 on the reduced Table 2 case (`verification/cylindrical-bending-dsa/ci.toml`:
+/// Design variables, methods and tables on the reduced Table 2 case (`verification/cylindrical-bending-dsa/ci.toml`:
 /// punch-driven bending with contact, die x and z position): continuum = dual to 2e-10 on every
 /// component with |ψ'| ≥ 1e-6 max|ψ'| at every step, continuum = central differences within
 /// 5e-5 on the steps whose active set (contact and yield status) does not change within ±h,

@@ -1,4 +1,4 @@
-//! Design sensitivity with contact (issue 5, tool-position variables; the paper's §4.2,
+//! Design sensitivity with contact (tool-position variables; the paper's §4.2,
 //! eqs 73–83) on a small punch-bending case: a quarter sheet 30 × 5 × 1 mm (13 × 3 particles,
 //! elastoplastic aluminium as in `verification/cylindrical-bending/`), a cylinder punch
 //! (R = 10) pushed down at x = 0, a cylinder die (R = 10) at x = 22, a constant self-weight.
@@ -518,7 +518,7 @@ fn tool_rotation_sensitivity_matches_dual_and_central_differences() {
 /// One variable's results of the `shelldsa dsa` run: dual against central differences at the
 /// smallest step, and the Taylor rates.
 /// The continuum (hand-derived, with `ShellContact::force_dot` for `b'_N`) derivative equals the
-/// dual one: issue 5 asks 1e-8 relative on every component with |ψ'| ≥ 1e-6 max|ψ'| (both solve
+/// dual one: the three-way check asks 1e-8 relative on every component with |ψ'| ≥ 1e-6 max|ψ'| (both solve
 /// eq 65 with the same tangent; their right-hand sides differ by round-off).
 fn continuum_matches_dual(var: &dsa_run::VariableResult) {
     let name = &var.entry.variable.name;

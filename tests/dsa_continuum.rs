@@ -1,4 +1,4 @@
-//! The continuum (hand-derived) DSA, path 2 of `/work/shared/design.md` (paper eqs 37–65):
+//! The continuum (hand-derived) DSA, path 2 of `docs/sensitivity.md` (paper eqs 37–65):
 //! against the dual-number reference on the yielding clamped plate (`tests/common/plate.rs`:
 //! follower pressure, clamped edges, 5 steps, plastic in steps 4–5) for thickness and five
 //! material parameters, term group by term group at a plastic step, bit-identical on a

@@ -1,4 +1,4 @@
-//! Design sensitivity groundwork (issue 5): the dual-number reference against finite
+//! Design sensitivity groundwork: the dual-number reference against finite
 //! differences of complete re-runs, the Taylor remainder rate, repeatability, and a linear
 //! elastic cantilever against beam theory.
 //!

@@ -1,4 +1,4 @@
-//! Shape design variables (issue 5): the hand-derived design velocity (eqs 37–43 on the
+//! Shape design variables: the hand-derived design velocity (eqs 37–43 on the
 //! parametric discretisation) against a `Dual64` evaluation of the f64 code path and central
 //! differences; the dual-number reference with shape variables against central differences of
 //! complete re-runs (an elastoplastic hemisphere, radius; a NURBS panel under pressure and
@@ -610,7 +610,7 @@ fn check_run(label: &str, case: &ShellCase, tol: f64, min_rates: usize) -> Vec<(
             "{label} {name}: no step may be flagged at the smallest step"
         );
         assert!(diff <= tol, "{label} {name}: {diff:e} > {tol:e}");
-        // The continuum (hand-derived) derivative equals the dual one (issue 5: 1e-8 relative
+        // The continuum (hand-derived) derivative equals the dual one (required: 1e-8 relative
         // on every component with |ψ'| ≥ 1e-6 max|ψ'|; both solve eq 65 with the same
         // tangent, their right-hand sides differ by round-off).
         let (c, d) = (v.continuum.as_ref().unwrap(), v.dual.as_ref().unwrap());

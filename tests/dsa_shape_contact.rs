@@ -1,4 +1,4 @@
-//! Shape design variables in cases with contact (issue 5; the paper's eqs 74, 78–83): the
+//! Shape design variables in cases with contact (the paper's eqs 74, 78–83): the
 //! contact's slave points sit on the initial mid-surface, `x = x̄⁰ + Σ Ψ (ū + Δū) + ζ t/2 d`,
 //! `d = n⁰ + Σ Ψ (d_J − d⁰_J)`, weighed by the initial face areas `w |x⁰,1 × x⁰,2|`, so a
 //! shape variable moves them by `V⁰ + ζ t/2 ṅ⁰` and changes the areas
@@ -430,7 +430,7 @@ fn contact_force_shape_sensitivity_matches_dual_and_rebuilt_contacts() {
     }
 }
 
-/// The continuum derivative equals the dual one: issue 5 asks 1e-8 relative on every
+/// The continuum derivative equals the dual one: the three-way check asks 1e-8 relative on every
 /// component with |ψ'| ≥ 1e-6 max|ψ'| (both solve eq 65 with the same tangent; their
 /// right-hand sides differ by round-off). Returns the largest relative difference.
 fn continuum_matches_dual(var: &dsa_run::VariableResult) -> f64 {
@@ -537,7 +537,7 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
             "{name}: {unflagged} of {} steps unflagged",
             last.flagged.len()
         );
-        // Issue 5 asks 0.1 % against complete re-runs. At the smallest h the central
+        // The three-way check asks 0.1 % against complete re-runs. At the smallest h the central
         // difference's truncation falls as h² (measured 4.1e-5, 1.0e-5, 2.6e-6 for the length
         // at h/τ = 1e-4, 5e-5, 2.5e-5; the width ≤ 1.3e-7, at the re-runs' noise ~1e-14 of
         // the responses over h) : 1e-5 leaves a factor 4 and is 100 times the issue's 0.1 %.

@@ -1,4 +1,4 @@
-//! Continuum DSA point and model kernels (issue 5, path 2): the hand-derived directional
+//! Continuum DSA point and model kernels (path 2): the hand-derived directional
 //! derivative of the point residual and trial history (`point_residual_dot`) equals the
 //! dual-number derivative of the generic kernel (`point_residual` in `Dual64`, round-off) and
 //! central differences (truncation), per seed group (surface, thickness, each material

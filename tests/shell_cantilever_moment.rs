@@ -1,5 +1,5 @@
 //! Cantilever under an end moment (Sze, Liu & Lo 2004, FEAD 40:1551, §3.2;
-//! `/work/shared/reference-values.md` §2): a clamped strip L = 12, width 1, t = 0.1, E = 1.2e6,
+//! `../shared/reference-values.md` §2): a clamped strip L = 12, width 1, t = 0.1, E = 1.2e6,
 //! ν = 0 rolls up under the end moment `M`; at `M_max = 2π EI/L` it closes into a full circle.
 //! Exact (inextensible elastica, uniform curvature `M/EI`), with `θ = 2π M/M_max`:
 //! tip `−u = L (1 − sin θ/θ)`, `w = L (1 − cos θ)/θ`.

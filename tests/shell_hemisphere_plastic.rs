@@ -1,7 +1,7 @@
 //! The elastoplastic pinched hemisphere (the source paper's §5.1 data: σ_Y = 2.43e5, H = 3e5,
 //! `verification/hemisphere-plastic/case.toml`) on a coarse 9 × 9 quarter model: the assembled
 //! tangent of the problem at plastic states equals the dual-number Jacobian of the assembled
-//! residual (issue 3: to 1e-7 relative), and central differences to truncation.
+//! residual (to 1e-7 relative), and central differences to truncation.
 //!
 //! ```text
 //!        B (−P y)            quarter model, symmetry planes x = 0, y = 0 (image particles)
@@ -141,7 +141,7 @@ fn tangent_equals_dual_jacobian_at_plastic_states() {
     println!(
         "{checked} columns: |K − J_dual| / max|J_col| = {worst:.2e}, |J_fd − J_dual| = {worst_fd:.2e}"
     );
-    // Issue 3 asks for 1e-7; the hand tangent and the dual numbers differ by round-off only
+    // The requirement is 1e-7; the hand tangent and the dual numbers differ by round-off only
     // (measured ~1e-13 on single points, tests/shell_tangent_fast.rs), so 1e-7 has wide margin
     // while any missing term (≥ 2e-4 when one is dropped) fails it.
     assert!(worst <= 1e-7, "tangent vs dual Jacobian: {worst:e}");

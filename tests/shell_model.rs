@@ -1,4 +1,4 @@
-//! Assembled meshfree shell (issue 3 groundwork): the assembled consistent tangent equals the
+//! Assembled meshfree shell: the assembled consistent tangent equals the
 //! dual-number Jacobian of the assembled internal force, before and after a committed plastic
 //! step with finite rotations (which moves particles, rotates directors and lamina frames, and
 //! leaves plastic history); and parallel assembly is bit-identical to serial.

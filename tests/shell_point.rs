@@ -1,4 +1,4 @@
-//! Shell point kernel (issue 3 groundwork): the hand-derived consistent tangent of one quadrature
+//! Shell point kernel: the hand-derived consistent tangent of one quadrature
 //! point equals the dual-number Jacobian of the generic residual and central differences, at
 //! elastic and plastic states, with finite director rotations in the step (cf. TACS per-element
 //! Jacobian tests; deal.II step-72 for hand vs AD side by side).

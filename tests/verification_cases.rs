@@ -170,7 +170,7 @@ fn cantilever_end_moment_sze() {
 /// Unconstrained cylindrical bending and springback (Choi et al. 2003 §5.2; README of
 /// `verification/cylindrical-bending`), reduced for CI: 21 × 3 particles instead of 31 × 4, no
 /// VTU, and the punch stopped at t = 1.4 (after the separation, which the shipped case finds at
-/// t ≈ 1.247). About 10 s in release. Asserts issue 4 item 4 and the contact bookkeeping:
+/// t ≈ 1.247). About 10 s in release. Asserts at most 8 iterations per step and the contact bookkeeping:
 /// - every converged step took ≤ 8 Newton iterations (the case's `max_iterations`; a step that
 ///   needs more is cut) and ended with the residual below 1e-10 of the larger of the step's
 ///   first residual and the punch force, or at the round-off floor of the residually stressed

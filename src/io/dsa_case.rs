@@ -1,5 +1,5 @@
 //! Design variables in a shell case file: the `[[design]]` tables and the optional `[dsa]`
-//! table (issue 5; `docs/case-format.md` §"Design sensitivity").
+//! table (`docs/case-format.md` §"Design sensitivity").
 //!
 //! ```toml
 //! [[design]]

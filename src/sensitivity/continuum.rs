@@ -1,4 +1,4 @@
-//! The continuum (hand-derived) design sensitivity analysis, path 2 of `/work/shared/design.md`:
+//! The continuum (hand-derived) design sensitivity analysis, path 2 of `docs/sensitivity.md`:
 //! the paper's §3 (eqs 37–65) on the discretised shell, at every converged load step, with the
 //! tangent the Newton driver holds factorised at the converged state and no iteration.
 //!

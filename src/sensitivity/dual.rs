@@ -1,4 +1,4 @@
-//! The dual-number reference of the design sensitivities (path 3 of `/work/shared/design.md`):
+//! The dual-number reference of the design sensitivities (path 3 of `docs/sensitivity.md`):
 //! the discrete, path-dependent solution differentiated step by step through the analysis'
 //! own generic kernels, with no hand-derived sensitivity code.
 //!

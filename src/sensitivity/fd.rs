@@ -1,4 +1,4 @@
-//! Finite differences of complete re-runs (path 4 of `/work/shared/design.md`): central
+//! Finite differences of complete re-runs (path 4 of `docs/sensitivity.md`): central
 //! differences for a list of step sizes (the step-size study) and the Taylor remainder test
 //! `|ψ(τ + h) − ψ(τ) − h ψ'|`, which falls as `h²` when `ψ'` is the derivative of the discrete
 //! response, with its observed rate fitted over the step sizes.

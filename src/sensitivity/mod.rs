@@ -1,4 +1,4 @@
-//! Design sensitivity analysis (issue 5; the paper's §3, eqs 37–65): design variables, the
+//! Design sensitivity analysis (the paper's §3, eqs 37–65): design variables, the
 //! dual-number reference ([`dual`]) and finite differences of complete re-runs ([`fd`]).
 //!
 //! The **non-shape** design variables: the thickness `t` and the material parameters

@@ -1,5 +1,5 @@
 //! Hand-derived forward (directional) derivative of the point residual for the continuum design
-//! sensitivity analysis (issue 5, path 2; paper §3, eqs 37–65).
+//! sensitivity analysis (path 2; paper §3, eqs 37–65).
 //!
 //! The continuum DSA differentiates the residual of one converged step `R(Δq; ⁿs, τ)` with
 //! respect to everything it depends on. At one layer point this is [`point_residual_dot`]: the
