@@ -230,7 +230,10 @@ pub fn main_with_args<I: IntoIterator<Item = String>>(args: I) -> i32 {
             say!(con, "{}: ok ({})", case.display(), describe(&c));
             report(&con, &c);
             if let (Case::Shell(_), None) = (&c, &boundary) {
-                say!(con, "boundary: not assembled here (over a million particles): `run` does");
+                say!(
+                    con,
+                    "boundary: not assembled here (over a million particles): `run` does"
+                );
             }
             if let Some(set) = boundary {
                 say!(

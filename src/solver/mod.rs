@@ -23,8 +23,8 @@ pub mod linear;
 pub mod newton;
 pub mod observe;
 pub mod pattern;
-pub mod supernodal;
 pub mod spectrum;
+pub mod supernodal;
 
 pub use assembly::{
     assemble, assemble_vector, assemble_with, AssemblyBuffers, AssemblyError, Execution,
