@@ -113,6 +113,9 @@ impl Default for SolverOptions {
     }
 }
 
+/// faer's sparse LU (symbolic and numeric), the supernodal LU's fallback.
+type FallbackLu = (lu::SymbolicLu<usize>, lu::NumericLu<usize, f64>);
+
 enum Factor {
     Lu {
         symbolic: lu::SymbolicLu<usize>,
@@ -133,7 +136,7 @@ enum Factor {
         numeric: SupernodalNumeric,
         /// The unrestricted sparse LU, built when a restricted-pivoting factorisation fails
         /// the probe; `active` while it holds the current factorisation.
-        fallback: Option<Box<(lu::SymbolicLu<usize>, lu::NumericLu<usize, f64>)>>,
+        fallback: Option<Box<FallbackLu>>,
         active: bool,
     },
 }
