@@ -60,7 +60,10 @@ impl Method {
     }
 }
 
-/// Threading of faer's factorisation and solve kernels.
+/// Threading of faer's factorisation and solve kernels ([`Method::Lu`], [`Method::Cholesky`],
+/// [`Method::DenseLu`], and the fallback of [`Method::SupernodalLu`]). The supernodal LU itself
+/// runs its independent subtrees and cut updates on rayon's pool whatever this setting, with a
+/// split that does not depend on the number of threads.
 ///
 /// The default is sequential. On the elastoplastic hemisphere tangent (1446 unknowns, 616k
 /// stored entries) one numeric LU took 54.5 ms serial and 41 ms on 2 threads when the second
@@ -110,6 +113,9 @@ impl Default for SolverOptions {
     }
 }
 
+/// faer's sparse LU (symbolic and numeric), the supernodal LU's fallback.
+type FallbackLu = (lu::SymbolicLu<usize>, lu::NumericLu<usize, f64>);
+
 enum Factor {
     Lu {
         symbolic: lu::SymbolicLu<usize>,
@@ -130,7 +136,7 @@ enum Factor {
         numeric: SupernodalNumeric,
         /// The unrestricted sparse LU, built when a restricted-pivoting factorisation fails
         /// the probe; `active` while it holds the current factorisation.
-        fallback: Option<Box<(lu::SymbolicLu<usize>, lu::NumericLu<usize, f64>)>>,
+        fallback: Option<Box<FallbackLu>>,
         active: bool,
     },
 }

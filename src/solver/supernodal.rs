@@ -775,14 +775,17 @@ impl Dissection<'_> {
             .collect();
         let mut before = 0usize;
         let mut best: Option<(usize, usize)> = None;
-        for k in 0..levels.len() {
-            let after = total - before - w[k];
-            if k > 0 && k + 1 < levels.len() && 4 * before >= total && 4 * after >= total {
-                if best.is_none_or(|(_, bw)| w[k] < bw) {
-                    best = Some((k, w[k]));
-                }
+        for (k, &wk) in w.iter().enumerate() {
+            let after = total - before - wk;
+            if k > 0
+                && k + 1 < levels.len()
+                && 4 * before >= total
+                && 4 * after >= total
+                && best.is_none_or(|(_, bw)| wk < bw)
+            {
+                best = Some((k, wk));
             }
-            before += w[k];
+            before += wk;
         }
         let k = match best {
             Some((k, _)) => k,
