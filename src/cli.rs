@@ -256,19 +256,13 @@ pub fn main_with_args<I: IntoIterator<Item = String>>(args: I) -> i32 {
             }
             EXIT_OK
         }),
-        Command::Run { case, out, quiet } => read_case(&case).map(|c| {
-            report(&con, &c);
-            run(&con, &c, &out, quiet)
-        }),
+        Command::Run { case, out, quiet } => read_case(&case).map(|c| run(&con, &c, &out, quiet)),
         Command::Dsa {
             case,
             out,
             methods,
             terms,
-        } => read_case(&case).map(|c| {
-            report(&con, &c);
-            dsa(&con, &c, &out, methods.as_deref(), terms)
-        }),
+        } => read_case(&case).map(|c| dsa(&con, &c, &out, methods.as_deref(), terms)),
     };
     match result {
         Ok(code) => con.status(code),
@@ -282,7 +276,12 @@ pub fn main_with_args<I: IntoIterator<Item = String>>(args: I) -> i32 {
 /// The case's resource estimate and warnings ([`crate::io::case_report`]), printed before any
 /// work.
 fn report(con: &Console, c: &Case) {
-    for line in crate::io::case_report(c) {
+    report_lines(con, crate::io::case_report(c));
+}
+
+/// Print the lines of a case report.
+fn report_lines(con: &Console, lines: Vec<String>) {
+    for line in lines {
         say!(con, "{line}");
     }
 }
@@ -377,6 +376,7 @@ fn dsa(
             .collect::<Vec<_>>()
             .join(",")
     );
+    report_lines(con, crate::io::shell_report(c));
     // The first error writing sensitivity.json while the methods run (they go on).
     let mut write_error: Option<String> = None;
     let run = dsa_run::run_observed(c, &spec, terms, &mut |line| con.line(line), &mut |r| {
@@ -522,7 +522,10 @@ fn run(con: &Console, case: &Case, out: &Path, quiet: bool) -> i32 {
         return EXIT_OUTPUT;
     }
     match case {
-        Case::MaterialPath(c) => match run_material_path(con, c, out, quiet) {
+        Case::MaterialPath(c) => match {
+            report(con, case);
+            run_material_path(con, c, out, quiet)
+        } {
             Ok(code) => code,
             Err(Failure { code, message }) => {
                 err!("error: {message}");
@@ -587,6 +590,7 @@ fn run_shell(con: &Console, c: &ShellCase, out: &Path, quiet: bool) -> i32 {
             .len(),
         start.elapsed().as_secs_f64()
     );
+    report_lines(con, crate::io::shell_report(c));
     let bar = (!quiet && std::io::stdout().is_terminal()).then(|| {
         let b = indicatif::ProgressBar::new(1000);
         if let Ok(style) = indicatif::ProgressStyle::with_template(

@@ -271,17 +271,22 @@ pub fn case_report(case: &Case) -> Vec<String> {
             m.path.n_steps(),
             m.max_steps
         )],
-        Case::Shell(s) => std::iter::once(format!(
-            "{} (limits: {} unknowns, {} layer points, memory {}, support {} spacings)",
-            s.estimate(),
-            s.limits.max_unknowns,
-            s.limits.max_layer_points,
-            shell_case::fmt_bytes(s.limits.max_memory_bytes),
-            s.limits.max_support
-        ))
-        .chain(s.warnings.iter().map(|w| format!("warning: {w}")))
-        .collect(),
+        Case::Shell(s) => shell_report(s),
     }
+}
+
+/// [`case_report`] of a shell case.
+pub fn shell_report(s: &shell_case::ShellCase) -> Vec<String> {
+    std::iter::once(format!(
+        "{} (limits: {} unknowns, {} layer points, memory {}, support {} spacings)",
+        s.estimate(),
+        s.limits.max_unknowns,
+        s.limits.max_layer_points,
+        shell_case::fmt_bytes(s.limits.max_memory_bytes),
+        s.limits.max_support
+    ))
+    .chain(s.warnings.iter().map(|w| format!("warning: {w}")))
+    .collect()
 }
 
 /// Read and validate a case file.

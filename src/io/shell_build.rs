@@ -200,12 +200,6 @@ pub fn unsupported(case: &ShellCase) -> Vec<BuildError> {
         .collect()
 }
 
-/// The label of the constraint row of the `prescribed` entry `boundary[k]` (to find its
-/// reaction among the problem's rows).
-pub fn prescribed_label(k: usize, component: Component) -> String {
-    format!("boundary[{k}]: prescribed {}", component.name())
-}
-
 /// The reaction of every `prescribed` entry of the case, in case order: `(boundary[k], the
 /// force (or moment) the support exerts on the shell along the prescribed component)`, from
 /// the committed multipliers. An entry whose row was dropped as redundant has none.
@@ -215,12 +209,13 @@ pub fn prescribed_reactions(case: &ShellCase, problem: &ShellProblem) -> Vec<(St
         .iter()
         .enumerate()
         .filter_map(|(k, b)| match b {
-            Boundary::Prescribed { component, .. } => {
-                let label = prescribed_label(k, *component);
+            Boundary::Prescribed { .. } => {
+                // The entry's one row, labelled by `boundary_constraints`.
+                let prefix = format!("{}: ", entry_name(k, b));
                 problem
                     .constraints()
                     .iter()
-                    .position(|c| c.label == label)
+                    .position(|c| c.label.starts_with(&prefix))
                     .map(|i| (format!("boundary[{k}]"), reactions[i]))
             }
             _ => None,
@@ -399,11 +394,7 @@ pub fn boundary_constraints(
             },
         }
         for c in &mut constraints[from..] {
-            c.label = match b {
-                // The reactions of displacement control are found by this label.
-                Boundary::Prescribed { component, .. } => prescribed_label(k, *component),
-                _ => format!("{entry}: {}", c.label),
-            };
+            c.label = format!("{entry}: {}", c.label);
         }
     }
     Ok(constraints)
