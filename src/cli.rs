@@ -522,16 +522,16 @@ fn run(con: &Console, case: &Case, out: &Path, quiet: bool) -> i32 {
         return EXIT_OUTPUT;
     }
     match case {
-        Case::MaterialPath(c) => match {
+        Case::MaterialPath(c) => {
             report(con, case);
-            run_material_path(con, c, out, quiet)
-        } {
-            Ok(code) => code,
-            Err(Failure { code, message }) => {
-                err!("error: {message}");
-                code
+            match run_material_path(con, c, out, quiet) {
+                Ok(code) => code,
+                Err(Failure { code, message }) => {
+                    err!("error: {message}");
+                    code
+                }
             }
-        },
+        }
         Case::Shell(c) => run_shell(con, c, out, quiet),
     }
 }

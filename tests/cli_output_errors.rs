@@ -608,9 +608,17 @@ fn a_killed_run_leaves_valid_results() {
             .unwrap();
         let mut reader = BufReader::new(child.stdout.take().unwrap());
         let mut line = String::new();
-        for _ in 0..after + 1 {
+        // Progress lines of converged steps start with "step"; the header and the case's
+        // estimate come before them.
+        let mut steps = 0;
+        while steps < after {
             line.clear();
-            reader.read_line(&mut line).unwrap();
+            if reader.read_line(&mut line).unwrap() == 0 {
+                break; // the run ended first
+            }
+            if line.starts_with("step ") {
+                steps += 1;
+            }
         }
         child.kill().unwrap();
         child.wait().unwrap();
