@@ -379,12 +379,16 @@ fn dsa(
     report_lines(con, crate::io::shell_report(c));
     // The first error writing sensitivity.json while the methods run (they go on).
     let mut write_error: Option<String> = None;
+    // The last results written: kept with the failure if the run stops.
+    let mut last: Option<serde_json::Value> = None;
     let run = dsa_run::run_observed(c, &spec, terms, &mut |line| con.line(line), &mut |r| {
         if write_error.is_none() {
-            if let Err(e) = dsa_run::write_json(&path, &dsa_run::to_json(c, r, "running")) {
+            let doc = dsa_run::to_json(c, r, "running");
+            if let Err(e) = dsa_run::write_json(&path, &doc) {
                 err!("error: {e} (the run goes on)");
                 write_error = Some(e);
             }
+            last = Some(doc);
         }
     });
     let result = match run {
@@ -397,10 +401,16 @@ fn dsa(
                     _
                 ))
             );
-            let _ = dsa_run::write_json(
-                &path,
-                &dsa_run::empty_json(c, &spec, &format!("failed: {e}")),
-            );
+            let status = format!("failed: {e}");
+            let doc = match last {
+                // Every converged step of the run that stopped.
+                Some(mut doc) => {
+                    doc["status"] = serde_json::Value::String(status);
+                    doc
+                }
+                None => dsa_run::empty_json(c, &spec, &status),
+            };
+            let _ = dsa_run::write_json(&path, &doc);
             return if stopped {
                 EXIT_STOPPED
             } else {

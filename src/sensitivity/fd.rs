@@ -21,7 +21,7 @@ use super::dual::SensitivityError;
 use super::{Design, DesignVariable, Monitor};
 use crate::contact::ShellContact;
 use crate::shell::problem::ShellProblem;
-use crate::solver::observe::{Observed, StepObserver};
+use crate::solver::observe::{Observed, StepObserver, Tapped};
 use crate::solver::{LinearSolver, Method, NewtonSolver, SolverOptions};
 use std::sync::Arc;
 
@@ -108,6 +108,19 @@ pub fn response_with_contact(
     solver: SolverOptions,
     monitors: &[Monitor],
 ) -> Result<RunResponse, SensitivityError> {
+    response_observed(problem, contact, newton, solver, monitors, &mut |_| {})
+}
+
+/// As [`response_with_contact`]; `on_step` sees the responses so far after every converged
+/// step (to write them as the run goes).
+pub fn response_observed(
+    problem: ShellProblem,
+    contact: Option<Arc<ShellContact>>,
+    newton: &NewtonSolver,
+    solver: SolverOptions,
+    monitors: &[Monitor],
+    on_step: &mut dyn FnMut(&RunResponse),
+) -> Result<RunResponse, SensitivityError> {
     let pattern = problem.pattern().clone();
     let mut linear = LinearSolver::new(&pattern, Method::auto(&pattern), solver)?;
     let u0 = problem.state().to_vec();
@@ -123,7 +136,8 @@ pub fn response_with_contact(
         before: Vec::new(),
         failure: None,
     };
-    let mut p = Observed::new(problem, rec);
+    let mut tap = |r: &Recording<'_>| on_step(&r.out);
+    let mut p = Observed::new(problem, Tapped::new(rec, &mut tap));
     newton
         .run(&mut p, &pattern, &mut linear, &u0)
         .map_err(SensitivityError::Newton)?;
@@ -132,7 +146,7 @@ pub fn response_with_contact(
             crate::shell::ShellError::InvalidInput(f),
         ));
     }
-    Ok(p.observer.out)
+    Ok(p.observer.observer.out)
 }
 
 /// Builds the analysis for a design: the problem and its driver.
