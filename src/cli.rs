@@ -434,18 +434,36 @@ fn dsa(
         fmt(result.time_dual_run),
         fmt(result.time_fd)
     );
-    if let (Some(t), Some(dsa)) = (result.continuum_stages, result.time_continuum) {
-        let nv = result.variables.len().max(1) as f64;
+    let cost = result.cost();
+    if let (Some(t), Some(own)) = (result.continuum_stages, cost.continuum_own) {
         say!(
             con,
             "continuum DSA per design variable: {:.2} % of the analysis; stages: right-hand sides \
              {:.3} s, solve {:.3} s, history update {:.3} s, monitors {:.3} s, load check {:.3} s",
-            100.0 * dsa / result.time_analysis / nv,
+            100.0 * own,
             t.rhs,
             t.solve,
             t.update,
             t.record,
             t.check
+        );
+    }
+    if let Some(whole) = cost.hooked_over_plain {
+        say!(
+            con,
+            "hooked run over the plain run, per design variable: {:.2} % (everything the {} \
+             add{}, the tangents at converged states included)",
+            100.0 * whole,
+            match (result.time_continuum, result.time_dual) {
+                (Some(_), Some(_)) => "continuum DSA and the dual reference",
+                (Some(_), None) => "continuum DSA",
+                _ => "dual reference",
+            },
+            if result.time_continuum.is_some() && result.time_dual.is_some() {
+                ""
+            } else {
+                "s"
+            }
         );
     }
     for f in &result.failures {

@@ -243,6 +243,38 @@ pub struct DsaResult {
     pub failures: Vec<DsaFailure>,
 }
 
+/// The cost of the derivative methods per design variable, as fractions of the plain
+/// analysis' wall time, measured both ways ([`DsaResult::cost`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DsaCost {
+    /// The continuum DSA's own stages (fictitious loads, solves, history update, monitors)
+    /// over the plain analysis, per variable.
+    pub continuum_own: Option<f64>,
+    /// The dual reference's own time over the plain analysis, per variable.
+    pub dual_own: Option<f64>,
+    /// `(hooked − plain) / plain / variables`: everything the hooked run costs more than the
+    /// plain one, including the converged-state tangents the methods need and the plain run
+    /// skips. With both methods the hooked run carries both.
+    pub hooked_over_plain: Option<f64>,
+}
+
+impl DsaResult {
+    /// The cost per design variable both ways (`None` entries for methods that did not run).
+    pub fn cost(&self) -> DsaCost {
+        let nv = self.variables.len().max(1) as f64;
+        let plain = self.time_analysis;
+        let per = |t: f64| (plain > 0.0).then(|| t / plain / nv);
+        DsaCost {
+            continuum_own: self.time_continuum.and_then(per),
+            dual_own: self.time_dual.and_then(per),
+            hooked_over_plain: self
+                .time_continuum_run
+                .or(self.time_dual_run)
+                .and_then(|t| per(t - plain)),
+        }
+    }
+}
+
 /// A method or finite-difference re-run that failed.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DsaFailure {
@@ -821,7 +853,7 @@ pub fn write_json(path: &std::path::Path, doc: &Value) -> Result<(), String> {
 }
 
 /// The notes written at the top of `sensitivity.json`.
-pub const NOTES: [&str; 4] = [
+pub const NOTES: [&str; 5] = [
     "continuum: the hand-derived continuum DSA (eqs 37-65: fictitious loads solved with the \
      converged, factorised tangent at every step); dual: the dual-number reference through \
      the same kernels; continuum_vs_dual: per variable, the largest |continuum - dual| \
@@ -840,6 +872,10 @@ pub const NOTES: [&str; 4] = [
      (max over the monitors; psi' the continuum derivative when it ran, else the dual one) \
      against log h over the unflagged step sizes; 2 when psi' is the derivative of the \
      discrete response",
+    "cost_per_variable: fractions of the plain analysis' wall time per design variable; \
+     continuum_own and dual_own: each method's own time in the hooked run; hooked_over_plain: \
+     (hooked run - plain run) / plain run / variables, everything the methods add including \
+     the tangents at converged states (with both methods, one run carries both)",
 ];
 
 /// `sensitivity.json`. Everything but `timing_s` and `dual_run_total_s` is a deterministic
@@ -951,6 +987,11 @@ pub fn to_json(case: &ShellCase, r: &DsaResult, status: &str) -> Value {
                 "record": t.record,
                 "check": t.check,
             })),
+        },
+        "cost_per_variable": {
+            "continuum_own": r.cost().continuum_own.map_or(Value::Null, num),
+            "dual_own": r.cost().dual_own.map_or(Value::Null, num),
+            "hooked_over_plain": r.cost().hooked_over_plain.map_or(Value::Null, num),
         },
         "dual_run_total_s": r.time_dual_run,
         "continuum_run_total_s": r.time_continuum_run,
