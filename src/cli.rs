@@ -479,6 +479,22 @@ fn dsa(
         return EXIT_OUTPUT;
     }
     say!(con, "wrote {} ({status})", path.display());
+    match crate::io::dsa_plots::write(out, &result) {
+        Ok(files) => say!(
+            con,
+            "wrote {} figure(s): {}",
+            files.len(),
+            files
+                .iter()
+                .filter_map(|f| f.file_name()?.to_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        Err(e) => {
+            err!("error: {e}");
+            return EXIT_OUTPUT;
+        }
+    }
     if write_error.is_some() {
         // Written in the end, but not while the methods ran.
         return EXIT_OUTPUT;
@@ -921,6 +937,7 @@ fn plot_material_path(
                 title: "response",
                 x_label: "step",
                 y_label: "stress",
+                x_scale: Scale::Linear,
                 y_scale: Scale::Linear,
                 series: vec![
                     Series {
@@ -944,6 +961,7 @@ fn plot_material_path(
                 title: &title,
                 x_label: "step",
                 y_label: "dσ11/dτ",
+                x_scale: Scale::Linear,
                 y_scale: Scale::Linear,
                 series: vec![
                     Series {
@@ -967,6 +985,7 @@ fn plot_material_path(
                 title: "worst scaled error per step (all 11 history components)",
                 x_label: "step",
                 y_label: "error",
+                x_scale: Scale::Linear,
                 y_scale: Scale::Log,
                 series: vec![
                     Series {

@@ -552,9 +552,10 @@ pub fn run_observed(
     if let Some(r) = continuum_run {
         let loads: Vec<f64> = r.records.iter().map(|s| s.load).collect();
         if loads != nominal.loads {
-            let e = DsaError::Inconsistent(format!(
-                "converged load levels {loads:?}, plain analysis {:?}: prescribe the steps",
-                nominal.loads
+            let e = DsaError::Inconsistent(fd::load_levels_differ(
+                &loads,
+                &nominal.loads,
+                "plain analysis",
             ));
             fail(&mut result, progress, DsaFailure::method("continuum", e));
             for v in &mut result.variables {
@@ -588,9 +589,10 @@ pub fn run_observed(
     if let Some(r) = dual_run {
         let loads: Vec<f64> = r.records.iter().map(|s| s.load).collect();
         if loads != nominal.loads {
-            let e = DsaError::Inconsistent(format!(
-                "converged load levels {loads:?}, plain analysis {:?}: prescribe the steps",
-                nominal.loads
+            let e = DsaError::Inconsistent(fd::load_levels_differ(
+                &loads,
+                &nominal.loads,
+                "plain analysis",
             ));
             fail(&mut result, progress, DsaFailure::method("dual", e));
             for v in &mut result.variables {
@@ -658,17 +660,7 @@ pub fn run_observed(
                     analysis.solver(),
                     monitors,
                 )?;
-                if r.loads != nominal.loads {
-                    return Err(SensitivityError::StepSequence {
-                        variable: var.name.clone(),
-                        h: delta,
-                        detail: format!(
-                            "converged load levels {:?}, nominal {:?}: prescribe the steps",
-                            r.loads, nominal.loads
-                        ),
-                    }
-                    .into());
-                }
+                fd::same_steps(var, delta, &nominal, &r)?;
                 progress(&format!(
                     "fd {done}/{total_runs}: `{}` {} h (h/|τ| = {relative:e}, h = {delta:.4e}) \
                      in {:.2} s",
@@ -1105,9 +1097,9 @@ pub fn table(r: &DsaResult, v: usize) -> String {
                 _ => format!("{:>10}", "—"),
             };
             s.push_str(&format!(
-                "{:>4} {:>11.4e} {:<10} {} {} {} {} {}{}\n",
+                "{:>4} {:>11} {:<10} {} {} {} {} {}{}\n",
                 st + 1,
-                r.nominal.loads[st],
+                super::plot::plain_tick(r.nominal.loads[st]),
                 mon.label,
                 cell(Some(r.nominal.values[st][m])),
                 cell(fd),

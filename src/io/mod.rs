@@ -8,6 +8,7 @@
 //!   assembled by [`shell_build`] and written by [`shell_output`].
 
 pub mod dsa_case;
+pub mod dsa_plots;
 pub mod dsa_run;
 pub mod plot;
 pub mod shell_build;

@@ -1016,6 +1016,7 @@ impl ShellOutput {
             title: &title,
             x_label: &x_label,
             y_label: "force",
+            x_scale: Scale::Linear,
             y_scale: Scale::Linear,
             series,
         };
@@ -1328,6 +1329,7 @@ impl ShellOutput {
                     title: &titles[k],
                     x_label: "displacement",
                     y_label: &y_label,
+                    x_scale: Scale::Linear,
                     y_scale: Scale::Linear,
                     series,
                 }

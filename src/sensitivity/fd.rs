@@ -177,7 +177,9 @@ fn run_at(
     response_with_contact(problem, contact, &newton, analysis.solver(), monitors)
 }
 
-fn same_steps(
+/// A re-run at `τ + h` is comparable with the nominal run only on the same load levels
+/// ([`SensitivityError::StepSequence`] otherwise, naming where they part).
+pub fn same_steps(
     variable: &DesignVariable,
     h: f64,
     nominal: &RunResponse,
@@ -187,13 +189,34 @@ fn same_steps(
         return Err(SensitivityError::StepSequence {
             variable: variable.name.clone(),
             h,
-            detail: format!(
-                "converged load levels {:?}, nominal {:?}: prescribe the steps",
-                other.loads, nominal.loads
-            ),
+            detail: load_levels_differ(&other.loads, &nominal.loads, "nominal run"),
         });
     }
     Ok(())
+}
+
+/// How the converged load levels `run` differ from those of `reference` (named
+/// `reference_name`), for an error message: the first step where they part, or the step
+/// counts.
+pub fn load_levels_differ(run: &[f64], reference: &[f64], reference_name: &str) -> String {
+    match run.iter().zip(reference).position(|(a, b)| a != b) {
+        Some(k) => format!(
+            "the converged load level of step {} is {} where the {reference_name} has {} \
+             ({} steps against {}: a step was cut or grown differently); prescribe the steps \
+             or take a smaller step size",
+            k + 1,
+            run[k],
+            reference[k],
+            run.len(),
+            reference.len()
+        ),
+        None => format!(
+            "{} converged steps where the {reference_name} has {} (the same levels up to \
+             there); prescribe the steps",
+            run.len(),
+            reference.len()
+        ),
+    }
 }
 
 /// Per step, whether the yield status of any layer point, or the contact status of any slave
