@@ -729,7 +729,6 @@ pub fn run_continuum_and_dual(
     problem: crate::shell::problem::ShellProblem,
     surface: Option<&Surface<f64>>,
     variables: Vec<DesignVariable>,
-    loads: Vec<dual::DualLoad>,
     monitors: Vec<Monitor>,
     newton: &crate::solver::NewtonSolver,
     solver: crate::solver::SolverOptions,
@@ -739,7 +738,6 @@ pub fn run_continuum_and_dual(
         problem: crate::shell::problem::ShellProblem,
         surface: Option<&Surface<f64>>,
         variables: Vec<DesignVariable>,
-        loads: Vec<dual::DualLoad>,
         monitors: Vec<Monitor>,
         newton: &crate::solver::NewtonSolver,
         solver: crate::solver::SolverOptions,
@@ -752,14 +750,9 @@ pub fn run_continuum_and_dual(
             crate::solver::Method::auto(&pattern),
             solver,
         )?;
-        let c = continuum::ContinuumDsa::new(
-            &problem,
-            surface,
-            variables.clone(),
-            loads.clone(),
-            monitors.clone(),
-        )?;
-        let d = dual::DualDsa::<D>::new(&problem, surface, variables, loads, monitors)?;
+        let c =
+            continuum::ContinuumDsa::new(&problem, surface, variables.clone(), monitors.clone())?;
+        let d = dual::DualDsa::<D>::new(&problem, surface, variables, monitors)?;
         let mut obs = Observed::new(problem, (c, d));
         let u0 = obs.problem.state().to_vec();
         let report = newton
@@ -776,7 +769,7 @@ pub fn run_continuum_and_dual(
         ($($n:literal),*) => {
             match variables.len() {
                 $($n => drive::<num_dual::DualSVec64<$n>>(
-                    problem, surface, variables, loads, monitors, newton, solver,
+                    problem, surface, variables, monitors, newton, solver,
                 ),)*
                 count => Err(dual::SensitivityError::TooManyVariables { count, max: 8 }),
             }
@@ -784,7 +777,7 @@ pub fn run_continuum_and_dual(
     }
     match mode {
         dual::DualMode::PerVariable => {
-            drive::<num_dual::Dual64>(problem, surface, variables, loads, monitors, newton, solver)
+            drive::<num_dual::Dual64>(problem, surface, variables, monitors, newton, solver)
         }
         dual::DualMode::Vector => vector!(1, 2, 3, 4, 5, 6, 7, 8),
     }
