@@ -379,12 +379,16 @@ fn dsa(
     report_lines(con, crate::io::shell_report(c));
     // The first error writing sensitivity.json while the methods run (they go on).
     let mut write_error: Option<String> = None;
+    // The last results written: kept with the failure if the run stops.
+    let mut last: Option<serde_json::Value> = None;
     let run = dsa_run::run_observed(c, &spec, terms, &mut |line| con.line(line), &mut |r| {
         if write_error.is_none() {
-            if let Err(e) = dsa_run::write_json(&path, &dsa_run::to_json(c, r, "running")) {
+            let doc = dsa_run::to_json(c, r, "running");
+            if let Err(e) = dsa_run::write_json(&path, &doc) {
                 err!("error: {e} (the run goes on)");
                 write_error = Some(e);
             }
+            last = Some(doc);
         }
     });
     let result = match run {
@@ -397,10 +401,16 @@ fn dsa(
                     _
                 ))
             );
-            let _ = dsa_run::write_json(
-                &path,
-                &dsa_run::empty_json(c, &spec, &format!("failed: {e}")),
-            );
+            let status = format!("failed: {e}");
+            let doc = match last {
+                // Every converged step of the run that stopped.
+                Some(mut doc) => {
+                    doc["status"] = serde_json::Value::String(status);
+                    doc
+                }
+                None => dsa_run::empty_json(c, &spec, &status),
+            };
+            let _ = dsa_run::write_json(&path, &doc);
             return if stopped {
                 EXIT_STOPPED
             } else {
@@ -424,17 +434,35 @@ fn dsa(
         fmt(result.time_dual_run),
         fmt(result.time_fd)
     );
-    if let (Some(t), Some(dsa)) = (result.continuum_stages, result.time_continuum) {
-        let nv = result.variables.len().max(1) as f64;
+    let cost = result.cost();
+    if let (Some(t), Some(own)) = (result.continuum_stages, cost.continuum_own) {
         say!(
             con,
             "continuum DSA per design variable: {:.2} % of the analysis; stages: right-hand sides \
              {:.3} s, solve {:.3} s, history update {:.3} s, monitors {:.3} s",
-            100.0 * dsa / result.time_analysis / nv,
+            100.0 * own,
             t.rhs,
             t.solve,
             t.update,
             t.record
+        );
+    }
+    if let Some(whole) = cost.hooked_over_plain {
+        say!(
+            con,
+            "hooked run over the plain run, per design variable: {:.2} % (everything the {} \
+             add{}, the tangents at converged states included)",
+            100.0 * whole,
+            match (result.time_continuum, result.time_dual) {
+                (Some(_), Some(_)) => "continuum DSA and the dual reference",
+                (Some(_), None) => "continuum DSA",
+                _ => "dual reference",
+            },
+            if result.time_continuum.is_some() && result.time_dual.is_some() {
+                ""
+            } else {
+                "s"
+            }
         );
     }
     for f in &result.failures {
@@ -450,6 +478,22 @@ fn dsa(
         return EXIT_OUTPUT;
     }
     say!(con, "wrote {} ({status})", path.display());
+    match crate::io::dsa_plots::write(out, &result) {
+        Ok(files) => say!(
+            con,
+            "wrote {} figure(s): {}",
+            files.len(),
+            files
+                .iter()
+                .filter_map(|f| f.file_name()?.to_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        Err(e) => {
+            err!("error: {e}");
+            return EXIT_OUTPUT;
+        }
+    }
     if write_error.is_some() {
         // Written in the end, but not while the methods ran.
         return EXIT_OUTPUT;
@@ -892,6 +936,7 @@ fn plot_material_path(
                 title: "response",
                 x_label: "step",
                 y_label: "stress",
+                x_scale: Scale::Linear,
                 y_scale: Scale::Linear,
                 series: vec![
                     Series {
@@ -915,6 +960,7 @@ fn plot_material_path(
                 title: &title,
                 x_label: "step",
                 y_label: "dσ11/dτ",
+                x_scale: Scale::Linear,
                 y_scale: Scale::Linear,
                 series: vec![
                     Series {
@@ -938,6 +984,7 @@ fn plot_material_path(
                 title: "worst scaled error per step (all 11 history components)",
                 x_label: "step",
                 y_label: "error",
+                x_scale: Scale::Linear,
                 y_scale: Scale::Log,
                 series: vec![
                     Series {

@@ -417,6 +417,101 @@ fn dsa_keeps_the_other_variables_when_a_re_run_fails() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A `dsa` whose plain analysis stops (the elastic–perfectly plastic cantilever asked for about
+/// twice its limit load, as in tests/shell_output.rs: the last converged level is P = 0.025 of
+/// the 0.04 asked for) keeps the converged steps in sensitivity.json, with the failure as its
+/// status, and exits with 3.
+#[test]
+fn dsa_whose_analysis_stops_keeps_its_converged_steps() {
+    let dir = unique_dir("dsa-analysis-stops");
+    let design = "[[design]]\nname = \"t\"\nkind = \"thickness\"\nfd_steps = [1e-3]\n\
+                  [dsa]\nmonitors = [\"tip\"]\nmethods = [\"continuum\", \"dual\"]\n";
+    let case = write_case(
+        &dir,
+        &cantilever(
+            0.04,
+            100.0,
+            "initial_step = 0.25\nmin_step = 0.05\nmax_step = 0.25\nmax_iterations = 12",
+            design,
+        ),
+    );
+    let out = dir.join("out");
+    let o = shelldsa()
+        .args([
+            "dsa",
+            case.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert_no_panic(&o);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(EXIT_STOPPED), "{stdout}");
+    let s = json(&out.join("sensitivity.json"));
+    let status = s["status"].as_str().unwrap();
+    assert!(status.starts_with("failed: analysis"), "{status}");
+    let loads: Vec<f64> = s["loads"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l.as_f64().unwrap())
+        .collect();
+    // At least the elastic first step (0.25) converged, and not the whole load.
+    assert!(loads.len() >= 2, "{loads:?}");
+    assert!(loads.windows(2).all(|w| w[0] < w[1]) && loads[loads.len() - 1] < 1.0);
+    let steps = s["variables"][0]["steps"].as_array().unwrap();
+    assert_eq!(steps.len(), loads.len());
+    for st in steps {
+        let v = st["monitors"]["tip.uz"]["value"].as_f64().unwrap();
+        assert!(v > 0.0, "{st}");
+    }
+    assert!(tmp_files(&out).is_empty());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `dsa` hands its results over after every converged step of the plain analysis and of the run
+/// with the derivative methods (so sensitivity.json follows the run step by step), and the
+/// derivative columns grow one step at a time.
+#[test]
+fn dsa_updates_after_every_converged_step() {
+    use shelldsa::io::dsa_case::DsaMethod;
+    use shelldsa::io::dsa_run;
+    let dir = unique_dir("dsa-step-updates");
+    let design = "[[design]]\nname = \"t\"\nkind = \"thickness\"\nfd_steps = [1e-3]\n\
+                  [dsa]\nmonitors = [\"tip\"]\n";
+    let text = cantilever(
+        1e-4,
+        1e30,
+        "initial_step = 0.2\nmin_step = 0.2\nmax_step = 0.2",
+        design,
+    );
+    let path = write_case(&dir, &text);
+    let case = parse_shell_case(&text, &path).unwrap();
+    let methods = [DsaMethod::Continuum, DsaMethod::Dual];
+    let spec = dsa_run::validate(&case, &methods).unwrap();
+    // (nominal steps, continuum steps, dual steps) at each update.
+    let mut seen: Vec<(usize, usize, usize)> = Vec::new();
+    let r = dsa_run::run_observed(&case, &spec, None, &mut |_| {}, &mut |r| {
+        let v = &r.variables[0];
+        seen.push((
+            r.nominal.loads.len(),
+            v.continuum.as_ref().map_or(0, |c| c.len()),
+            v.dual.as_ref().map_or(0, |d| d.len()),
+        ));
+    })
+    .unwrap();
+    let n = r.nominal.loads.len();
+    assert_eq!(n, 5);
+    for k in 1..=n {
+        assert!(seen.contains(&(k, 0, 0)), "plain step {k}: {seen:?}");
+        assert!(seen.contains(&(n, k, k)), "hooked step {k}: {seen:?}");
+    }
+    // The columns handed over while the run went on are the final ones' leading steps.
+    assert_eq!(r.variables[0].continuum.as_ref().unwrap().len(), n);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// RFC 4180 fields: quoted (quotes doubled) when they hold a comma, a quote, a line break or
 /// edge white space.
 #[test]

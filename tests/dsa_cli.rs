@@ -444,6 +444,12 @@ fn bending_three_ways_through_the_cli() {
     assert_eq!(vars.len(), 2);
     for v in vars {
         let name = v["name"].as_str().unwrap();
+        // The figures beside sensitivity.json: the derivatives along the path and the
+        // finite-difference study, as PNG files.
+        for file in [format!("dsa_{name}.png"), format!("dsa_{name}_fd.png")] {
+            let bytes = std::fs::read(out.join(&file)).unwrap();
+            assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n"), "{file}");
+        }
         let steps = v["steps"].as_array().unwrap();
         let big = steps
             .iter()

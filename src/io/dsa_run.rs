@@ -17,12 +17,12 @@ use super::dsa_case::{
 use super::shell_build;
 use super::shell_case::ShellCase;
 use super::CaseError;
+use super::RewriteSchedule;
 use crate::contact::ShellContact;
-use crate::sensitivity::continuum::run_continuum;
-use crate::sensitivity::dual::{run_dual_on, DualMode, SensitivityError};
+use crate::sensitivity::dual::{DualMode, SensitivityError};
 use crate::sensitivity::fd::{self, fit_rate, Analysis, RunResponse, TaylorFit, TaylorRow};
 use crate::sensitivity::terms::{breakdown, TermBreakdown};
-use crate::sensitivity::{run_continuum_and_dual, validate_design_on, Design, DesignVariable};
+use crate::sensitivity::{run_hooked, validate_design_on, Design, DesignVariable, HookedMethods};
 use crate::shell::problem::ShellProblem;
 use crate::shell::ShellError;
 use crate::solver::NewtonSolver;
@@ -238,6 +238,38 @@ pub struct DsaResult {
     pub failures: Vec<DsaFailure>,
 }
 
+/// The cost of the derivative methods per design variable, as fractions of the plain
+/// analysis' wall time, measured both ways ([`DsaResult::cost`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DsaCost {
+    /// The continuum DSA's own stages (fictitious loads, solves, history update, monitors)
+    /// over the plain analysis, per variable.
+    pub continuum_own: Option<f64>,
+    /// The dual reference's own time over the plain analysis, per variable.
+    pub dual_own: Option<f64>,
+    /// `(hooked − plain) / plain / variables`: everything the hooked run costs more than the
+    /// plain one, including the converged-state tangents the methods need and the plain run
+    /// skips. With both methods the hooked run carries both.
+    pub hooked_over_plain: Option<f64>,
+}
+
+impl DsaResult {
+    /// The cost per design variable both ways (`None` entries for methods that did not run).
+    pub fn cost(&self) -> DsaCost {
+        let nv = self.variables.len().max(1) as f64;
+        let plain = self.time_analysis;
+        let per = |t: f64| (plain > 0.0).then(|| t / plain / nv);
+        DsaCost {
+            continuum_own: self.time_continuum.and_then(per),
+            dual_own: self.time_dual.and_then(per),
+            hooked_over_plain: self
+                .time_continuum_run
+                .or(self.time_dual_run)
+                .and_then(|t| per(t - plain)),
+        }
+    }
+}
+
 /// A method or finite-difference re-run that failed.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DsaFailure {
@@ -323,9 +355,11 @@ pub fn run(
 }
 
 /// Run the analysis and the methods of `spec` on `case`. `progress` receives one line per run;
-/// `update` the results so far after the plain analysis, after the continuum and dual run and
-/// after every finite-difference step size of every variable (to write `sensitivity.json` as
-/// the run goes). With `need_step`, a plain analysis with fewer converged steps is an error
+/// `update` the results so far (to write `sensitivity.json` as the run goes): after converged
+/// steps of the plain analysis and of the run with the derivative methods (on the schedule of
+/// [`RewriteSchedule`]), after each of those runs, after every finite-difference step size of
+/// every variable, and before an error of the plain analysis is returned (with its converged
+/// steps). With `need_step`, a plain analysis with fewer converged steps is an error
 /// before the methods run ([`DsaError::StepOutOfRange`]).
 ///
 /// The checks and the plain analysis are all or nothing: an error there is returned. After it,
@@ -359,20 +393,6 @@ pub fn run_observed(
             }
         }
     }
-    let nominal =
-        fd::response_with_contact(problem, contact, &newton, analysis.solver(), monitors)?;
-    let time_analysis = t.elapsed().as_secs_f64();
-    progress(&format!(
-        "analysis: {} converged steps, {:.2} s",
-        nominal.loads.len(),
-        time_analysis
-    ));
-    if let Some(step) = need_step.filter(|&s| s == 0 || s > nominal.loads.len()) {
-        return Err(DsaError::StepOutOfRange {
-            step,
-            steps: nominal.loads.len(),
-        });
-    }
     let mut result = DsaResult {
         spec: spec.clone(),
         variables: spec
@@ -387,11 +407,16 @@ pub fn run_observed(
                 taylor: Vec::new(),
             })
             .collect(),
-        nominal,
+        nominal: RunResponse {
+            loads: Vec::new(),
+            values: Vec::new(),
+            yielding: Vec::new(),
+            contact: Vec::new(),
+        },
         dual_value_difference: None,
         dual_state_mismatch: None,
         continuum_value_difference: None,
-        time_analysis,
+        time_analysis: 0.0,
         time_continuum: None,
         time_continuum_run: None,
         continuum_stages: None,
@@ -400,6 +425,38 @@ pub fn run_observed(
         time_fd: None,
         failures: Vec::new(),
     };
+    let mut schedule = RewriteSchedule::starting(Instant::now());
+    let run = fd::response_observed(
+        problem,
+        contact,
+        &newton,
+        analysis.solver(),
+        monitors,
+        &mut |r| {
+            extend_response(&mut result.nominal, r);
+            update_if_due(update, &mut schedule, &result, r.loads.len());
+        },
+    );
+    result.time_analysis = t.elapsed().as_secs_f64();
+    match run {
+        Ok(nominal) => result.nominal = nominal,
+        Err(e) => {
+            // The converged steps are kept in the last update before the error.
+            update(&result);
+            return Err(e.into());
+        }
+    }
+    progress(&format!(
+        "analysis: {} converged steps, {:.2} s",
+        result.nominal.loads.len(),
+        result.time_analysis
+    ));
+    if let Some(step) = need_step.filter(|&s| s == 0 || s > result.nominal.loads.len()) {
+        return Err(DsaError::StepOutOfRange {
+            step,
+            steps: result.nominal.loads.len(),
+        });
+    }
     update(&result);
     let nominal = result.nominal.clone();
 
@@ -437,31 +494,46 @@ pub fn run_observed(
         (true, false) => "continuum",
         _ => "dual",
     };
-    let hooked = || -> Result<_, DsaError> {
-        let (problem, newton) = method_problem(&analysis, &base)?;
-        let (surface, solver) = (Some(&case.surface), analysis.solver());
-        let (vars, monitors) = (vars.clone(), monitors.clone());
-        match (want_continuum, want_dual) {
-            (true, true) => {
-                let (c, d) = run_continuum_and_dual(
-                    problem, surface, vars, monitors, &newton, solver, dual_mode,
-                )?;
-                Ok((Some(c), Some(d)))
-            }
-            (true, false) => {
-                let c = run_continuum(problem, surface, vars, monitors, &newton, solver)?;
-                Ok((Some(c), None))
-            }
-            _ => {
-                let d = run_dual_on(problem, surface, vars, monitors, &newton, solver, dual_mode)?;
-                Ok((None, Some(d)))
-            }
-        }
+    let methods = HookedMethods {
+        continuum: want_continuum,
+        dual: want_dual.then_some(dual_mode),
     };
     let (continuum_run, dual_run) = if want_continuum || want_dual {
-        match hooked() {
+        let mut schedule = RewriteSchedule::starting(Instant::now());
+        let runs = method_problem(&analysis, &base).and_then(|(problem, newton)| {
+            run_hooked(
+                problem,
+                Some(&case.surface),
+                vars.clone(),
+                monitors.clone(),
+                &newton,
+                analysis.solver(),
+                methods,
+                &mut |records| {
+                    let mut steps = 0;
+                    if let Some(recs) = records.continuum {
+                        for (v, vr) in result.variables.iter_mut().enumerate() {
+                            let steps_of = recs.iter().map(|r| (r.load, r.derivatives.as_slice()));
+                            extend_column(&mut vr.continuum, &nominal.loads, steps_of, v);
+                        }
+                        steps = recs.len();
+                    }
+                    if let Some(recs) = records.dual {
+                        for (v, vr) in result.variables.iter_mut().enumerate() {
+                            let steps_of = recs.iter().map(|r| (r.load, r.derivatives.as_slice()));
+                            extend_column(&mut vr.dual, &nominal.loads, steps_of, v);
+                        }
+                        steps = steps.max(recs.len());
+                    }
+                    update_if_due(update, &mut schedule, &result, steps);
+                },
+            )
+            .map_err(DsaError::from)
+        });
+        match runs {
             Ok(runs) => runs,
             Err(e) => {
+                // The derivatives of the steps that converged before the failure are kept.
                 fail(&mut result, progress, DsaFailure::method(methods_name, e));
                 (None, None)
             }
@@ -474,11 +546,15 @@ pub fn run_observed(
     if let Some(r) = continuum_run {
         let loads: Vec<f64> = r.records.iter().map(|s| s.load).collect();
         if loads != nominal.loads {
-            let e = DsaError::Inconsistent(format!(
-                "converged load levels {loads:?}, plain analysis {:?}: prescribe the steps",
-                nominal.loads
+            let e = DsaError::Inconsistent(fd::load_levels_differ(
+                &loads,
+                &nominal.loads,
+                "plain analysis",
             ));
             fail(&mut result, progress, DsaFailure::method("continuum", e));
+            for v in &mut result.variables {
+                v.continuum = None;
+            }
         } else {
             result.continuum_value_difference = Some(value_difference(
                 &nominal.values,
@@ -507,11 +583,15 @@ pub fn run_observed(
     if let Some(r) = dual_run {
         let loads: Vec<f64> = r.records.iter().map(|s| s.load).collect();
         if loads != nominal.loads {
-            let e = DsaError::Inconsistent(format!(
-                "converged load levels {loads:?}, plain analysis {:?}: prescribe the steps",
-                nominal.loads
+            let e = DsaError::Inconsistent(fd::load_levels_differ(
+                &loads,
+                &nominal.loads,
+                "plain analysis",
             ));
             fail(&mut result, progress, DsaFailure::method("dual", e));
+            for v in &mut result.variables {
+                v.dual = None;
+            }
         } else {
             result.dual_value_difference = Some(value_difference(
                 &nominal.values,
@@ -574,17 +654,7 @@ pub fn run_observed(
                     analysis.solver(),
                     monitors,
                 )?;
-                if r.loads != nominal.loads {
-                    return Err(SensitivityError::StepSequence {
-                        variable: var.name.clone(),
-                        h: delta,
-                        detail: format!(
-                            "converged load levels {:?}, nominal {:?}: prescribe the steps",
-                            r.loads, nominal.loads
-                        ),
-                    }
-                    .into());
-                }
+                fd::same_steps(var, delta, &nominal, &r)?;
                 progress(&format!(
                     "fd {done}/{total_runs}: `{}` {} h (h/|τ| = {relative:e}, h = {delta:.4e}) \
                      in {:.2} s",
@@ -656,7 +726,10 @@ pub fn run_observed(
             vr.taylor = if rows.is_empty() {
                 Vec::new()
             } else {
+                // Steps past a derivative column cut short by a failed method have no
+                // remainder.
                 (0..nominal.loads.len())
+                    .take_while(|&s| rows.iter().all(|r| s < r.remainder.len()))
                     .map(|s| fit_rate(&rows, s))
                     .collect()
             };
@@ -666,6 +739,49 @@ pub fn run_observed(
     }
     result.time_fd = run_fd.then(|| t_fd.elapsed().as_secs_f64());
     Ok(result)
+}
+
+/// `update(result)` when `schedule` has a rewrite due at `steps` converged steps.
+fn update_if_due(
+    update: &mut dyn FnMut(&DsaResult),
+    schedule: &mut RewriteSchedule,
+    result: &DsaResult,
+    steps: usize,
+) {
+    if schedule.due(steps) {
+        let t = Instant::now();
+        update(result);
+        schedule.wrote(steps, t.elapsed());
+    }
+}
+
+/// Append to `to` the steps of `from` it does not have yet.
+fn extend_response(to: &mut RunResponse, from: &RunResponse) {
+    let have = to.loads.len();
+    to.loads
+        .extend_from_slice(&from.loads[have.min(from.loads.len())..]);
+    to.values.extend(from.values.iter().skip(have).cloned());
+    to.yielding.extend(from.yielding.iter().skip(have).cloned());
+    to.contact.extend(from.contact.iter().skip(have).cloned());
+}
+
+/// Append to the column of variable `v` (`column[step][monitor]`) the derivatives of the hooked
+/// run's steps (`(load, derivatives[monitor][variable])`) it does not have yet, as long as each
+/// step's load is the plain analysis' load of the same step (a column only holds steps
+/// comparable with the plain run's).
+fn extend_column<'a>(
+    column: &mut Option<Vec<Vec<f64>>>,
+    loads: &[f64],
+    steps: impl Iterator<Item = (f64, &'a [Vec<f64>])>,
+    v: usize,
+) {
+    let column = column.get_or_insert_with(Vec::new);
+    for (s, (load, d)) in steps.enumerate().skip(column.len()) {
+        if loads.get(s) != Some(&load) {
+            break;
+        }
+        column.push(d.iter().map(|m| m[v]).collect());
+    }
 }
 
 /// Record a failure and report it on the progress lines.
@@ -723,7 +839,7 @@ pub fn write_json(path: &std::path::Path, doc: &Value) -> Result<(), String> {
 }
 
 /// The notes written at the top of `sensitivity.json`.
-pub const NOTES: [&str; 4] = [
+pub const NOTES: [&str; 5] = [
     "continuum: the hand-derived continuum DSA (eqs 37-65: fictitious loads solved with the \
      converged, factorised tangent at every step); dual: the dual-number reference through \
      the same kernels; continuum_vs_dual: per variable, the largest |continuum - dual| \
@@ -742,6 +858,10 @@ pub const NOTES: [&str; 4] = [
      (max over the monitors; psi' the continuum derivative when it ran, else the dual one) \
      against log h over the unflagged step sizes; 2 when psi' is the derivative of the \
      discrete response",
+    "cost_per_variable: fractions of the plain analysis' wall time per design variable; \
+     continuum_own and dual_own: each method's own time in the hooked run; hooked_over_plain: \
+     (hooked run - plain run) / plain run / variables, everything the methods add including \
+     the tangents at converged states (with both methods, one run carries both)",
 ];
 
 /// `sensitivity.json`. Everything but `timing_s` and `dual_run_total_s` is a deterministic
@@ -767,8 +887,8 @@ pub fn to_json(case: &ShellCase, r: &DsaResult, status: &str) -> Value {
                             mon.label.clone(),
                             json!({
                                 "value": num(r.nominal.values[s][m]),
-                                "continuum": v.continuum.as_ref().map_or(Value::Null, |d| num(d[s][m])),
-                                "dual": v.dual.as_ref().map_or(Value::Null, |d| num(d[s][m])),
+                                "continuum": v.continuum.as_ref().and_then(|d| d.get(s)).map_or(Value::Null, |d| num(d[m])),
+                                "dual": v.dual.as_ref().and_then(|d| d.get(s)).map_or(Value::Null, |d| num(d[m])),
                                 "fd_central": v.fd.iter().map(|c| num(c.derivatives[s][m])).collect::<Vec<_>>(),
                                 "fd_step": v.fd.iter().map(|c| num(c.h)).collect::<Vec<_>>(),
                             }),
@@ -779,7 +899,7 @@ pub fn to_json(case: &ShellCase, r: &DsaResult, status: &str) -> Value {
                         "load": r.nominal.loads[s],
                         "plastic_points": r.nominal.yielding[s].iter().filter(|y| **y).count(),
                         "fd_flagged": v.fd.iter().map(|c| c.flagged[s]).collect::<Vec<_>>(),
-                        "taylor_remainder": v.fd.iter().map(|c| c.taylor.as_ref().map_or(Value::Null, |t| num(t.remainder[s]))).collect::<Vec<_>>(),
+                        "taylor_remainder": v.fd.iter().map(|c| c.taylor.as_ref().and_then(|t| t.remainder.get(s)).map_or(Value::Null, |t| num(*t))).collect::<Vec<_>>(),
                         "monitors": comps,
                     })
                 })
@@ -852,6 +972,11 @@ pub fn to_json(case: &ShellCase, r: &DsaResult, status: &str) -> Value {
                 "update": t.update,
                 "record": t.record,
             })),
+        },
+        "cost_per_variable": {
+            "continuum_own": r.cost().continuum_own.map_or(Value::Null, num),
+            "dual_own": r.cost().dual_own.map_or(Value::Null, num),
+            "hooked_over_plain": r.cost().hooked_over_plain.map_or(Value::Null, num),
         },
         "dual_run_total_s": r.time_dual_run,
         "continuum_run_total_s": r.time_continuum_run,
@@ -953,7 +1078,10 @@ pub fn table(r: &DsaResult, v: usize) -> String {
         let flag = col.is_some_and(|c| c.flagged[st]);
         for (m, mon) in r.spec.monitors.iter().enumerate() {
             let fd = col.map(|c| c.derivatives[st][m] * c.h);
-            let scaled = |d: &Vec<Vec<f64>>| col.map(|c| d[st][m] * c.h).or(Some(d[st][m]));
+            let scaled = |d: &Vec<Vec<f64>>| {
+                let g = d.get(st)?[m];
+                col.map(|c| g * c.h).or(Some(g))
+            };
             let dual = var.dual.as_ref().and_then(scaled);
             let cont = var.continuum.as_ref().and_then(scaled);
             let ratio = match (fd, cont.or(dual)) {
@@ -962,9 +1090,9 @@ pub fn table(r: &DsaResult, v: usize) -> String {
                 _ => format!("{:>10}", "—"),
             };
             s.push_str(&format!(
-                "{:>4} {:>11.4e} {:<10} {} {} {} {} {}{}\n",
+                "{:>4} {:>11} {:<10} {} {} {} {} {}{}\n",
                 st + 1,
-                r.nominal.loads[st],
+                super::plot::plain_tick(r.nominal.loads[st]),
                 mon.label,
                 cell(Some(r.nominal.values[st][m])),
                 cell(fd),

@@ -45,6 +45,8 @@ pub struct Panel<'a> {
     pub x_label: &'a str,
     /// y-axis label.
     pub y_label: &'a str,
+    /// x-axis scale.
+    pub x_scale: Scale,
     /// y-axis scale.
     pub y_scale: Scale,
     /// Series drawn in the panel.
@@ -127,45 +129,45 @@ pub fn figure(path: &Path, width: u32, height: u32, panels: &[Panel]) -> Result<
     root.fill(&WHITE).map_err(|x| e(&x))?;
     let areas = root.split_evenly((panels.len().max(1), 1));
     for (area, p) in areas.iter().zip(panels) {
+        let (log_x, log_y) = (p.x_scale == Scale::Log, p.y_scale == Scale::Log);
         let xs = range(
             p.series.iter().flat_map(|s| s.points.iter().map(|q| q.0)),
-            false,
+            log_x,
         );
-        let log = p.y_scale == Scale::Log;
         let ys = range(
             p.series.iter().flat_map(|s| s.points.iter().map(|q| q.1)),
-            log,
+            log_y,
         );
         let mut b = ChartBuilder::on(area);
         b.caption(p.title, ("sans-serif", 20))
             .margin(10)
             .x_label_area_size(40)
             .y_label_area_size(80);
-        if log {
-            let mut chart = b
-                .build_cartesian_2d(xs.0..xs.1, (ys.0..ys.1).log_scale())
-                .map_err(|x| e(&x))?;
-            chart
-                .configure_mesh()
-                .x_desc(p.x_label)
-                .y_desc(p.y_label)
-                .y_label_formatter(&|v| format!("{v:.0e}"))
-                .draw()
-                .map_err(|x| e(&x))?;
-            draw_series(&mut chart, &p.series, true, xs, ys).map_err(|x| e(&x))?;
-        } else {
-            let mut chart = b
-                .build_cartesian_2d(xs.0..xs.1, ys.0..ys.1)
-                .map_err(|x| e(&x))?;
-            chart
-                .configure_mesh()
-                .x_desc(p.x_label)
-                .y_desc(p.y_label)
-                .x_label_formatter(&|v| plain_tick(*v))
-                .y_label_formatter(&|v| plain_tick(*v))
-                .draw()
-                .map_err(|x| e(&x))?;
-            draw_series(&mut chart, &p.series, false, xs, ys).map_err(|x| e(&x))?;
+        let exp = |v: &f64| format!("{v:.0e}");
+        // A tick within round-off of zero on a linear axis is written 0.
+        let near_zero = |v: f64, r: (f64, f64)| v.abs() <= 1e-9 * r.0.abs().max(r.1.abs());
+        let plain_x = |v: &f64| plain_tick(if near_zero(*v, xs) { 0.0 } else { *v });
+        let plain = |v: &f64| plain_tick(if near_zero(*v, ys) { 0.0 } else { *v });
+        // One arm per combination of axis kinds (plotters' coordinate types differ).
+        macro_rules! draw {
+            ($x:expr, $y:expr, $fx:expr, $fy:expr) => {{
+                let mut chart = b.build_cartesian_2d($x, $y).map_err(|x| e(&x))?;
+                chart
+                    .configure_mesh()
+                    .x_desc(p.x_label)
+                    .y_desc(p.y_label)
+                    .x_label_formatter(&$fx)
+                    .y_label_formatter(&$fy)
+                    .draw()
+                    .map_err(|x| e(&x))?;
+                draw_series(&mut chart, &p.series, (log_x, log_y), xs, ys).map_err(|x| e(&x))?;
+            }};
+        }
+        match (log_x, log_y) {
+            (false, false) => draw!(xs.0..xs.1, ys.0..ys.1, plain_x, plain),
+            (false, true) => draw!(xs.0..xs.1, (ys.0..ys.1).log_scale(), plain_x, exp),
+            (true, false) => draw!((xs.0..xs.1).log_scale(), ys.0..ys.1, exp, plain),
+            (true, true) => draw!((xs.0..xs.1).log_scale(), (ys.0..ys.1).log_scale(), exp, exp),
         }
     }
     root.present().map_err(|x| e(&x))?;
@@ -174,7 +176,7 @@ pub fn figure(path: &Path, width: u32, height: u32, panels: &[Panel]) -> Result<
 
 /// A tick label in plain notation (`0.25`, `1500`, `-3.2`), with exponents only outside
 /// `[1e-3, 1e6)`: six significant digits at most, trailing zeros removed.
-fn plain_tick(v: f64) -> String {
+pub(crate) fn plain_tick(v: f64) -> String {
     let a = v.abs();
     if v == 0.0 || !v.is_finite() {
         return if v == 0.0 { "0".into() } else { v.to_string() };
@@ -199,13 +201,14 @@ fn plain_tick(v: f64) -> String {
 fn draw_series<'a, DB: DrawingBackend + 'a, CT>(
     chart: &mut ChartContext<'a, DB, CT>,
     series: &[Series],
-    log: bool,
+    (log_x, log_y): (bool, bool),
     xs: (f64, f64),
     ys: (f64, f64),
 ) -> Result<(), String>
 where
     CT: plotters::coord::CoordTranslate<From = (f64, f64)>,
 {
+    let mut marker_series = 0;
     for (k, s) in series.iter().enumerate() {
         let color = COLORS[k % COLORS.len()];
         // Points inside the axes: a point far outside would be mapped to a pixel ~2^31 away,
@@ -214,14 +217,18 @@ where
             .points
             .iter()
             .filter_map(|p| {
-                let x = axis_value(p.0, false)?.clamp(xs.0, xs.1);
-                let y = axis_value(p.1, log)?.clamp(ys.0, ys.1);
+                let x = axis_value(p.0, log_x)?.clamp(xs.0, xs.1);
+                let y = axis_value(p.1, log_y)?.clamp(ys.0, ys.1);
                 Some((x, y))
             })
             .collect();
         if s.markers {
+            // Later marker series are drawn smaller, so that coinciding points of several
+            // series stay visible as concentric dots.
+            let radius = 6u32.saturating_sub(2 * marker_series).max(2);
+            marker_series += 1;
             chart
-                .draw_series(pts.iter().map(|&p| Circle::new(p, 3, color.filled())))
+                .draw_series(pts.iter().map(|&p| Circle::new(p, radius, color.filled())))
                 .map_err(|e| e.to_string())?
                 .label(s.label)
                 .legend(move |(x, y)| Circle::new((x + 10, y), 3, color.filled()));
@@ -325,6 +332,7 @@ mod tests {
                         title: "degenerate",
                         x_label: "x",
                         y_label: "y",
+                        x_scale: Scale::Linear,
                         y_scale,
                         series: vec![
                             Series {

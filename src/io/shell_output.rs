@@ -48,7 +48,7 @@
 //! uy, uz]}}` for converged steps and `null` (plus `"failure"`) for rejected ones. The file is
 //! written to `results.json.tmp` and renamed ([`replace_file`]), so a reader, or a run killed
 //! at any moment, never sees half a file. It and the PVD are rewritten after every converged
-//! step while the run is short and then less and less often (`Rewrites`: the total written
+//! step while the run is short and then less and less often (`RewriteSchedule`: the total written
 //! stays linear in the number of steps); every step is also appended to `steps.jsonl` as it
 //! converges (one line of JSON each, serialised once and reused by every rewrite).
 //!
@@ -591,7 +591,7 @@ pub struct ShellOutput {
     step_lines: Vec<String>,
     /// `steps.jsonl`, open for appending, and its length after the last whole line.
     step_log: Option<(std::fs::File, u64)>,
-    rewrites: Rewrites,
+    rewrites: super::RewriteSchedule,
     start: Instant,
     info: serde_json::Map<String, Value>,
     contact: Option<ContactTracking>,
@@ -603,36 +603,6 @@ pub struct ShellOutput {
     displacement_control: Option<f64>,
     /// Reactions of the step being recorded (set before [`Self::converged_with_contact`]).
     pending_reactions: Vec<(String, f64)>,
-}
-
-/// When `results.json` and the PVD are rewritten whole while the run goes on: after every
-/// converged step up to [`Rewrites::EVERY_STEP_UP_TO`], then once the number of steps has grown
-/// by a sixteenth since the last rewrite, or once the last rewrite is older than
-/// [`Rewrites::MIN_INTERVAL_S`] and 100 times its own duration. Each step record is then
-/// written about 17 times in all (a geometric series), and rewrites take at most about 1 % of
-/// the wall time, so the cost per step stays bounded however long the run. The append-only
-/// `steps.jsonl` has every converged step as soon as it converges.
-#[derive(Debug)]
-struct Rewrites {
-    /// Steps in the last rewrite.
-    steps: usize,
-    /// When it ended.
-    at: Instant,
-    /// How long it took.
-    took: std::time::Duration,
-}
-
-impl Rewrites {
-    const EVERY_STEP_UP_TO: usize = 32;
-    const GROWTH: usize = 16;
-    const MIN_INTERVAL_S: f64 = 10.0;
-
-    fn due(&self, steps: usize) -> bool {
-        let since = self.at.elapsed().as_secs_f64();
-        steps <= Self::EVERY_STEP_UP_TO
-            || steps >= self.steps + (self.steps / Self::GROWTH).max(1)
-            || since >= Self::MIN_INTERVAL_S.max(100.0 * self.took.as_secs_f64())
-    }
 }
 
 /// What [`ShellOutput`] tracks of the contact over the run.
@@ -696,11 +666,7 @@ impl ShellOutput {
             steps: Vec::new(),
             step_lines: Vec::new(),
             step_log: None,
-            rewrites: Rewrites {
-                steps: 0,
-                at: start,
-                took: std::time::Duration::ZERO,
-            },
+            rewrites: super::RewriteSchedule::starting(start),
             start,
             info: serde_json::Map::new(),
             contact: None,
@@ -1050,6 +1016,7 @@ impl ShellOutput {
             title: &title,
             x_label: &x_label,
             y_label: "force",
+            x_scale: Scale::Linear,
             y_scale: Scale::Linear,
             series,
         };
@@ -1276,11 +1243,7 @@ impl ShellOutput {
         let text = self.results_text(status, None)?;
         let path = self.dir.join(RESULTS_FILE);
         replace_file(&path, text.as_bytes()).map_err(io_err(&path))?;
-        self.rewrites = Rewrites {
-            steps: self.steps.len(),
-            at: Instant::now(),
-            took: t.elapsed(),
-        };
+        self.rewrites.wrote(self.steps.len(), t.elapsed());
         Ok(())
     }
 
@@ -1366,6 +1329,7 @@ impl ShellOutput {
                     title: &titles[k],
                     x_label: "displacement",
                     y_label: &y_label,
+                    x_scale: Scale::Linear,
                     y_scale: Scale::Linear,
                     series,
                 }

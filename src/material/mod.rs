@@ -394,9 +394,10 @@ fn solve_consistency(
 /// `θ = 1 − ⅔βHλ` and `f2 = ⅔βHφ² + θ ηᵀPw`:
 /// `D^ep = f1 Ξ D − (θ / f2) u uᵀ` (symmetric).
 ///
-/// This differs in form from the transcribed eq (48) (whose `f2` carries `⅔Hφ²` and whose `f3`
-/// carries an extra `f1`); the dual-number derivative of [`return_map`] confirms this form for
-/// every β in [0, 1] (tests `consistent_tangent_*`).
+/// This is the transcribed eq (48) with its `f2 = ⅔Hφ² + θ ηᵀPΞDPη` and `f3 = f1 θ / f2`
+/// written as `f3 = θ / (f2 / f1)`: the two forms agree to round-off for every β
+/// (tests/material_transcription.rs), and the dual-number derivative of [`return_map`] confirms
+/// them (tests `consistent_tangent_*`).
 pub fn consistent_tangent(m: &MaterialParams<f64>, out: &ReturnMap<f64>) -> Mat5<f64> {
     let d = elastic_matrix(m);
     if !out.plastic {

@@ -17,8 +17,10 @@
 //!
 //! The stress sensitivity is linear in `Δε̇`: `ⁿ⁺¹σ̇ = D^ep Δε̇ + σ^fic` (eq 47), where σ^fic
 //! collects the history terms (`ⁿσ̇, ⁿα̇, ⁿė^p`, eq 49) and the material-parameter terms.
-//! The paper's eqs (46)–(49) as transcribed differ in the factors f2 and f3; this form is the one
-//! the dual-number derivative of [`super::return_map`] confirms.
+//! This `f2` is the transcription's divided by `f1`, so `D^ep` is eq (48) as transcribed. Eq
+//! (49)'s coefficient of `ⁿα̇` as transcribed is not the derivative: this form gives
+//! `λΞDP + f3 ΞDPη ηᵀPΞ` (`f3 = θ/f2` here), the one the dual-number derivative of
+//! [`super::return_map`] confirms (tests/material_transcription.rs).
 
 use super::{
     elastic_matrix, eta_p_eta, p_matrix, xi_matrix, Mat5, MaterialParams, MaterialState, ReturnMap,

@@ -44,11 +44,11 @@ use crate::shell::model::ShellModel;
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
 use crate::shell::point_sensitivity::{commit_particle_dot, ModelSeeds, StepLinearisation};
 use crate::shell::problem::ShellProblem;
-use crate::solver::observe::{Observed, StepObserver};
+use crate::solver::observe::StepObserver;
 use crate::solver::NonlinearProblem;
 use crate::solver::{
-    ConvergedStep, ConvergedTangent, FactorisedAt, LinearSolver, NewtonReport, NewtonSolver,
-    ProblemError, SolverOptions,
+    ConvergedStep, ConvergedTangent, FactorisedAt, NewtonReport, NewtonSolver, ProblemError,
+    SolverOptions,
 };
 use nalgebra::Vector3;
 use std::time::{Duration, Instant};
@@ -839,19 +839,19 @@ pub fn run_continuum(
     newton: &NewtonSolver,
     solver: SolverOptions,
 ) -> Result<ContinuumRun, SensitivityError> {
-    let t0 = Instant::now();
-    let pattern = problem.pattern().clone();
-    let mut linear = LinearSolver::new(&pattern, crate::solver::Method::auto(&pattern), solver)?;
-    let dsa = ContinuumDsa::new(&problem, surface, variables, monitors)?;
-    let mut obs = Observed::new(problem, dsa);
-    let u0 = obs.problem.state().to_vec();
-    let report = newton
-        .run(&mut obs, &pattern, &mut linear, &u0)
-        .map_err(SensitivityError::Newton)?;
-    if let Some(f) = obs.observer.failure() {
-        return Err(SensitivityError::Shell(
-            crate::shell::ShellError::InvalidInput(f),
-        ));
-    }
-    Ok(obs.observer.into_run(report, t0.elapsed()))
+    let methods = super::HookedMethods {
+        continuum: true,
+        dual: None,
+    };
+    let (run, _) = super::run_hooked(
+        problem,
+        surface,
+        variables,
+        monitors,
+        newton,
+        solver,
+        methods,
+        &mut |_| {},
+    )?;
+    Ok(run.unwrap_or_else(|| unreachable!("run_hooked returns a run per method asked for")))
 }

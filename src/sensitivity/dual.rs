@@ -91,8 +91,8 @@ use crate::shell::problem::ShellProblem;
 use crate::shell::ShellError;
 use crate::solver::observe::{Observed, StepObserver};
 use crate::solver::{
-    ConvergedStep, ConvergedTangent, FactorisedAt, LinearSolver, NewtonFailure, NewtonReport,
-    NewtonSolver, ProblemError, SolverOptions,
+    ConvergedStep, ConvergedTangent, FactorisedAt, NewtonFailure, NewtonReport, NewtonSolver,
+    ProblemError, SolverOptions,
 };
 use nalgebra::Vector3;
 use num_dual::{Derivative, Dual64, DualSVec64};
@@ -790,29 +790,6 @@ impl DualRun {
     }
 }
 
-fn drive<D: DesignDual>(
-    problem: ShellProblem,
-    surface: Option<&Surface<f64>>,
-    variables: Vec<DesignVariable>,
-    monitors: Vec<Monitor>,
-    newton: &NewtonSolver,
-    solver: SolverOptions,
-) -> Result<DualRun, SensitivityError> {
-    let t0 = Instant::now();
-    let pattern = problem.pattern().clone();
-    let mut linear = LinearSolver::new(&pattern, crate::solver::Method::auto(&pattern), solver)?;
-    let dsa = DualDsa::<D>::new(&problem, surface, variables, monitors)?;
-    let mut p: DualShellProblem<D> = Observed::new(problem, dsa);
-    let u0 = p.problem.state().to_vec();
-    let report = newton
-        .run(&mut p, &pattern, &mut linear, &u0)
-        .map_err(SensitivityError::Newton)?;
-    if let Some(f) = p.observer.failure() {
-        return Err(SensitivityError::Shell(ShellError::InvalidInput(f)));
-    }
-    Ok(p.observer.into_run(report, t0.elapsed()))
-}
-
 /// Run the analysis of `problem` with the dual reference of `variables` in its convergence
 /// hook (`mode` picks the dual scalar), recording `monitors` and their derivatives at every
 /// converged step.
@@ -839,20 +816,19 @@ pub fn run_dual_on(
     solver: SolverOptions,
     mode: DualMode,
 ) -> Result<DualRun, SensitivityError> {
-    macro_rules! vector {
-        ($($n:literal),*) => {
-            match variables.len() {
-                $($n => drive::<DualSVec64<$n>>(
-                    problem, surface, variables, monitors, newton, solver,
-                ),)*
-                count => Err(SensitivityError::TooManyVariables { count, max: 8 }),
-            }
-        };
-    }
-    match mode {
-        DualMode::PerVariable => {
-            drive::<Dual64>(problem, surface, variables, monitors, newton, solver)
-        }
-        DualMode::Vector => vector!(1, 2, 3, 4, 5, 6, 7, 8),
-    }
+    let methods = super::HookedMethods {
+        continuum: false,
+        dual: Some(mode),
+    };
+    let (_, run) = super::run_hooked(
+        problem,
+        surface,
+        variables,
+        monitors,
+        newton,
+        solver,
+        methods,
+        &mut |_| {},
+    )?;
+    Ok(run.unwrap_or_else(|| unreachable!("run_hooked returns a run per method asked for")))
 }

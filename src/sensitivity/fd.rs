@@ -21,7 +21,7 @@ use super::dual::SensitivityError;
 use super::{Design, DesignVariable, Monitor};
 use crate::contact::ShellContact;
 use crate::shell::problem::ShellProblem;
-use crate::solver::observe::{Observed, StepObserver};
+use crate::solver::observe::{Observed, StepObserver, Tapped};
 use crate::solver::{LinearSolver, Method, NewtonSolver, SolverOptions};
 use std::sync::Arc;
 
@@ -108,6 +108,19 @@ pub fn response_with_contact(
     solver: SolverOptions,
     monitors: &[Monitor],
 ) -> Result<RunResponse, SensitivityError> {
+    response_observed(problem, contact, newton, solver, monitors, &mut |_| {})
+}
+
+/// As [`response_with_contact`]; `on_step` sees the responses so far after every converged
+/// step (to write them as the run goes).
+pub fn response_observed(
+    problem: ShellProblem,
+    contact: Option<Arc<ShellContact>>,
+    newton: &NewtonSolver,
+    solver: SolverOptions,
+    monitors: &[Monitor],
+    on_step: &mut dyn FnMut(&RunResponse),
+) -> Result<RunResponse, SensitivityError> {
     let pattern = problem.pattern().clone();
     let mut linear = LinearSolver::new(&pattern, Method::auto(&pattern), solver)?;
     let u0 = problem.state().to_vec();
@@ -123,7 +136,8 @@ pub fn response_with_contact(
         before: Vec::new(),
         failure: None,
     };
-    let mut p = Observed::new(problem, rec);
+    let mut tap = |r: &Recording<'_>| on_step(&r.out);
+    let mut p = Observed::new(problem, Tapped::new(rec, &mut tap));
     newton
         .run(&mut p, &pattern, &mut linear, &u0)
         .map_err(SensitivityError::Newton)?;
@@ -132,7 +146,7 @@ pub fn response_with_contact(
             crate::shell::ShellError::InvalidInput(f),
         ));
     }
-    Ok(p.observer.out)
+    Ok(p.observer.observer.out)
 }
 
 /// Builds the analysis for a design: the problem and its driver.
@@ -163,7 +177,9 @@ fn run_at(
     response_with_contact(problem, contact, &newton, analysis.solver(), monitors)
 }
 
-fn same_steps(
+/// A re-run at `τ + h` is comparable with the nominal run only on the same load levels
+/// ([`SensitivityError::StepSequence`] otherwise, naming where they part).
+pub fn same_steps(
     variable: &DesignVariable,
     h: f64,
     nominal: &RunResponse,
@@ -173,13 +189,34 @@ fn same_steps(
         return Err(SensitivityError::StepSequence {
             variable: variable.name.clone(),
             h,
-            detail: format!(
-                "converged load levels {:?}, nominal {:?}: prescribe the steps",
-                other.loads, nominal.loads
-            ),
+            detail: load_levels_differ(&other.loads, &nominal.loads, "nominal run"),
         });
     }
     Ok(())
+}
+
+/// How the converged load levels `run` differ from those of `reference` (named
+/// `reference_name`), for an error message: the first step where they part, or the step
+/// counts.
+pub fn load_levels_differ(run: &[f64], reference: &[f64], reference_name: &str) -> String {
+    match run.iter().zip(reference).position(|(a, b)| a != b) {
+        Some(k) => format!(
+            "the converged load level of step {} is {} where the {reference_name} has {} \
+             ({} steps against {}: a step was cut or grown differently); prescribe the steps \
+             or take a smaller step size",
+            k + 1,
+            run[k],
+            reference[k],
+            run.len(),
+            reference.len()
+        ),
+        None => format!(
+            "{} converged steps where the {reference_name} has {} (the same levels up to \
+             there); prescribe the steps",
+            run.len(),
+            reference.len()
+        ),
+    }
 }
 
 /// Per step, whether the yield status of any layer point, or the contact status of any slave

@@ -718,12 +718,113 @@ pub enum DesignError {
     },
 }
 
-/// The continuum DSA and the dual-number reference in the same analysis: one hooked run with
-/// both observers (`(ContinuumDsa, DualDsa<D>)`, the continuum's hooks first) instead of one
-/// run each. The two methods share the analysis, its converged tangents and its load levels,
-/// and each still times only its own work (`ContinuumRun::dsa`, `DualRun::reference`); both
-/// results carry the one run's report and total time. The dual scalar follows `mode` as in
-/// [`dual::run_dual_on`].
+/// Which derivative methods observe a hooked run ([`run_hooked`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct HookedMethods {
+    /// The continuum (hand-derived) DSA.
+    pub continuum: bool,
+    /// The dual-number reference, with its scalar ([`dual::DualMode`]).
+    pub dual: Option<dual::DualMode>,
+}
+
+/// The records of a hooked run so far, seen after every converged step.
+#[derive(Clone, Copy, Debug)]
+pub struct HookedRecords<'a> {
+    /// The continuum DSA's steps, when it runs.
+    pub continuum: Option<&'a [continuum::ContinuumStepRecord]>,
+    /// The dual reference's steps, when it runs.
+    pub dual: Option<&'a [dual::DualStepRecord]>,
+}
+
+/// One analysis of `problem` observed by the derivative methods of `methods`: the continuum
+/// DSA and the dual-number reference (each optional; with both, one run instead of one each,
+/// the continuum's hooks first). The methods share the analysis, its converged tangents and
+/// its load levels, and each still times only its own work (`ContinuumRun::dsa`,
+/// `DualRun::reference`); both results carry the one run's report and total time. `on_step`
+/// sees the records after every converged step (to write the results as the run goes).
+#[allow(clippy::too_many_arguments)] // the run's inputs, the methods and the step callback
+pub fn run_hooked(
+    problem: crate::shell::problem::ShellProblem,
+    surface: Option<&Surface<f64>>,
+    variables: Vec<DesignVariable>,
+    monitors: Vec<Monitor>,
+    newton: &crate::solver::NewtonSolver,
+    solver: crate::solver::SolverOptions,
+    methods: HookedMethods,
+    on_step: &mut dyn FnMut(HookedRecords<'_>),
+) -> Result<(Option<continuum::ContinuumRun>, Option<dual::DualRun>), dual::SensitivityError> {
+    type Runs = (Option<continuum::ContinuumRun>, Option<dual::DualRun>);
+    #[allow(clippy::too_many_arguments)]
+    fn drive<D: dual::DesignDual>(
+        problem: crate::shell::problem::ShellProblem,
+        surface: Option<&Surface<f64>>,
+        variables: Vec<DesignVariable>,
+        monitors: Vec<Monitor>,
+        newton: &crate::solver::NewtonSolver,
+        solver: crate::solver::SolverOptions,
+        methods: HookedMethods,
+        on_step: &mut dyn FnMut(HookedRecords<'_>),
+    ) -> Result<Runs, dual::SensitivityError> {
+        use crate::solver::observe::{Observed, StepObserver, Tapped};
+        let t0 = std::time::Instant::now();
+        let pattern = problem.pattern().clone();
+        let mut linear = crate::solver::LinearSolver::new(
+            &pattern,
+            crate::solver::Method::auto(&pattern),
+            solver,
+        )?;
+        let c = methods
+            .continuum
+            .then(|| {
+                continuum::ContinuumDsa::new(&problem, surface, variables.clone(), monitors.clone())
+            })
+            .transpose()?;
+        let d = methods
+            .dual
+            .map(|_| dual::DualDsa::<D>::new(&problem, surface, variables, monitors))
+            .transpose()?;
+        let mut tap = |o: &(Option<continuum::ContinuumDsa>, Option<dual::DualDsa<D>>)| {
+            on_step(HookedRecords {
+                continuum: o.0.as_ref().map(|c| c.records()),
+                dual: o.1.as_ref().map(|d| d.records()),
+            })
+        };
+        let mut obs = Observed::new(problem, Tapped::new((c, d), &mut tap));
+        let u0 = obs.problem.state().to_vec();
+        let report = newton
+            .run(&mut obs, &pattern, &mut linear, &u0)
+            .map_err(dual::SensitivityError::Newton)?;
+        if let Some(f) = obs.observer.failure() {
+            return Err(dual::SensitivityError::Shell(ShellError::InvalidInput(f)));
+        }
+        let total = t0.elapsed();
+        let (c, d) = obs.observer.observer;
+        Ok((
+            c.map(|c| c.into_run(report.clone(), total)),
+            d.map(|d| d.into_run(report, total)),
+        ))
+    }
+    macro_rules! vector {
+        ($($n:literal),*) => {
+            match variables.len() {
+                $($n => drive::<num_dual::DualSVec64<$n>>(
+                    problem, surface, variables, monitors, newton, solver, methods,
+                    on_step,
+                ),)*
+                count => Err(dual::SensitivityError::TooManyVariables { count, max: 8 }),
+            }
+        };
+    }
+    match methods.dual {
+        None | Some(dual::DualMode::PerVariable) => drive::<num_dual::Dual64>(
+            problem, surface, variables, monitors, newton, solver, methods, on_step,
+        ),
+        Some(dual::DualMode::Vector) => vector!(1, 2, 3, 4, 5, 6, 7, 8),
+    }
+}
+
+/// The continuum DSA and the dual-number reference in one hooked run ([`run_hooked`] with
+/// both methods; the dual scalar follows `mode` as in [`dual::run_dual_on`]).
 #[allow(clippy::too_many_arguments)] // run_dual_on's arguments
 pub fn run_continuum_and_dual(
     problem: crate::shell::problem::ShellProblem,
@@ -734,51 +835,22 @@ pub fn run_continuum_and_dual(
     solver: crate::solver::SolverOptions,
     mode: dual::DualMode,
 ) -> Result<(continuum::ContinuumRun, dual::DualRun), dual::SensitivityError> {
-    fn drive<D: dual::DesignDual>(
-        problem: crate::shell::problem::ShellProblem,
-        surface: Option<&Surface<f64>>,
-        variables: Vec<DesignVariable>,
-        monitors: Vec<Monitor>,
-        newton: &crate::solver::NewtonSolver,
-        solver: crate::solver::SolverOptions,
-    ) -> Result<(continuum::ContinuumRun, dual::DualRun), dual::SensitivityError> {
-        use crate::solver::observe::{Observed, StepObserver};
-        let t0 = std::time::Instant::now();
-        let pattern = problem.pattern().clone();
-        let mut linear = crate::solver::LinearSolver::new(
-            &pattern,
-            crate::solver::Method::auto(&pattern),
-            solver,
-        )?;
-        let c =
-            continuum::ContinuumDsa::new(&problem, surface, variables.clone(), monitors.clone())?;
-        let d = dual::DualDsa::<D>::new(&problem, surface, variables, monitors)?;
-        let mut obs = Observed::new(problem, (c, d));
-        let u0 = obs.problem.state().to_vec();
-        let report = newton
-            .run(&mut obs, &pattern, &mut linear, &u0)
-            .map_err(dual::SensitivityError::Newton)?;
-        if let Some(f) = obs.observer.failure() {
-            return Err(dual::SensitivityError::Shell(ShellError::InvalidInput(f)));
-        }
-        let total = t0.elapsed();
-        let (c, d) = obs.observer;
-        Ok((c.into_run(report.clone(), total), d.into_run(report, total)))
-    }
-    macro_rules! vector {
-        ($($n:literal),*) => {
-            match variables.len() {
-                $($n => drive::<num_dual::DualSVec64<$n>>(
-                    problem, surface, variables, monitors, newton, solver,
-                ),)*
-                count => Err(dual::SensitivityError::TooManyVariables { count, max: 8 }),
-            }
-        };
-    }
-    match mode {
-        dual::DualMode::PerVariable => {
-            drive::<num_dual::Dual64>(problem, surface, variables, monitors, newton, solver)
-        }
-        dual::DualMode::Vector => vector!(1, 2, 3, 4, 5, 6, 7, 8),
+    let methods = HookedMethods {
+        continuum: true,
+        dual: Some(mode),
+    };
+    let runs = run_hooked(
+        problem,
+        surface,
+        variables,
+        monitors,
+        newton,
+        solver,
+        methods,
+        &mut |_| {},
+    )?;
+    match runs {
+        (Some(c), Some(d)) => Ok((c, d)),
+        _ => unreachable!("run_hooked returns a run per method asked for"),
     }
 }

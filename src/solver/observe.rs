@@ -69,6 +69,82 @@ impl<P: ?Sized, A: StepObserver<P>, B: StepObserver<P>> StepObserver<P> for (A, 
     }
 }
 
+/// An observer that may be absent (then it does nothing and leaves the problem's tangent
+/// policy as it is).
+impl<P: ?Sized, A: StepObserver<P>> StepObserver<P> for Option<A> {
+    fn converged_tangent(&self, problem: ConvergedTangent) -> ConvergedTangent {
+        self.as_ref()
+            .map_or(problem, |a| a.converged_tangent(problem))
+    }
+    fn on_converged(&mut self, problem: &P, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
+        self.as_mut()
+            .map_or(Ok(()), |a| a.on_converged(problem, step))
+    }
+    fn before_commit(&mut self, problem: &P, u: &[f64], load: f64) {
+        if let Some(a) = self {
+            a.before_commit(problem, u, load);
+        }
+    }
+    fn after_commit(&mut self, problem: &P, u: &[f64], load: f64) {
+        if let Some(a) = self {
+            a.after_commit(problem, u, load);
+        }
+    }
+    fn on_restore(&mut self) {
+        if let Some(a) = self {
+            a.on_restore();
+        }
+    }
+    fn failure(&self) -> Option<String> {
+        self.as_ref().and_then(|a| a.failure())
+    }
+}
+
+/// An observer and a callback that sees it after every commit, once the observer has recorded
+/// the step (e.g. to write the results so far while the run goes on).
+pub struct Tapped<'f, O> {
+    /// The observer.
+    pub observer: O,
+    tap: &'f mut dyn FnMut(&O),
+}
+
+impl<'f, O> Tapped<'f, O> {
+    /// `observer`, with `tap` called after each of its commits.
+    pub fn new(observer: O, tap: &'f mut dyn FnMut(&O)) -> Self {
+        Self { observer, tap }
+    }
+}
+
+impl<O: std::fmt::Debug> std::fmt::Debug for Tapped<'_, O> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Tapped")
+            .field("observer", &self.observer)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<P: ?Sized, O: StepObserver<P>> StepObserver<P> for Tapped<'_, O> {
+    fn converged_tangent(&self, problem: ConvergedTangent) -> ConvergedTangent {
+        self.observer.converged_tangent(problem)
+    }
+    fn on_converged(&mut self, problem: &P, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
+        self.observer.on_converged(problem, step)
+    }
+    fn before_commit(&mut self, problem: &P, u: &[f64], load: f64) {
+        self.observer.before_commit(problem, u, load);
+    }
+    fn after_commit(&mut self, problem: &P, u: &[f64], load: f64) {
+        self.observer.after_commit(problem, u, load);
+        (self.tap)(&self.observer);
+    }
+    fn on_restore(&mut self) {
+        self.observer.on_restore();
+    }
+    fn failure(&self) -> Option<String> {
+        self.observer.failure()
+    }
+}
+
 /// A problem (owned or `&mut`) and its observer.
 #[derive(Debug)]
 pub struct Observed<P, O> {
