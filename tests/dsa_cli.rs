@@ -260,6 +260,8 @@ fn without_timing(mut v: Value) -> Value {
     o.remove("timing_s");
     o.remove("dual_run_total_s");
     o.remove("continuum_run_total_s");
+    // Fractions of wall times.
+    o.remove("cost_per_variable");
     v
 }
 
