@@ -15,11 +15,9 @@
 //! percentages: `DSA_BENCH_CASE=hemisphere cargo bench --bench dsa -- nomatch`.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use shelldsa::io::dsa_case::{dual_contact, dual_loads};
 use shelldsa::io::dsa_run::CaseAnalysis;
 use shelldsa::io::shell_case::{read_shell_case, ShellCase};
 use shelldsa::sensitivity::continuum::run_continuum;
-use shelldsa::sensitivity::dual::DualLoad;
 use shelldsa::sensitivity::dual::{run_dual_on, DualMode};
 use shelldsa::sensitivity::fd::{self, Analysis};
 use shelldsa::sensitivity::{Design, DesignVariable};
@@ -64,26 +62,20 @@ impl Setup {
             .loads
             .len() as f64
     }
-    /// The problem, its driver and the loads as the sensitivity methods see them (with the
-    /// contact when the case has tools).
-    fn problem(&self) -> (ShellProblem, NewtonSolver, Vec<DualLoad>) {
+    /// The problem (with its loads) and its driver.
+    fn problem(&self) -> (ShellProblem, NewtonSolver) {
         let a = CaseAnalysis { case: &self.case };
-        let (p, n, contact) = a.build_with_contact(&self.base()).unwrap();
-        let mut loads = dual_loads(&self.case).unwrap();
-        if let Some(c) = contact {
-            loads.push(dual_contact(&self.case, c));
-        }
-        (p, n, loads)
+        let (p, n, _) = a.build_with_contact(&self.base()).unwrap();
+        (p, n)
     }
     /// (method time, whole run time) in seconds.
     fn continuum(&self) -> (f64, f64) {
         let a = CaseAnalysis { case: &self.case };
-        let (p, n, loads) = self.problem();
+        let (p, n) = self.problem();
         let r = run_continuum(
             p,
             Some(&self.case.surface),
             self.vars.clone(),
-            loads,
             self.case.dsa.as_ref().unwrap().monitors.clone(),
             &n,
             a.solver(),
@@ -91,20 +83,18 @@ impl Setup {
         .unwrap();
         let t = r.timing;
         eprintln!(
-            "continuum stages: rhs {:.3} s, solve {:.3} s, update {:.3} s, record {:.3} s, load \
-             check {:.3} s",
-            t.rhs, t.solve, t.update, t.record, t.check
+            "continuum stages: rhs {:.3} s, solve {:.3} s, update {:.3} s, record {:.3} s",
+            t.rhs, t.solve, t.update, t.record
         );
         (r.dsa.as_secs_f64(), r.total.as_secs_f64())
     }
     fn dual(&self) -> (f64, f64) {
         let a = CaseAnalysis { case: &self.case };
-        let (p, n, loads) = self.problem();
+        let (p, n) = self.problem();
         let r = run_dual_on(
             p,
             Some(&self.case.surface),
             self.vars.clone(),
-            loads,
             self.case.dsa.as_ref().unwrap().monitors.clone(),
             &n,
             a.solver(),

@@ -439,13 +439,12 @@ fn dsa(
         say!(
             con,
             "continuum DSA per design variable: {:.2} % of the analysis; stages: right-hand sides \
-             {:.3} s, solve {:.3} s, history update {:.3} s, monitors {:.3} s, load check {:.3} s",
+             {:.3} s, solve {:.3} s, history update {:.3} s, monitors {:.3} s",
             100.0 * own,
             t.rhs,
             t.solve,
             t.update,
-            t.record,
-            t.check
+            t.record
         );
     }
     if let Some(whole) = cost.hooked_over_plain {

@@ -13,7 +13,7 @@ use shelldsa::geometry::{CylinderSector, Rectangle, SphereZone, Surface};
 use shelldsa::meshfree::Edge;
 use shelldsa::scalar::Real;
 use shelldsa::shell::constraints::{edge_constraints, EdgeCondition, LinearConstraint};
-use shelldsa::shell::load::{ExternalLoad, GenericLoad, Gravity, LoadScaling};
+use shelldsa::shell::load::{ContactLoad, Gravity, Load, LoadScaling};
 use shelldsa::shell::model::ShellModel;
 use shelldsa::shell::problem::ShellProblem;
 use shelldsa::solver::{
@@ -200,9 +200,13 @@ fn contact_stiffness_matches_dual_jacobian_and_central_differences() {
     println!("{report}");
     assert!(report.passed());
     // A prescribed load: the shell problem subtracts it as given, at factor = λ = t.
-    assert_eq!(contact.scaling(), LoadScaling::Prescribed);
+    let load = Load::Contact(ContactLoad {
+        contact: Arc::new(contact),
+        penalty_factor: None,
+    });
+    assert_eq!(load.scaling(), LoadScaling::Prescribed);
     let mut fp = vec![0.0; q.len()];
-    contact.add_force(&model, &q, t, &mut fp).unwrap();
+    load.add_force(&model, &q, t, &mut fp).unwrap();
     assert!(fp.iter().any(|v| *v != 0.0));
 }
 
@@ -217,7 +221,7 @@ fn report_balances_the_scattered_forces() {
     let q = increment(&model, 1e-3, 0.02);
     let rep = contact.report(&model, &q, 0.0).unwrap();
     let mut f = vec![0.0; q.len()];
-    contact.add_force(&model, &q, 0.0, &mut f).unwrap();
+    contact.force_tracked(&model, &q, 0.0, &mut f).unwrap();
     let sum: V3 = (0..model.n_particles())
         .map(|i| V3::new(f[5 * i], f[5 * i + 1], f[5 * i + 2]))
         .sum();
@@ -304,13 +308,14 @@ fn invalid_input_and_path_errors_are_typed() {
     .unwrap();
     let q = vec![0.0; model.n_dofs()];
     let mut f = vec![0.0; q.len()];
-    contact.add_force(&model, &q, 0.5, &mut f).unwrap();
+    contact.force_tracked(&model, &q, 0.5, &mut f).unwrap();
     assert!(f.iter().all(|v| *v == 0.0), "no contact at t = 0.5");
     assert!(matches!(
         contact.check_engaged(),
         Err(ContactError::ToolsNeverTouched { tools }) if tools == ["punch"]
     ));
-    let e: shelldsa::shell::ShellError = contact.add_force(&model, &q, 0.6, &mut f).unwrap_err();
+    let e: shelldsa::shell::ShellError =
+        contact.force_tracked(&model, &q, 0.6, &mut f).unwrap_err();
     let msg = e.to_string();
     println!("{msg}");
     assert!(
@@ -319,10 +324,10 @@ fn invalid_input_and_path_errors_are_typed() {
     );
     // The gaps of a failed evaluation are not recorded: a retry with a smaller step is
     // compared with the last good pseudo-time, and fails again at t = 0.6 ...
-    assert!(contact.add_force(&model, &q, 0.6, &mut f).is_err());
+    assert!(contact.force_tracked(&model, &q, 0.6, &mut f).is_err());
     // ... but passes at t = 0.52 (the punch 0.2 t into the top face, gap > −t), where the
     // punch has touched the sheet.
-    contact.add_force(&model, &q, 0.52, &mut f).unwrap();
+    contact.force_tracked(&model, &q, 0.52, &mut f).unwrap();
     contact.check_engaged().unwrap();
     // After a reset nothing is remembered.
     contact.reset_tracking();
@@ -383,9 +388,12 @@ fn patch_test_uniform_pressure_and_penalty_study() {
             LinearConstraint::displacement(&model, [0.5, 0.5], V3::y(), 0.0).unwrap(),
             LinearConstraint::displacement(&model, [1.0, 0.5], V3::y(), 0.0).unwrap(),
         ];
-        let loads: Vec<Box<dyn ExternalLoad>> = vec![
-            Box::new(Gravity::new([0.0, 0.0, -p]).unwrap()),
-            Box::new(Arc::clone(&contact)),
+        let loads = vec![
+            Gravity::new([0.0, 0.0, -p]).unwrap().into(),
+            Load::Contact(ContactLoad {
+                contact: Arc::clone(&contact),
+                penalty_factor: None,
+            }),
         ];
         let mut problem = ShellProblem::new(model, loads, holds).unwrap();
         contact.reset_tracking();
@@ -451,7 +459,10 @@ fn cylinder_pressed_into_clamped_plate_balances_the_reactions() {
     );
     let mut clamps = edge_constraints(&model, Edge::UMin, &EdgeCondition::Clamped).unwrap();
     clamps.extend(edge_constraints(&model, Edge::UMax, &EdgeCondition::Clamped).unwrap());
-    let loads: Vec<Box<dyn ExternalLoad>> = vec![Box::new(Arc::clone(&contact))];
+    let loads = vec![Load::Contact(ContactLoad {
+        contact: Arc::clone(&contact),
+        penalty_factor: None,
+    })];
     let mut problem = ShellProblem::new(model, loads, clamps).unwrap();
     contact.reset_tracking();
     let pattern = problem.pattern().clone();

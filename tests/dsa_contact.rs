@@ -7,8 +7,8 @@
 //!    the dual-number evaluation `ShellContact::force_with` and against central differences,
 //!    seed by seed (die x, die z, punch z, thickness with penalty, committed state and
 //!    increment), at a deformed, plastically bent state with both tools active.
-//! 2. The dual reference (`sensitivity::dual`, `DualLoad::Contact`) for the die's horizontal
-//!    and vertical position and the thickness against central differences of complete re-runs
+//! 2. The dual reference (`sensitivity::dual` on the problem's `Load::Contact`) for the die's
+//!    horizontal and vertical position and the thickness against central differences of complete re-runs
 //!    (`shelldsa dsa`'s run), and the Taylor remainder's rate.
 //! 3. Tool **rotations** (`tool.<name>.<rx|ry|rz>`): `force_dot` with rotation rates against
 //!    the dual evaluation and central differences of the force with the tool rotated

@@ -18,14 +18,9 @@ mod plate;
 use plate::*;
 
 use shelldsa::sensitivity::continuum::{run_continuum, ContinuumRun, TermGroup};
-use shelldsa::sensitivity::dual::{run_dual, DualLoad, DualMode, DualRun};
+use shelldsa::sensitivity::dual::{run_dual, DualMode, DualRun};
 use shelldsa::sensitivity::terms::breakdown;
 use shelldsa::solver::SolverOptions;
-
-/// The plate's loads as the sensitivity methods take them (the follower pressure).
-fn loads() -> Vec<DualLoad> {
-    vec![DualLoad::Pressure(Plate::pressure())]
-}
 
 fn continuum() -> ContinuumRun {
     let d = nominal_design();
@@ -33,7 +28,6 @@ fn continuum() -> ContinuumRun {
         Plate::problem(&d),
         None,
         variables(),
-        loads(),
         Plate::monitors(),
         &driver(STEPS),
         SolverOptions::default(),
@@ -46,7 +40,6 @@ fn dual() -> DualRun {
     run_dual(
         Plate::problem(&d),
         variables(),
-        loads(),
         Plate::monitors(),
         &driver(STEPS),
         SolverOptions::default(),
@@ -126,7 +119,6 @@ fn term_groups_match_the_dual_reference_at_a_plastic_step() {
         Plate::problem(&d),
         None,
         variables(),
-        loads(),
         &driver(STEPS),
         SolverOptions::default(),
         STEPS,
@@ -231,7 +223,6 @@ fn one_run_for_both_methods_equals_a_run_each() {
         Plate::problem(&d),
         None,
         variables(),
-        loads(),
         Plate::monitors(),
         &driver(STEPS),
         SolverOptions::default(),

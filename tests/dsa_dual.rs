@@ -16,13 +16,13 @@ use shelldsa::material::MaterialParams;
 use shelldsa::meshfree::quadrature::{gauss_legendre, CellQuadrature};
 use shelldsa::meshfree::Edge;
 use shelldsa::meshfree::{regular_grid, Basis, ParamBox};
-use shelldsa::sensitivity::dual::{run_dual, DualLoad, DualMode, DualRun};
+use shelldsa::sensitivity::dual::{run_dual, DualMode, DualRun, SensitivityError};
 use shelldsa::sensitivity::fd::{central_differences, fit_rate, response, taylor_remainders};
 use shelldsa::sensitivity::{
     validate_design, Design, DesignError, DesignKind, DesignVariable, MaterialParameter, Monitor,
 };
 use shelldsa::shell::constraints::{edge_constraints, EdgeCondition};
-use shelldsa::shell::load::{ExternalLoad, PointForce};
+use shelldsa::shell::load::{Moment, PointForce};
 use shelldsa::shell::model::{Discretisation, ShellModel};
 use shelldsa::shell::problem::ShellProblem;
 use shelldsa::solver::SolverOptions;
@@ -37,7 +37,6 @@ fn dual_run(mode: DualMode) -> DualRun {
     run_dual(
         Plate::problem(&d),
         variables(),
-        vec![DualLoad::Pressure(Plate::pressure())],
         Plate::monitors(),
         &driver(STEPS),
         SolverOptions::default(),
@@ -254,10 +253,7 @@ fn elastic_cantilever_sensitivities_follow_beam_theory() {
             force: [0.0, 0.0, P * w / 2.0],
         })
         .collect();
-    let loads: Vec<Box<dyn ExternalLoad>> = forces
-        .iter()
-        .map(|f| Box::new(f.clone()) as Box<dyn ExternalLoad>)
-        .collect();
+    let loads = forces.into_iter().map(Into::into).collect();
     let problem = ShellProblem::new(model, loads, rows).unwrap();
     let run = run_dual(
         problem,
@@ -265,7 +261,6 @@ fn elastic_cantilever_sensitivities_follow_beam_theory() {
             DesignVariable::thickness(),
             DesignVariable::material(MaterialParameter::Young),
         ],
-        forces.into_iter().map(DualLoad::PointForce).collect(),
         vec![Monitor::new("tip deflection", [1.0, 0.5], 2).unwrap()],
         &driver(1),
         SolverOptions::default(),
@@ -348,16 +343,34 @@ fn design_variables_are_validated() {
         Err(DesignError::NoVariables)
     ));
     assert!(Monitor::new("bad", [0.5, 0.5], 3).is_err());
-    // The dual reference refuses loads that are not the problem's.
+    // The dual reference refuses, before the analysis, a load it does not carry.
+    let surface = Surface::Rectangle(
+        Rectangle::new(
+            nalgebra::Vector3::zeros(),
+            nalgebra::Vector3::x(),
+            nalgebra::Vector3::y(),
+        )
+        .unwrap(),
+    );
+    let moment = Moment::on_edge(&model, &surface, Edge::UMax, [0.0, 1.0, 0.0], 2, 2).unwrap();
+    let problem = ShellProblem::new(model, vec![moment.into()], Vec::new()).unwrap();
     let err = run_dual(
-        Plate::problem(&d),
+        problem,
         vec![DesignVariable::thickness()],
-        vec![],
         Plate::monitors(),
         &driver(STEPS),
         SolverOptions::default(),
         DualMode::Vector,
     )
     .unwrap_err();
-    assert!(err.to_string().contains("loads"), "{err}");
+    assert!(
+        matches!(
+            err,
+            SensitivityError::UnsupportedLoad {
+                index: 0,
+                kind: "moment"
+            }
+        ),
+        "{err}"
+    );
 }

@@ -14,11 +14,9 @@ use shelldsa::geometry::{
 };
 use shelldsa::io::shell_build;
 use shelldsa::io::shell_case::{parse_shell_case, ShellCase};
-use shelldsa::sensitivity::shape::{
-    dual_geometry, lamina_vectors, lamina_vectors_dot, ShapeVelocity,
-};
+use shelldsa::sensitivity::shape::{dual_geometry, lamina_vectors_dot, ShapeVelocity};
 use shelldsa::sensitivity::{DesignError, DesignKind, DesignVariable};
-use shelldsa::shell::model::ShellModel;
+use shelldsa::shell::model::{lamina_vectors, ShellModel};
 use shelldsa::shell::point::SurfacePoint;
 use std::f64::consts::FRAC_PI_2;
 use std::path::{Path, PathBuf};

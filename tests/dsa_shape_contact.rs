@@ -32,7 +32,6 @@ use shelldsa::io::dsa_run;
 use shelldsa::io::shell_build;
 use shelldsa::io::shell_case::parse_shell_case;
 use shelldsa::sensitivity::shape::{dual_geometry, ShapeVelocity};
-use shelldsa::shell::load::GenericLoad;
 use shelldsa::shell::model::ShellModel;
 use shelldsa::shell::point::{ParticleState, SurfacePoint};
 use shelldsa::solver::{LinearSolver, Method, SolverOptions};

@@ -15,7 +15,7 @@ use shelldsa::io::shell_case::parse_shell_case;
 use shelldsa::material::{return_map, MaterialParams, MaterialState, Vec5, N_PARAMS, PARAM_NAMES};
 use shelldsa::meshfree::XorShift64;
 use shelldsa::scalar::Real;
-use shelldsa::sensitivity::dual::commit_particle;
+use shelldsa::shell::model::commit_particle;
 use shelldsa::shell::model::ShellModel;
 use shelldsa::shell::point::{
     point_residual, point_residual_with, point_tangent, ParticleState, PointHistory,

@@ -39,7 +39,7 @@
 mod common;
 
 use shelldsa::meshfree::Edge;
-use shelldsa::shell::load::{ExternalLoad, Moment};
+use shelldsa::shell::load::Moment;
 use shelldsa::shell::problem::ShellProblem;
 use shelldsa::solver::{LoadStepping, NewtonOptions, NewtonSolver};
 use std::f64::consts::PI;
@@ -88,7 +88,7 @@ fn problem(n_u: usize, planar: bool) -> (ShellProblem, Moment) {
     } else {
         Vec::new()
     };
-    let p = strip.problem(vec![Box::new(moment.clone())], planar_rows);
+    let p = strip.problem(vec![moment.clone().into()], planar_rows);
     (p, moment)
 }
 

@@ -26,7 +26,7 @@ use shelldsa::meshfree::quadrature::{gauss_legendre, gauss_lobatto, CellQuadratu
 use shelldsa::meshfree::Edge;
 use shelldsa::meshfree::{regular_grid, Basis, ParamBox};
 use shelldsa::shell::constraints::LinearConstraint;
-use shelldsa::shell::load::{ExternalLoad, PointForce};
+use shelldsa::shell::load::PointForce;
 use shelldsa::shell::model::{Discretisation, ShellModel};
 use shelldsa::shell::problem::{ProblemOptions, ShellProblem, SymmetryTreatment};
 use shelldsa::shell::symmetry::SymmetryPlane;
@@ -80,15 +80,17 @@ fn hemisphere(n: usize, ppc: usize, layers: Layers, treatment: SymmetryTreatment
     };
     let material = MaterialParams::new(6.825e7, 0.3, 1e30, 0.0, 1.0).unwrap();
     let model = ShellModel::new(&surface, disc, material).unwrap();
-    let loads: Vec<Box<dyn ExternalLoad>> = vec![
-        Box::new(PointForce {
+    let loads = vec![
+        PointForce {
             uv: [0.0, 0.0],
             force: [P, 0.0, 0.0],
-        }),
-        Box::new(PointForce {
+        }
+        .into(),
+        PointForce {
             uv: [1.0, 0.0],
             force: [0.0, -P, 0.0],
-        }),
+        }
+        .into(),
     ];
     // The rigid translation along z: hold u_z at the top of the meridian through A.
     let hold = LinearConstraint::displacement(&model, [0.0, 1.0], Vector3::z(), 0.0).unwrap();

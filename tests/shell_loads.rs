@@ -11,9 +11,8 @@ use shelldsa::geometry::{CylinderSector, Rectangle, SphereZone, Surface};
 use shelldsa::meshfree::Edge;
 use shelldsa::meshfree::{ParamBox, XorShift64};
 use shelldsa::scalar::Real;
-use shelldsa::shell::load::{
-    ExternalLoad, GatherMap, GenericLoad, Gravity, Moment, PointForce, Pressure,
-};
+use shelldsa::shell::gather::GatherMap;
+use shelldsa::shell::load::{Gravity, Load, Moment, PointForce, Pressure};
 use shelldsa::shell::model::ShellModel;
 use shelldsa::shell::ShellError;
 use shelldsa::verification::{check, CheckOptions, Differentiable, StepSize, Tolerance};
@@ -99,15 +98,15 @@ fn random_increment(
         .collect()
 }
 
-struct LoadForce<'a, L>(&'a ShellModel, &'a L);
+struct LoadForce<'a>(&'a ShellModel, &'a Load);
 
-impl<L: GenericLoad> Differentiable for LoadForce<'_, L> {
+impl Differentiable for LoadForce<'_> {
     fn n_inputs(&self) -> usize {
         self.0.n_dofs()
     }
     fn eval<T: Real>(&self, x: &[T]) -> Vec<T> {
         let mut f = vec![T::zero(); self.0.n_dofs()];
-        self.1.force_generic(self.0, x, 1.0, &mut f).unwrap();
+        self.1.force(self.0, None, x, 1.0, &mut f).unwrap();
         f
     }
 }
@@ -118,17 +117,12 @@ impl<L: GenericLoad> Differentiable for LoadForce<'_, L> {
 /// truncation h²|f'''|/6 plus round-off ε|f|/h, measured ≤ 5e-10 of the largest entry here. So
 /// entries are compared to 1e-6 relative above 1 % of the largest entry and to 1e-8 of the
 /// largest entry below (floor 1e-2): a missing term of any visible size still fails.
-fn check_stiffness<L: GenericLoad + ExternalLoad>(
-    title: &str,
-    model: &ShellModel,
-    load: &L,
-    q: &[f64],
-) -> DMatrix<f64> {
+fn check_stiffness(title: &str, model: &ShellModel, load: Load, q: &[f64]) -> DMatrix<f64> {
     let mut trip = Vec::new();
     load.add_stiffness(model, q, 1.0, &mut trip).unwrap();
     let k = dense(model.n_dofs(), &trip);
     let rep = check(
-        &LoadForce(model, load),
+        &LoadForce(model, &load),
         title,
         q,
         &k,
@@ -157,7 +151,7 @@ fn gravity_total_is_load_times_area_on_a_sphere_zone() {
     let model = common::elastic_model(&zone, &spec(7, 7));
     let area = 100.0 * lam1 * phi1.sin();
     let b = [0.5, -1.0, -90.0];
-    let g = Gravity::new(b).unwrap();
+    let g = Load::from(Gravity::new(b).unwrap());
     let mut f = vec![0.0; model.n_dofs()];
     let q = vec![0.0; model.n_dofs()];
     g.add_force(&model, &q, 2.0, &mut f).unwrap();
@@ -195,6 +189,7 @@ fn gravity_in_a_region_integrates_that_region_only() {
         .unwrap()
         .within(ParamBox::new([0.0, 1.0], [0.0, 0.5]))
         .unwrap();
+    let g = Load::from(g);
     let mut f = vec![0.0; model.n_dofs()];
     g.add_force(&model, &vec![0.0; model.n_dofs()], 1.0, &mut f)
         .unwrap();
@@ -207,7 +202,7 @@ fn pressure_total_on_a_cylinder_sector_matches_the_closed_form() {
     let model = common::elastic_model(&cylinder(), &spec(5, 5));
     let (r, len, th1) = (5.0, 4.0, 60f64.to_radians());
     let p = 3.0;
-    let load = Pressure::new(p).unwrap();
+    let load = Load::from(Pressure::new(p).unwrap());
     let mut f = vec![0.0; model.n_dofs()];
     load.add_force(&model, &vec![0.0; model.n_dofs()], 1.0, &mut f)
         .unwrap();
@@ -245,8 +240,7 @@ fn pressure_follows_a_rigid_rotation_of_a_flat_plate() {
     }
     let p = -2.5;
     let mut f = vec![0.0; model.n_dofs()];
-    Pressure::new(p)
-        .unwrap()
+    Load::from(Pressure::new(p).unwrap())
         .add_force(&model, &q, 1.0, &mut f)
         .unwrap();
     let s = sum_components(&model, &f);
@@ -263,7 +257,7 @@ fn pressure_stiffness_matches_dual_numbers_and_central_differences() {
     commit_random(&mut model, &mut rng, 0.05, 0.1);
     let q = random_increment(model.n_dofs(), &mut rng, 0.1, 0.2, true);
     let load = Pressure::new(7.0).unwrap();
-    let k = check_stiffness("pressure on a cylinder sector", &model, &load, &q);
+    let k = check_stiffness("pressure on a cylinder sector", &model, load.into(), &q);
     // Rotation columns and rows are empty (a mid-surface load).
     for i in 0..model.n_dofs() {
         if i % 5 >= 3 {
@@ -275,7 +269,7 @@ fn pressure_stiffness_matches_dual_numbers_and_central_differences() {
         .unwrap()
         .within(ParamBox::new([0.25, 0.75], [0.0, 0.5]))
         .unwrap();
-    check_stiffness("pressure in a region", &model, &part, &q);
+    check_stiffness("pressure in a region", &model, part.clone().into(), &q);
     let mut t1 = Vec::new();
     let mut t2 = Vec::new();
     part.add_stiffness(&model, &q, 1.0, &mut t1).unwrap();
@@ -295,7 +289,7 @@ fn moment_does_the_work_of_a_uniform_rotation_on_a_flat_strip() {
     let load = Moment::on_edge(&model, &surface, Edge::UMax, m, 3, 4).unwrap();
     assert!((load.edge_length() - 1.0).abs() < 1e-15);
     let mut f = vec![0.0; model.n_dofs()];
-    load.add_force(&model, &vec![0.0; model.n_dofs()], 1.5, &mut f)
+    load.force(&model, &vec![0.0; model.n_dofs()], 1.5, &mut f)
         .unwrap();
     let s = sum_components(&model, &f);
     assert_eq!((s[0], s[1], s[2]), (0.0, 0.0, 0.0));
@@ -323,7 +317,7 @@ fn moment_stiffness_matches_duals_and_is_symmetric_exactly_for_planar_bending() 
     let c = model.contributions(&q, false).unwrap();
     model.commit(&q, c);
     let q = random_increment(model.n_dofs(), &mut rng, 0.0, 0.4, false);
-    let k = check_stiffness("moment, planar state", &model, &load, &q);
+    let k = check_stiffness("moment, planar state", &model, load.clone().into(), &q);
     let skew = (&k - k.transpose()).norm() / k.norm();
     println!("planar bending: |K − Kᵀ|/|K| = {skew:.2e}");
     // Conservative: the stiffness is the Hessian of −|m| ∫ φ ds, symmetric to round-off.
@@ -334,7 +328,7 @@ fn moment_stiffness_matches_duals_and_is_symmetric_exactly_for_planar_bending() 
     let mut model3 = common::elastic_model(&surface, &spec(7, 4));
     commit_random(&mut model3, &mut rng, 0.0, 0.3);
     let q3 = random_increment(model3.n_dofs(), &mut rng, 0.0, 0.3, true);
-    let k3 = check_stiffness("moment, out-of-plane state", &model3, &load, &q3);
+    let k3 = check_stiffness("moment, out-of-plane state", &model3, load.into(), &q3);
     let skew3 = (&k3 - k3.transpose()).norm() / k3.norm();
     println!("out-of-plane director: |K − Kᵀ|/|K| = {skew3:.2e}");
     assert!(skew3 > 1e-3, "{skew3:e}");
@@ -352,7 +346,7 @@ fn moment_on_a_curved_edge_matches_dual_numbers() {
     let mut rng = XorShift64::new(42);
     commit_random(&mut model, &mut rng, 0.05, 0.2);
     let q = random_increment(model.n_dofs(), &mut rng, 0.05, 0.3, true);
-    check_stiffness("moment on a curved edge", &model, &load, &q);
+    check_stiffness("moment on a curved edge", &model, load.into(), &q);
 }
 
 #[test]
@@ -385,12 +379,11 @@ fn bad_load_input_is_a_typed_error_naming_the_field() {
         .within(ParamBox::new([0.5, 0.5], [0.5, 0.5]))
         .unwrap();
     let n = model.n_dofs();
-    let e = empty
+    let e = Load::from(empty)
         .add_force(&model, &vec![0.0; n], 1.0, &mut vec![0.0; n])
         .unwrap_err();
     assert!(msg(e).contains("contains no quadrature point"));
-    let e = Pressure::new(1.0)
-        .unwrap()
+    let e = Load::from(Pressure::new(1.0).unwrap())
         .add_force(&model, &vec![0.0; n - 1], 1.0, &mut vec![0.0; n])
         .unwrap_err();
     assert_eq!(
@@ -409,16 +402,16 @@ fn bad_load_input_is_a_typed_error_naming_the_field() {
     // A moment built for another model.
     let other = common::elastic_model(&surface, &spec(5, 3));
     let load = Moment::on_edge(&other, &surface, Edge::UMax, [0.0, 1.0, 0.0], 2, 2).unwrap();
-    let e = load
+    let e = Load::from(load)
         .add_force(&model, &vec![0.0; n], 1.0, &mut vec![0.0; n])
         .unwrap_err();
     assert!(msg(e).contains("built for a model"));
     // The dead point force still works through the same seam.
     let mut f = vec![0.0; n];
-    PointForce {
+    Load::from(PointForce {
         uv: [0.5, 0.5],
         force: [0.0, 0.0, 1.0],
-    }
+    })
     .add_force(&model, &vec![0.0; n], 1.0, &mut f)
     .unwrap();
     assert!((sum_components(&model, &f)[2] - 1.0).abs() < 1e-14);

@@ -22,7 +22,7 @@ use shelldsa::meshfree::Edge;
 use shelldsa::meshfree::{regular_grid, Basis, ParamBox, XorShift64};
 use shelldsa::scalar::Real;
 use shelldsa::shell::constraints::{edge_constraints, EdgeCondition};
-use shelldsa::shell::load::PointForce;
+use shelldsa::shell::load::{PointForce, Pressure};
 use shelldsa::shell::model::{Discretisation, ShellModel};
 use shelldsa::shell::problem::{ProblemOptions, ShellProblem, SymmetryTreatment};
 use shelldsa::shell::rotation::rotate_director;
@@ -556,10 +556,11 @@ fn rotated_panel(start_deg: f64, treatment: SymmetryTreatment) -> Vec<Vector3<f6
     let radial = Vector3::new(a.cos(), a.sin(), 0.0) * p;
     let mut problem = ShellProblem::with_options(
         m,
-        vec![Box::new(PointForce {
+        vec![PointForce {
             uv: [0.0, 0.5],
             force: radial.into(),
-        })],
+        }
+        .into()],
         clamp,
         ProblemOptions {
             symmetry: treatment,
@@ -608,42 +609,6 @@ fn a_plane_off_the_axes_gives_the_rotated_solution() {
     assert!(axis[0][1].abs() <= 1e-9 * scale && axis[1][1].abs() <= 1e-9 * scale);
 }
 
-/// A configuration-dependent test load: a grounded spring on one generalised DOF,
-/// `f_ext = −k (q_committed + q)` on that DOF, with its load stiffness `∂f/∂q = −k`.
-#[derive(Debug)]
-struct Spring {
-    dof: usize,
-    k: f64,
-}
-
-impl shelldsa::shell::load::ExternalLoad for Spring {
-    fn add_force(
-        &self,
-        model: &ShellModel,
-        q: &[f64],
-        factor: f64,
-        f: &mut [f64],
-    ) -> Result<(), ShellError> {
-        let (i, c) = (self.dof / 5, self.dof % 5);
-        let total = if c < 3 { model.particles[i].u[c] } else { 0.0 } + q[self.dof];
-        f[self.dof] -= factor * self.k * total;
-        Ok(())
-    }
-    fn is_follower(&self) -> bool {
-        true
-    }
-    fn add_stiffness(
-        &self,
-        _model: &ShellModel,
-        _q: &[f64],
-        factor: f64,
-        out: &mut Vec<(usize, usize, f64)>,
-    ) -> Result<(), ShellError> {
-        out.push((self.dof, self.dof, -factor * self.k));
-        Ok(())
-    }
-}
-
 #[test]
 fn problem_tangent_with_images_multipliers_and_follower_load_matches_central_differences() {
     use shelldsa::shell::constraints::LinearConstraint;
@@ -651,24 +616,26 @@ fn problem_tangent_with_images_multipliers_and_follower_load_matches_central_dif
     let (_, m) = quarter();
     // Rows: a point displacement near the corner (its neighbours include images), a rotation
     // row and the clamp of the free edge u = 1; the symmetry conditions as multiplier rows;
-    // a point force near the plane and a follower spring.
+    // a point force near the plane and a follower pressure on the corner between the planes
+    // (its stiffness mapped through the images).
     let mut rows = vec![
         LinearConstraint::displacement(&m, [0.1, 0.05], Vector3::new(1.0, 2.0, 0.5), 1e-3).unwrap(),
         LinearConstraint::rotation(&m, [0.3, 0.6], 0, 0.0).unwrap(),
     ];
     rows.extend(edge_constraints(&m, Edge::UMax, &EdgeCondition::SimplySupported).unwrap());
-    let spring_dof = 5 * 6 + 2;
     let mut problem = ShellProblem::with_options(
         m,
         vec![
-            Box::new(PointForce {
+            PointForce {
                 uv: [0.05, 0.5],
                 force: [3.0, -1.0, 2.0],
-            }),
-            Box::new(Spring {
-                dof: spring_dof,
-                k: 5e2,
-            }),
+            }
+            .into(),
+            Pressure::new(5e2)
+                .unwrap()
+                .within(ParamBox::new([0.0, 0.4], [0.0, 0.4]))
+                .unwrap()
+                .into(),
         ],
         rows,
         ProblemOptions {
@@ -736,7 +703,7 @@ fn problem_tangent_with_images_multipliers_and_follower_load_matches_central_dif
     }
     println!("problem tangent vs central differences: worst relative error {worst:.3e}");
     assert!(worst < 1e-6, "{worst:e}");
-    // Structural checks: the constraint block is k C and its transpose, the spring adds +λk.
+    // Structural checks: the constraint block is k C and its transpose.
     let scales = problem.constraint_scales().to_vec();
     for (c, row) in problem.constraints().iter().enumerate() {
         for &(d, a) in &row.terms {

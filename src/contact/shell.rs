@@ -20,11 +20,12 @@
 //! rotations of the same particle).
 //!
 //! **Pseudo-time.** The tools move with the solver's load factor `λ` (the pseudo-time `t`), and
-//! the penalty force is not scaled by it: the contact is a [`LoadScaling::Prescribed`] load, so
-//! [`ExternalLoad::add_force`] receives `factor = t` and adds `f_c(q; t)` (and likewise the
-//! stiffness); [`crate::shell::problem::ShellProblem`] subtracts it from the residual.
+//! the penalty force is not scaled by it: the contact is a prescribed load
+//! ([`crate::shell::load::Load::Contact`]), so [`ShellContact::force_tracked`] receives
+//! `factor = t` and adds `f_c(q; t)` (and likewise the stiffness); [`crate::shell::problem::ShellProblem`] subtracts it from the residual.
 //!
-//! **Checks.** Evaluations through [`ExternalLoad`] track the gaps: when the pseudo-time changes
+//! **Checks.** The analysis' evaluations ([`ShellContact::force_tracked`],
+//! [`ShellContact::add_stiffness`]) track the gaps: when the pseudo-time changes
 //! (a new step), a slave point whose gap to a tool goes from `> 0` at the previous pseudo-time
 //! to `< −thickness` is a [`ContactError::PathCrossesSheet`] (the tool passed through the sheet
 //! in one step). [`ShellContact::check_engaged`] reports the tools that never touched the sheet
@@ -37,7 +38,7 @@ use super::tool::RigidTool;
 use super::{invalid, ContactError};
 use crate::geometry::Surface;
 use crate::scalar::Real;
-use crate::shell::load::{ExternalLoad, GatherMap, GenericLoad, LoadScaling};
+use crate::shell::gather::GatherMap;
 use crate::shell::model::ShellModel;
 use crate::shell::point::{
     director_first_derivatives, ParticleState, SurfacePoint, DOFS_PER_PARTICLE,
@@ -142,8 +143,8 @@ pub struct ContactReport {
     pub pressure: Vec<[f64; 2]>,
 }
 
-/// Frictionless penalty contact of the shell with rigid tools (eqs 69–72); an
-/// [`ExternalLoad`] (follower) and a [`GenericLoad`].
+/// Frictionless penalty contact of the shell with rigid tools (eqs 69–72); a follower load
+/// of the problem ([`crate::shell::load::Load::Contact`]).
 #[derive(Debug)]
 pub struct ShellContact {
     tools: Vec<RigidTool>,
@@ -616,7 +617,7 @@ impl ShellContact {
         Ok(())
     }
 
-    /// The f64 evaluation of the [`ExternalLoad`] methods (tracked).
+    /// The f64 evaluation of the analysis (tracked).
     fn evaluate_tracked(
         &self,
         model: &ShellModel,
@@ -717,11 +718,11 @@ impl ShellContact {
     }
 }
 
-impl GenericLoad for ShellContact {
+impl ShellContact {
     /// Adds `f_c(q; t = factor)` (module documentation), in scalar `T`; the
     /// tools' surfaces are lifted as constants (derivatives with respect to `q` only). Not
     /// tracked.
-    fn force_generic<T: Real>(
+    pub fn force_generic<T: Real>(
         &self,
         model: &ShellModel,
         q: &[T],
@@ -735,12 +736,10 @@ impl GenericLoad for ShellContact {
         self.scatter_forces(model, &evals, f);
         Ok(())
     }
-}
 
-impl ExternalLoad for ShellContact {
     /// Adds `f_c(q; t = factor)`: the penalty forces at pseudo-time `factor`, not scaled by it
     /// (module documentation). Tracked (tool crossing check).
-    fn add_force(
+    pub fn force_tracked(
         &self,
         model: &ShellModel,
         q: &[f64],
@@ -754,17 +753,10 @@ impl ExternalLoad for ShellContact {
         Ok(())
     }
 
-    fn is_follower(&self) -> bool {
-        true
-    }
-    fn scaling(&self) -> LoadScaling {
-        LoadScaling::Prescribed
-    }
-
     /// Adds `∂f_c/∂q` at pseudo-time `factor` (hand-derived, module
     /// documentation). The entries lie in the cells of the quadrature points, which every
-    /// `ShellProblem` pattern holds, so the active set may change freely.
-    fn add_stiffness(
+    /// `ShellProblem` pattern holds, so the active set may change freely. Tracked.
+    pub fn add_stiffness(
         &self,
         model: &ShellModel,
         q: &[f64],
@@ -834,38 +826,5 @@ impl ExternalLoad for ShellContact {
             map.add_triplets(model, &local, &kl, out);
         }
         Ok(())
-    }
-}
-
-/// A shared contact (keep an `Arc` clone to call [`ShellContact::report`],
-/// [`ShellContact::check_engaged`] or [`ShellContact::reset_tracking`] while a problem owns the
-/// load): delegates to the contact.
-impl ExternalLoad for std::sync::Arc<ShellContact> {
-    fn add_force(
-        &self,
-        model: &ShellModel,
-        q: &[f64],
-        factor: f64,
-        f: &mut [f64],
-    ) -> Result<(), ShellError> {
-        self.as_ref().add_force(model, q, factor, f)
-    }
-    fn is_follower(&self) -> bool {
-        true
-    }
-    fn shared_object(&self) -> Option<*const ()> {
-        Some(std::sync::Arc::as_ptr(self).cast())
-    }
-    fn scaling(&self) -> LoadScaling {
-        LoadScaling::Prescribed
-    }
-    fn add_stiffness(
-        &self,
-        model: &ShellModel,
-        q: &[f64],
-        factor: f64,
-        out: &mut Vec<(usize, usize, f64)>,
-    ) -> Result<(), ShellError> {
-        self.as_ref().add_stiffness(model, q, factor, out)
     }
 }

@@ -23,19 +23,16 @@
 //! [`CaseError::Invalid`] naming the dotted key (`design[1].kind`, `dsa.monitors[0]`), the
 //! value and the expectation; every `±h` of the finite-difference study must give an
 //! admissible design ([`DesignVariable::perturbed`]: `t ± h > 0`, material parameters in their
-//! ranges). [`dual_loads`] checks that the dual-number reference can carry the case's loads.
+//! ranges). [`check_dsa_loads`] checks that the sensitivity methods can carry the case's loads.
 
-use super::shell_case::{Load, LoadScalingSpec, Monitor as CaseMonitor, PenaltySpec, ShellCase};
+use super::shell_case::{Load, Monitor as CaseMonitor, ShellCase};
 use super::CaseError;
-use crate::contact::{RigidTool, ShellContact};
+use crate::contact::RigidTool;
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
-use crate::sensitivity::dual::{DualContact, DualLoad};
 use crate::sensitivity::{check_tools, Design, DesignKind, DesignVariable, Monitor};
-use crate::shell::load::{Gravity, PointForce, Pressure};
 use serde::Deserialize;
 use std::path::Path;
-use std::sync::Arc;
 
 /// Default relative finite-difference steps `h/|τ|`: 1e-3 and 1e-4 (truncation error of the
 /// central difference ~1e-6 and ~1e-8 of the response's curvature scale, both far above the
@@ -488,58 +485,32 @@ pub fn check_tool_names(path: &Path, tools: &[RigidTool], spec: &DsaSpec) -> Res
     Ok(())
 }
 
-/// The case's loads (not the contact) as the dual-number reference evaluates them; a load held
-/// constant (`scaling = "constant"`) is a [`DualLoad::Constant`]. The contact with the case's
-/// tools is added by the run with the built problem's [`crate::contact::ShellContact`]
-/// ([`dual_contact`]). Rejects, before any analysis, what the reference cannot carry yet: edge
-/// moments (they act through the director) and edge forces.
-pub fn dual_loads(case: &ShellCase) -> Result<Vec<DualLoad>, CaseError> {
-    let path = case.path.as_path();
-    let mut out = Vec::with_capacity(case.loads.len());
+/// Rejects, before any analysis, the loads the sensitivity methods cannot carry yet: edge
+/// moments (they act through the director) and edge forces (their design derivative through
+/// the edge's length element).
+pub fn check_dsa_loads(case: &ShellCase) -> Result<(), CaseError> {
     for (k, l) in case.loads.iter().enumerate() {
-        let key = format!("load[{k}]");
-        let constant =
-            case.load_scaling.get(k).copied().unwrap_or_default() == LoadScalingSpec::Constant;
-        let shell_err = |e: crate::shell::ShellError| invalid(path, &key, "(table)", e.to_string());
-        let load = match l {
-            Load::PointForce { at, force } => DualLoad::PointForce(PointForce {
-                uv: *at,
-                force: *force,
-            }),
-            Load::Gravity { per_area } => {
-                DualLoad::Gravity(Gravity::new(*per_area).map_err(shell_err)?)
-            }
-            Load::Pressure { value } => {
-                DualLoad::Pressure(Pressure::new(*value).map_err(shell_err)?)
-            }
-            Load::Moment { .. } => {
-                return Err(invalid(
-                    path,
-                    format!("{key}.kind"),
-                    "\"moment\"",
-                    "\"point-force\", \"pressure\" or \"gravity\" for the dual-number \
-                     reference (edge moments act through the director and are not supported \
-                     by it yet)",
-                ))
-            }
-            Load::EdgeForce { .. } => {
-                return Err(invalid(
-                    path,
-                    format!("{key}.kind"),
-                    "\"edge-force\"",
-                    "\"point-force\", \"pressure\" or \"gravity\" for the sensitivity \
-                     methods (the design derivative of an edge force, through the edge's \
-                     length element, is not carried by them yet)",
-                ))
-            }
+        let (value, why) = match l {
+            Load::Moment { .. } => (
+                "\"moment\"",
+                "for the dual-number reference (edge moments act through the director and \
+                 are not supported by it yet)",
+            ),
+            Load::EdgeForce { .. } => (
+                "\"edge-force\"",
+                "for the sensitivity methods (the design derivative of an edge force, through \
+                 the edge's length element, is not carried by them yet)",
+            ),
+            Load::PointForce { .. } | Load::Gravity { .. } | Load::Pressure { .. } => continue,
         };
-        out.push(if constant {
-            DualLoad::Constant(Box::new(load))
-        } else {
-            load
-        });
+        return Err(invalid(
+            &case.path,
+            format!("load[{k}].kind"),
+            value,
+            format!("\"point-force\", \"pressure\" or \"gravity\" {why}"),
+        ));
     }
-    Ok(out)
+    Ok(())
 }
 
 /// Rejects, before any analysis, a case on an arc-length path (`[steps] control =
@@ -557,17 +528,4 @@ pub fn check_load_control(case: &ShellCase) -> Result<(), CaseError> {
         ));
     }
     Ok(())
-}
-
-/// The contact load of the reference for the built problem's contact `contact` (the case's
-/// `[contact]` penalty rule: `penalty_factor` makes `ω = c E/t` a function of the design).
-pub fn dual_contact(case: &ShellCase, contact: Arc<ShellContact>) -> DualLoad {
-    let penalty_factor = match case.contact.as_ref().map(|c| c.penalty) {
-        Some(PenaltySpec::Factor(c)) => Some(c),
-        _ => None,
-    };
-    DualLoad::Contact(DualContact {
-        contact,
-        penalty_factor,
-    })
 }

@@ -12,14 +12,14 @@
 //! `|ψ(τ + h) − ψ(τ) − h ψ'|` of every step size reuses the `τ + h` re-run.
 
 use super::dsa_case::{
-    check_load_control, check_tool_names, dual_contact, dual_loads, DesignEntry, DsaMethod, DsaSpec,
+    check_dsa_loads, check_load_control, check_tool_names, DesignEntry, DsaMethod, DsaSpec,
 };
 use super::shell_build;
 use super::shell_case::ShellCase;
 use super::CaseError;
 use super::RewriteSchedule;
 use crate::contact::ShellContact;
-use crate::sensitivity::dual::{DualLoad, DualMode, SensitivityError};
+use crate::sensitivity::dual::{DualMode, SensitivityError};
 use crate::sensitivity::fd::{self, fit_rate, Analysis, RunResponse, TaylorFit, TaylorRow};
 use crate::sensitivity::terms::{breakdown, TermBreakdown};
 use crate::sensitivity::{run_hooked, validate_design_on, Design, DesignVariable, HookedMethods};
@@ -132,19 +132,14 @@ impl Analysis for CaseAnalysis<'_> {
     }
 }
 
-/// A sensitivity method's problem for `design`: the problem, its driver and the loads as the
-/// methods see them (the case's loads and, with tools, the problem's own contact).
+/// A sensitivity method's problem for `design`: the problem (which owns its loads) and its
+/// driver.
 fn method_problem(
     analysis: &CaseAnalysis<'_>,
-    case: &ShellCase,
     design: &Design,
-) -> Result<(ShellProblem, NewtonSolver, Vec<DualLoad>), DsaError> {
-    let (problem, newton, contact) = analysis.build_with_contact(design)?;
-    let mut loads = dual_loads(case)?;
-    if let Some(c) = contact {
-        loads.push(dual_contact(case, c));
-    }
-    Ok((problem, newton, loads))
+) -> Result<(ShellProblem, NewtonSolver), DsaError> {
+    let (problem, newton, _) = analysis.build_with_contact(design)?;
+    Ok((problem, newton))
 }
 
 /// Per-step derivatives `[step][monitor][variable]` regrouped as `[variable][step][monitor]`.
@@ -344,7 +339,7 @@ pub fn validate(case: &ShellCase, methods: &[DsaMethod]) -> Result<DsaSpec, DsaE
     if methods.contains(&DsaMethod::Dual) || methods.contains(&DsaMethod::Continuum) {
         // Shape variables with contact are carried by both methods: the slave sites take the
         // design velocity of the initial geometry (`contact::shell::InitialGeometry`).
-        dual_loads(case)?;
+        check_dsa_loads(case)?;
     }
     Ok(spec)
 }
@@ -505,12 +500,11 @@ pub fn run_observed(
     };
     let (continuum_run, dual_run) = if want_continuum || want_dual {
         let mut schedule = RewriteSchedule::starting(Instant::now());
-        let runs = method_problem(&analysis, case, &base).and_then(|(problem, newton, loads)| {
+        let runs = method_problem(&analysis, &base).and_then(|(problem, newton)| {
             run_hooked(
                 problem,
                 Some(&case.surface),
                 vars.clone(),
-                loads,
                 monitors.clone(),
                 &newton,
                 analysis.solver(),
@@ -854,7 +848,7 @@ pub const NOTES: [&str; 5] = [
      hook), the nominal run of the finite differences; timing_s.continuum and timing_s.dual: \
      each method's own time inside its analysis run with the hook (the whole hooked runs: \
      continuum_run_total_s, dual_run_total_s; with both methods asked for, one run observed \
-     by both, so the two totals are the same run's); timing_s.continuum_stages: the continuum DSA by stage (fictitious loads, solve, history update, monitors, load check; s); timing_s.fd: all finite-difference re-runs",
+     by both, so the two totals are the same run's); timing_s.continuum_stages: the continuum DSA by stage (fictitious loads, solve, history update, monitors; s); timing_s.fd: all finite-difference re-runs",
     "fd_central and fd_step are lists, one entry per step size of the variable's fd_steps \
      (relative steps h/|tau|; fd_step holds the absolute h); fd_flagged[k] marks load steps \
      where the yield status of some layer point differs among the runs at tau-h, tau, tau+h \
@@ -977,7 +971,6 @@ pub fn to_json(case: &ShellCase, r: &DsaResult, status: &str) -> Value {
                 "solve": t.solve,
                 "update": t.update,
                 "record": t.record,
-                "check": t.check,
             })),
         },
         "cost_per_variable": {
@@ -1180,13 +1173,12 @@ pub fn terms(
 ) -> Result<Vec<TermBreakdown>, DsaError> {
     let analysis = CaseAnalysis { case };
     let base = base_design(case);
-    let (problem, newton, loads) = method_problem(&analysis, case, &base)?;
+    let (problem, newton) = method_problem(&analysis, &base)?;
     let vars: Vec<DesignVariable> = spec.design.iter().map(|d| d.variable.clone()).collect();
     Ok(breakdown(
         problem,
         Some(&case.surface),
         vars,
-        loads,
         &newton,
         analysis.solver(),
         step,

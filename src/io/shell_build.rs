@@ -15,7 +15,7 @@
 
 use super::shell_case::{
     edge_name, Boundary, CellLayout, Component, Load, LoadScalingSpec, Location, MonitorDirection,
-    PredictorKind, ShellCase,
+    PenaltySpec, PredictorKind, ShellCase,
 };
 use super::shell_output::{OutputError, OutputGrid, Separation, ShellOutput, StepSummary};
 use crate::contact::ShellContact;
@@ -28,8 +28,7 @@ use crate::shell::constraints::{
     RowKind, SymmetryRows,
 };
 use crate::shell::integration::{apply_vci, boundary_rule};
-use crate::shell::load::LoadScaling;
-use crate::shell::load::{EdgeForce, ExternalLoad, Gravity, Moment, PointForce, Pressure};
+use crate::shell::load;
 use crate::shell::model::{Discretisation, ShellModel};
 use crate::shell::point::DOFS_PER_PARTICLE;
 use crate::shell::problem::ShellProblem;
@@ -181,7 +180,7 @@ pub fn newton_settings(case: &ShellCase) -> (NewtonOptions, LoadStepping) {
 // ---------------------------------------------------------------------------------------------
 // API seam: the only code that knows how conditions and loads reach `ShellProblem`, and which
 // options the driver has. To connect the rewritten problem (symmetry images, Lagrange-multiplier
-// constraints, `Vec<Box<dyn ExternalLoad>>`) and the driver's predictor, change these four
+// constraints, `Vec<Load>`) and the driver's predictor, change these four
 // functions and remove the entries of `unsupported` that become possible.
 
 /// Features of `case` the current [`ShellProblem`] and driver cannot express, each as the
@@ -430,37 +429,85 @@ pub fn connect(case: &ShellCase, disc: Discretisation) -> Result<ShellProblem, B
     connect_with_contact(case, disc).map(|(p, _)| p)
 }
 
-/// A load applied at its full value at every load factor (`[[load]] scaling = "constant"`):
-/// a [`LoadScaling::Prescribed`] load that ignores the level, so `f(q; λ) = f(q)` (the inner
-/// load evaluated at factor 1).
-#[derive(Debug)]
-pub struct ConstantLoad(pub Box<dyn ExternalLoad>);
-
-impl ExternalLoad for ConstantLoad {
-    fn add_force(
-        &self,
-        model: &ShellModel,
-        q: &[f64],
-        _factor: f64,
-        f: &mut [f64],
-    ) -> Result<(), ShellError> {
-        self.0.add_force(model, q, 1.0, f)
+/// The loads of `case` on `model`, at load factor 1, in case order: the `[[load]]` tables
+/// (a load with `scaling = "constant"` held at its full value), the director filter, and the
+/// contact with the case's tools (also returned: a handle for the per-step reports).
+pub fn case_loads(
+    case: &ShellCase,
+    model: &ShellModel,
+) -> Result<(Vec<load::Load>, Option<Arc<ShellContact>>), BuildError> {
+    let mut loads = Vec::new();
+    for (k, l) in case.loads.iter().enumerate() {
+        let key = format!("load[{k}]");
+        let err = |e: ShellError| model_err(&key, e);
+        // The edge rule of edge loads: one interval per particle spacing along the edge (the
+        // kernels are piecewise cubic there), 4 Gauss points each.
+        let intervals = |edge: &Edge| match edge {
+            Edge::UMin | Edge::UMax => case.particles.counts[1] - 1,
+            Edge::VMin | Edge::VMax => case.particles.counts[0] - 1,
+        };
+        let load: load::Load = match l {
+            Load::PointForce { at, force } => load::PointForce {
+                uv: *at,
+                force: *force,
+            }
+            .into(),
+            Load::Gravity { per_area } => load::Gravity::new(*per_area).map_err(err)?.into(),
+            Load::Pressure { value } => load::Pressure::new(*value).map_err(err)?.into(),
+            Load::Moment { edge, per_length } => {
+                load::Moment::on_edge(model, &case.surface, *edge, *per_length, intervals(edge), 4)
+                    .map_err(err)?
+                    .into()
+            }
+            // A follower one is refused by `unsupported`.
+            Load::EdgeForce {
+                edge, per_length, ..
+            } => load::EdgeForce::on_edge(
+                model,
+                &case.surface,
+                *edge,
+                *per_length,
+                intervals(edge),
+                4,
+            )
+            .map_err(err)?
+            .into(),
+        };
+        loads.push(
+            match case.load_scaling.get(k).copied().unwrap_or_default() {
+                LoadScalingSpec::Proportional => load,
+                LoadScalingSpec::Constant => load::Load::Constant(Box::new(load)),
+            },
+        );
     }
-    fn is_follower(&self) -> bool {
-        self.0.is_follower()
+    if case.integration.director_stabilisation > 0.0 {
+        loads.push(load::Load::DirectorFilter(
+            crate::shell::stabilisation::DirectorFilter::new(
+                model,
+                case.integration.director_stabilisation,
+            )
+            .map_err(|e| model_err("integration.director_stabilisation", e))?,
+        ));
     }
-    fn scaling(&self) -> LoadScaling {
-        LoadScaling::Prescribed
-    }
-    fn add_stiffness(
-        &self,
-        model: &ShellModel,
-        q: &[f64],
-        _factor: f64,
-        out: &mut Vec<(usize, usize, f64)>,
-    ) -> Result<(), ShellError> {
-        self.0.add_stiffness(model, q, 1.0, out)
-    }
+    let contact = match &case.contact {
+        Some(spec) if !case.tools.is_empty() => {
+            let omega = spec.penalty.omega(case.material.young, case.thickness);
+            let c = ShellContact::new(model, &case.surface, case.tools.clone(), spec.faces, omega)
+                .map_err(|e| model_err("contact", e))?;
+            let c = Arc::new(c);
+            let penalty_factor = match spec.penalty {
+                PenaltySpec::Factor(c) => Some(c),
+                _ => None,
+            };
+            loads.push(load::Load::Contact(load::ContactLoad {
+                contact: c.clone(),
+                penalty_factor,
+            }));
+            Some(c)
+        }
+        _ => None,
+    };
+    Ok((loads, contact))
 }
 
 /// As [`connect`], also returning a handle on the contact with the case's tools (a
@@ -485,71 +532,7 @@ pub fn connect_with_contact(
 
     let constraints = boundary_constraints(case, &model)?;
 
-    // Loads at load factor 1.
-    let mut loads: Vec<Box<dyn ExternalLoad>> = Vec::new();
-    for (k, l) in case.loads.iter().enumerate() {
-        let key = format!("load[{k}]");
-        let err = |e: crate::shell::ShellError| model_err(&key, e);
-        let load: Box<dyn ExternalLoad> = match l {
-            Load::PointForce { at, force } => Box::new(PointForce {
-                uv: *at,
-                force: *force,
-            }),
-            Load::Gravity { per_area } => Box::new(Gravity::new(*per_area).map_err(err)?),
-            Load::Pressure { value } => Box::new(Pressure::new(*value).map_err(err)?),
-            // The edge rule: one interval per particle spacing along the edge (the kernels
-            // are piecewise cubic there), 4 Gauss points each.
-            Load::Moment { edge, per_length } => {
-                let along = match edge {
-                    Edge::UMin | Edge::UMax => case.particles.counts[1],
-                    Edge::VMin | Edge::VMax => case.particles.counts[0],
-                };
-                Box::new(
-                    Moment::on_edge(&model, &case.surface, *edge, *per_length, along - 1, 4)
-                        .map_err(err)?,
-                )
-            }
-            // The same edge rule as the moment's (a follower one is refused by `unsupported`).
-            Load::EdgeForce {
-                edge, per_length, ..
-            } => {
-                let along = match edge {
-                    Edge::UMin | Edge::UMax => case.particles.counts[1],
-                    Edge::VMin | Edge::VMax => case.particles.counts[0],
-                };
-                Box::new(
-                    EdgeForce::on_edge(&model, &case.surface, *edge, *per_length, along - 1, 4)
-                        .map_err(err)?,
-                )
-            }
-        };
-        loads.push(
-            match case.load_scaling.get(k).copied().unwrap_or_default() {
-                LoadScalingSpec::Proportional => load,
-                LoadScalingSpec::Constant => Box::new(ConstantLoad(load)),
-            },
-        );
-    }
-    if case.integration.director_stabilisation > 0.0 {
-        loads.push(Box::new(
-            crate::shell::stabilisation::DirectorFilter::new(
-                &model,
-                case.integration.director_stabilisation,
-            )
-            .map_err(|e| model_err("integration.director_stabilisation", e))?,
-        ));
-    }
-    let contact = match &case.contact {
-        Some(spec) if !case.tools.is_empty() => {
-            let omega = spec.penalty.omega(case.material.young, case.thickness);
-            let c = ShellContact::new(&model, &case.surface, case.tools.clone(), spec.faces, omega)
-                .map_err(|e| model_err("contact", e))?;
-            let c = Arc::new(c);
-            loads.push(Box::new(c.clone()));
-            Some(c)
-        }
-        _ => None,
-    };
+    let (loads, contact) = case_loads(case, &model)?;
     let problem =
         ShellProblem::new(model, loads, constraints).map_err(|e| model_err("boundary", e))?;
     if let Some(c) = &contact {

@@ -33,13 +33,13 @@
 //! explicit design dependence). Each can be compared with the dual-number reference seeded with
 //! that group only ([`super::terms`]).
 
-use super::dual::{DualLoad, SensitivityError};
+use super::dual::SensitivityError;
 use super::shape::ShapeVelocity;
 use super::{record_monitors, DesignError, DesignKind, DesignVariable, Monitor};
 use crate::contact::ContactSeeds;
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
-use crate::shell::load::ExternalLoad;
+use crate::shell::load::Load;
 use crate::shell::model::ShellModel;
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
 use crate::shell::point_sensitivity::{commit_particle_dot, ModelSeeds, StepLinearisation};
@@ -138,11 +138,10 @@ impl SensitivityState {
     /// particles' initial directors and lamina vectors, the initial lamina frames.
     pub fn initial(
         problem: &ShellProblem,
-        loads: &[DualLoad],
         var: &DesignVariable,
         surface: Option<&Surface<f64>>,
     ) -> Result<Self, DesignError> {
-        let mut s = Self::zero(problem, loads);
+        let mut s = Self::zero(problem);
         match &var.kind {
             DesignKind::Thickness => s.thickness = 1.0,
             DesignKind::Material(p) => {
@@ -166,7 +165,7 @@ impl SensitivityState {
                 s.position = Some(v.positions);
             }
             DesignKind::Tool { tool, axis } => {
-                let names = contact_tools(loads);
+                let names = contact_tools(problem);
                 let i = names.iter().position(|n| n == tool).ok_or_else(|| {
                     DesignError::UnknownTool {
                         variable: var.name.clone(),
@@ -177,7 +176,7 @@ impl SensitivityState {
                 s.tools[i].translation[*axis] = 1.0;
             }
             DesignKind::ToolRotation { tool, axis } => {
-                let names = contact_tools(loads);
+                let names = contact_tools(problem);
                 let i = names.iter().position(|n| n == tool).ok_or_else(|| {
                     DesignError::UnknownTool {
                         variable: var.name.clone(),
@@ -230,8 +229,8 @@ impl SensitivityState {
         }
     }
 
-    /// All sensitivities zero (the seeds of a group left out), for `problem` with `loads`.
-    pub fn zero(problem: &ShellProblem, loads: &[DualLoad]) -> Self {
+    /// All sensitivities zero (the seeds of a group left out), for `problem`.
+    pub fn zero(problem: &ShellProblem) -> Self {
         let model = &problem.model;
         SensitivityState {
             particles: vec![zero_particle(); model.particles.len()],
@@ -241,21 +240,19 @@ impl SensitivityState {
             position: None,
             thickness: 0.0,
             material: MaterialParams::zero(),
-            tools: vec![Default::default(); contact_tools(loads).len()],
+            tools: vec![Default::default(); contact_tools(problem).len()],
         }
     }
 }
 
-/// The names of the contact's tools in `loads` (its order; empty without contact).
-pub fn contact_tools(loads: &[DualLoad]) -> Vec<String> {
-    loads
+/// The names of the tools of the contact among the loads of `problem` (its order; empty
+/// without contact).
+pub fn contact_tools(problem: &ShellProblem) -> Vec<String> {
+    problem
+        .loads()
         .iter()
-        .find_map(|l| match l {
-            DualLoad::Contact(c) => {
-                Some(c.contact.tools().iter().map(|t| t.name.clone()).collect())
-            }
-            _ => None,
-        })
+        .find_map(|l| l.contact())
+        .map(|c| c.contact.tools().iter().map(|t| t.name.clone()).collect())
         .unwrap_or_default()
 }
 
@@ -283,16 +280,12 @@ pub struct ContinuumTiming {
     pub update: f64,
     /// Monitor derivatives after the commit.
     pub record: f64,
-    /// The check that the loads given to the method are the problem's (at every step; a
-    /// contact that is the problem's own object is recognised by identity, not evaluated).
-    pub check: f64,
 }
 
 /// The continuum DSA as an observer of the analysis' converged steps.
 #[derive(Debug)]
 pub struct ContinuumDsa {
     variables: Vec<DesignVariable>,
-    loads: Vec<DualLoad>,
     monitors: Vec<Monitor>,
     states: Vec<SensitivityState>,
     zero: SensitivityState,
@@ -315,24 +308,22 @@ fn fatal(e: impl std::fmt::Display) -> ProblemError {
 
 impl ContinuumDsa {
     /// The continuum DSA of `variables` for `problem` (at its initial state, built on
-    /// `surface`: needed by shape variables), with the problem's loads as `loads` (checked at
-    /// every step) and `monitors` recorded at every converged step.
+    /// `surface`: needed by shape variables), with `monitors` recorded at every converged
+    /// step.
     pub fn new(
         problem: &ShellProblem,
         surface: Option<&Surface<f64>>,
         variables: Vec<DesignVariable>,
-        loads: Vec<DualLoad>,
         monitors: Vec<Monitor>,
     ) -> Result<Self, SensitivityError> {
         super::dual::check_method_inputs(problem, surface, &variables, &monitors)?;
         let states = variables
             .iter()
-            .map(|v| SensitivityState::initial(problem, &loads, v, surface))
+            .map(|v| SensitivityState::initial(problem, v, surface))
             .collect::<Result<Vec<_>, _>>()?;
-        let zero = SensitivityState::zero(problem, &loads);
+        let zero = SensitivityState::zero(problem);
         Ok(ContinuumDsa {
             variables,
-            loads,
             monitors,
             states,
             zero,
@@ -387,7 +378,7 @@ impl ContinuumDsa {
         at: StepState<'_>,
         group: Option<TermGroup>,
     ) -> Result<Vec<Vec<f64>>, SensitivityError> {
-        fictitious_loads(problem, &self.loads, &self.states, &self.zero, at, group)
+        fictitious_loads(problem, &self.states, &self.zero, at, group)
     }
 
     fn hook(
@@ -409,14 +400,10 @@ impl ContinuumDsa {
             .zip(problem.state())
             .map(|(a, b)| a - b)
             .collect();
-        let t0 = Instant::now();
-        super::dual::check_loads(problem, &self.loads, &du[..n_q], step.load)?;
-        self.timing.check += t0.elapsed().as_secs_f64();
         // 1. Fictitious loads of all variables (eq 65's right-hand side).
         let t0 = Instant::now();
         let (rhs, kept) = fictitious_loads_kept(
             problem,
-            &self.loads,
             &self.states,
             &self.zero,
             StepState {
@@ -533,7 +520,7 @@ impl ContinuumDsa {
 /// contact.
 fn contact_dots(
     model: &ShellModel,
-    loads: &[DualLoad],
+    loads: &[Load],
     states: &[SensitivityState],
     zero: &SensitivityState,
     group: Option<TermGroup>,
@@ -541,7 +528,7 @@ fn contact_dots(
     factor: f64,
 ) -> Result<Option<Vec<Vec<f64>>>, SensitivityError> {
     let Some(c) = loads.iter().find_map(|l| match l {
-        DualLoad::Contact(c) => Some(c),
+        Load::Contact(c) => Some(c),
         _ => None,
     }) else {
         return Ok(None);
@@ -619,7 +606,7 @@ fn contact_dots(
 /// - the contact: [`contact_dots`], for all variables at once.
 fn add_load_dot(
     model: &ShellModel,
-    l: &DualLoad,
+    l: &Load,
     s: &SensitivityState,
     group: Option<TermGroup>,
     dq: &[f64],
@@ -628,7 +615,7 @@ fn add_load_dot(
 ) -> Result<(), SensitivityError> {
     let on = |g: TermGroup| group.is_none_or(|x| x == g);
     match l {
-        DualLoad::Pressure(p) => {
+        Load::Pressure(p) => {
             if on(TermGroup::History) {
                 let mut trip = Vec::new();
                 p.add_stiffness(model, dq, factor, &mut trip)?;
@@ -643,21 +630,30 @@ fn add_load_dot(
                 p.add_design_derivative(model, v, dq, factor, f)?;
             }
         }
-        DualLoad::Gravity(g) => {
+        Load::Gravity(g) => {
             if let (true, Some(v)) = (on(TermGroup::Load), &s.surface) {
                 g.add_design_derivative(model, v, factor, f)?;
             }
         }
-        DualLoad::PointForce(_) => {}
-        DualLoad::Constant(inner) => add_load_dot(model, inner, s, group, dq, 1.0, f)?,
+        Load::PointForce(_) => {}
+        Load::Constant(inner) => add_load_dot(model, inner, s, group, dq, 1.0, f)?,
         // The contact is evaluated for all variables at once (`contact_dots`).
-        DualLoad::Contact(_) => {
+        Load::Contact(_) => {
             return Err(SensitivityError::Shell(
                 crate::shell::ShellError::InvalidInput(
                     "continuum sensitivity: a contact inside a constant load: expected the \
                  contact as a load of its own"
                         .into(),
                 ),
+            ))
+        }
+        // Refused before the analysis (`check_method_inputs`).
+        Load::Moment(_) | Load::EdgeForce(_) | Load::DirectorFilter(_) => {
+            return Err(SensitivityError::Shell(
+                crate::shell::ShellError::InvalidInput(format!(
+                    "continuum sensitivity: a {} load is not carried",
+                    l.kind()
+                )),
             ))
         }
     }
@@ -681,13 +677,12 @@ pub struct StepState<'a> {
 /// on `ⁿū̇`, and the constraint rows.
 pub fn fictitious_loads(
     problem: &ShellProblem,
-    loads: &[DualLoad],
     states: &[SensitivityState],
     zero: &SensitivityState,
     at: StepState<'_>,
     group: Option<TermGroup>,
 ) -> Result<Vec<Vec<f64>>, SensitivityError> {
-    Ok(fictitious_loads_kept(problem, loads, states, zero, at, group, None)?.0)
+    Ok(fictitious_loads_kept(problem, states, zero, at, group, None)?.0)
 }
 
 /// The trial histories' seed part (one per variable) and the layer data of the step, kept by
@@ -703,7 +698,6 @@ type Recycled = (Vec<Vec<PointHistory<f64>>>, Option<StepLinearisation>);
 /// ([`ShellModel::internal_force_dots_linearised_into`]).
 fn fictitious_loads_kept(
     problem: &ShellProblem,
-    loads: &[DualLoad],
     states: &[SensitivityState],
     zero: &SensitivityState,
     at: StepState<'_>,
@@ -712,6 +706,7 @@ fn fictitious_loads_kept(
 ) -> Result<(Vec<Vec<f64>>, Option<Kept>), SensitivityError> {
     let StepState { du, u, load } = at;
     let model = &problem.model;
+    let loads = problem.loads();
     let n = u.len();
     let n_q = problem.n_generalised();
     let zero_dofs = vec![0.0; n_q];
@@ -744,7 +739,7 @@ fn fictitious_loads_kept(
             Some(c) => c,
             None => vec![0.0; n_q],
         };
-        for l in loads.iter().filter(|l| !matches!(l, DualLoad::Contact(_))) {
+        for l in loads.iter().filter(|l| !matches!(l, Load::Contact(_))) {
             add_load_dot(model, l, s, group, &du[..n_q], load, &mut f)?;
         }
         for (ri, fi) in r.iter_mut().zip(&f) {
@@ -840,7 +835,6 @@ pub fn run_continuum(
     problem: ShellProblem,
     surface: Option<&Surface<f64>>,
     variables: Vec<DesignVariable>,
-    loads: Vec<DualLoad>,
     monitors: Vec<Monitor>,
     newton: &NewtonSolver,
     solver: SolverOptions,
@@ -853,7 +847,6 @@ pub fn run_continuum(
         problem,
         surface,
         variables,
-        loads,
         monitors,
         newton,
         solver,

@@ -31,19 +31,18 @@
 //! directions; `Dual64` repeats all of that per variable. Both give the same derivatives to
 //! round-off; their cost is measured in `tests/dsa_dual.rs` and `docs/sensitivity.md`.
 //!
-//! **Loads.** For non-shape design variables the loads have no explicit design dependence
-//! (a pressure per unit area, a point force, a gravity load per unit area as given). A follower
-//! pressure depends on the committed displacement `ⁿū`, which carries a sensitivity: it is
-//! evaluated with the increment's derivative part set to `ⁿū̇` ([`Pressure`] depends on `ⁿū` and
-//! `Δū` only through their sum, `docs/loads.md`), which gives `∂f_ext/∂ⁿū · ⁿū̇` exactly. The
-//! problem owns its loads as trait objects, so they are handed to the reference again as
-//! [`DualLoad`]s; at every step their force is checked against the problem's
-//! ([`ShellProblem::external_force`]), so a missing or different load is an error, not a wrong
-//! derivative. A load held constant ([`DualLoad::Constant`]) is its inner load at factor 1.
-//! Edge moments (which act through the director) are not supported yet.
+//! **Loads.** The reference evaluates the problem's own loads ([`ShellProblem::loads`], the
+//! closed [`crate::shell::load::Load`] type) with its `force` on the group's dual state ([`LoadState`]). For
+//! non-shape design variables the loads have no explicit design dependence (a pressure per
+//! unit area, a point force, a gravity load per unit area as given). A follower pressure
+//! depends on the committed displacement `ⁿū`, which carries a sensitivity: it is evaluated with
+//! the increment's derivative part set to `ⁿū̇` (it depends on `ⁿū` and `Δū` only through their
+//! sum, `docs/loads.md`), which gives `∂f_ext/∂ⁿū · ⁿū̇` exactly. A load held constant is its
+//! inner load at factor 1. Edge moments, edge forces and the director filter are refused
+//! (`Load::takes_state`).
 //!
-//! **Contact** ([`DualLoad::Contact`], eqs 68–70). The penalty force of the slave points
-//! against the rigid tools is evaluated in `D` by [`ShellContact::force_with`] with the
+//! **Contact** (`Load::Contact`, eqs 68–70). The penalty force of the slave points
+//! against the rigid tools is evaluated in `D` by [`crate::contact::ShellContact::force_with`] with the
 //! group's committed dual particle states (`ū, d, e`: the slave point `x̄ + ζ t/2 d` and the
 //! rotated director depend on them, so the history dependence of the contact force is carried
 //! exactly, as for the pressure), the converged increment (constant), the dual thickness, the
@@ -69,7 +68,7 @@
 //! functions and quadrature weights live on the parameter domain and do not move. With
 //! contact, the group's dual mid-surface points `x̄⁰` ([`DualState::positions`]) and its
 //! surfaces are the initial geometry of the slave points
-//! ([`crate::contact::shell::InitialGeometry`] in [`ContactInputs::initial`]): the slave
+//! ([`crate::contact::shell::InitialGeometry`] in [`crate::contact::ContactInputs::initial`]): the slave
 //! point `x̄⁰ + Σ Ψ (ū + Δū) + ζ t/2 (n⁰ + Σ Ψ (d − d⁰))` and the initial face areas carry
 //! the design velocity (eq 74's `V⁰` in eqs 78–83).
 //!
@@ -82,15 +81,13 @@ use super::shape::dual_geometry;
 use super::{
     validate_design, validate_design_on, Design, DesignError, DesignKind, DesignVariable, Monitor,
 };
-use crate::contact::shell::InitialGeometry;
-use crate::contact::{ContactInputs, ShellContact};
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
 use crate::scalar::Real;
-use crate::shell::load::{ExternalLoad, GenericLoad, Gravity, PointForce, Pressure};
+use crate::shell::load::{ContactLoad, LoadState};
+use crate::shell::model::commit_particle;
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
 use crate::shell::problem::ShellProblem;
-use crate::shell::rotation::rotate_director;
 use crate::shell::ShellError;
 use crate::solver::observe::{Observed, StepObserver};
 use crate::solver::{
@@ -99,7 +96,6 @@ use crate::solver::{
 };
 use nalgebra::Vector3;
 use num_dual::{Derivative, Dual64, DualSVec64};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 use thiserror::Error;
 
@@ -139,71 +135,6 @@ impl<const N: usize> DesignDual for DualSVec64<N> {
     }
     fn part(&self, k: usize) -> f64 {
         self.eps.0.as_ref().map_or(0.0, |v| v[k])
-    }
-}
-
-/// A load of the problem as the dual reference evaluates it (the problem holds its loads as
-/// trait objects; see the module documentation).
-#[derive(Clone, Debug, PartialEq)]
-pub enum DualLoad {
-    /// Dead point force: no dependence on the state or on a non-shape design.
-    PointForce(PointForce),
-    /// Dead load per unit area: no dependence on the state or on a non-shape design.
-    Gravity(Gravity),
-    /// Follower pressure: depends on the committed displacement.
-    Pressure(Pressure),
-    /// Penalty contact with rigid tools (a prescribed load: the tools move with the load
-    /// factor): depends on the committed particle states, the increment, the thickness and
-    /// the tool positions (eqs 68–70; [`ShellContact::force_with`]).
-    Contact(DualContact),
-    /// A load held at its full value at every load factor (`scaling = "constant"`): the inner
-    /// load evaluated at factor 1.
-    Constant(Box<DualLoad>),
-}
-
-/// The contact load of the problem as the reference evaluates it: the problem's own
-/// [`ShellContact`] (shared) and how its penalty was set.
-#[derive(Clone, Debug)]
-pub struct DualContact {
-    /// The contact (the same object the problem owns as a load).
-    pub contact: Arc<ShellContact>,
-    /// `Some(c)` when the penalty is `ω = c E / t` (`penalty_factor`): the reference then
-    /// differentiates `ω` with `E` and `t` as a re-run does; `None` for a given `ω`.
-    pub penalty_factor: Option<f64>,
-}
-
-impl PartialEq for DualContact {
-    /// The same contact object and penalty rule.
-    fn eq(&self, other: &Self) -> bool {
-        Arc::ptr_eq(&self.contact, &other.contact) && self.penalty_factor == other.penalty_factor
-    }
-}
-
-impl DualLoad {
-    fn add_force_f64(
-        &self,
-        model: &crate::shell::model::ShellModel,
-        q: &[f64],
-        factor: f64,
-        f: &mut [f64],
-    ) -> Result<(), ShellError> {
-        match self {
-            DualLoad::PointForce(l) => l.add_force(model, q, factor, f),
-            DualLoad::Gravity(l) => l.add_force(model, q, factor, f),
-            DualLoad::Pressure(l) => l.add_force(model, q, factor, f),
-            // Untracked (the problem's own evaluation tracks the gaps).
-            DualLoad::Contact(c) => c.contact.force_generic(model, q, factor, f),
-            DualLoad::Constant(inner) => inner.add_force_f64(model, q, 1.0, f),
-        }
-    }
-
-    /// The contact of this load (also inside [`DualLoad::Constant`]).
-    fn contact(&self) -> Option<&DualContact> {
-        match self {
-            DualLoad::Contact(c) => Some(c),
-            DualLoad::Constant(inner) => inner.contact(),
-            _ => None,
-        }
     }
 }
 
@@ -285,6 +216,18 @@ pub enum SensitivityError {
         /// Supported.
         max: usize,
     },
+    /// A load of the problem the sensitivity methods do not carry
+    /// ([`crate::shell::load::Load::takes_state`]).
+    #[error(
+        "load {index} of the problem ({kind}): not carried by the design sensitivity methods \
+         (expected point forces, gravity, pressure or contact, any of them held constant)"
+    )]
+    UnsupportedLoad {
+        /// Position in [`ShellProblem::loads`].
+        index: usize,
+        /// Its kind.
+        kind: &'static str,
+    },
     /// Shell evaluation.
     #[error(transparent)]
     Shell(#[from] ShellError),
@@ -313,7 +256,6 @@ pub enum SensitivityError {
 #[derive(Debug)]
 pub struct DualDsa<D: DesignDual> {
     variables: Vec<DesignVariable>,
-    loads: Vec<DualLoad>,
     monitors: Vec<Monitor>,
     groups: Vec<DualState<D>>,
     pending: Option<Vec<DualState<D>>>,
@@ -327,26 +269,6 @@ pub struct DualDsa<D: DesignDual> {
 /// The shell problem with the dual-number reference in its convergence hook.
 pub type DualShellProblem<D> = Observed<ShellProblem, DualDsa<D>>;
 
-/// `e1 = (t − d (d·t))/|…|`, `e2 = d × e1` (the model's lamina vectors), generic.
-fn lamina_vectors<T: Real>(d: &Vector3<T>, t: &Vector3<T>) -> [Vector3<T>; 2] {
-    let e1 = (t - d * d.dot(t)).normalize();
-    [e1, d.cross(&e1)]
-}
-
-/// The particle update of `ShellModel::commit_histories`, generic: `ū += Δū`, the director and
-/// the first lamina vector rotated by Rodrigues' formula, the lamina vectors re-orthogonalised.
-pub fn commit_particle<T: Real>(p: &ParticleState<T>, q: &[T]) -> ParticleState<T> {
-    let alpha = [q[3], q[4]];
-    let d = rotate_director(&p.d, &p.e[0], &p.e[1], alpha);
-    let e0 = rotate_director(&p.e[0], &p.e[0], &p.e[1], alpha);
-    ParticleState {
-        u: p.u + Vector3::new(q[0], q[1], q[2]),
-        d,
-        d0: p.d0,
-        e: lamina_vectors(&d, &e0),
-    }
-}
-
 fn fatal(e: impl std::fmt::Display) -> ProblemError {
     ProblemError::Fatal(format!("dual sensitivity reference: {e}"))
 }
@@ -354,8 +276,8 @@ fn fatal(e: impl std::fmt::Display) -> ProblemError {
 impl<D: DesignDual> DualDsa<D> {
     /// The reference for `problem` (at its initial state, its model built on `surface`;
     /// `None`: no shape design variables allowed): `variables` are validated against its
-    /// model, `loads` must be the problem's loads (checked at every step), `monitors` are
-    /// recorded at every converged step. A shape design variable seeds its surface
+    /// model, the problem's loads are evaluated with the dual states, `monitors` are recorded
+    /// at every converged step. A shape design variable seeds its surface
     /// parameter: the group's initial geometry (quadrature-point surfaces, particle directors
     /// and lamina vectors, initial frames) is built in `D` from the seeded surface
     /// ([`dual_geometry`]), exactly as `ShellModel::new` builds it in `f64`.
@@ -363,11 +285,11 @@ impl<D: DesignDual> DualDsa<D> {
         problem: &ShellProblem,
         surface: Option<&Surface<f64>>,
         variables: Vec<DesignVariable>,
-        loads: Vec<DualLoad>,
         monitors: Vec<Monitor>,
     ) -> Result<Self, SensitivityError> {
         check_method_inputs(problem, surface, &variables, &monitors)?;
-        let contacts: Vec<&DualContact> = loads.iter().filter_map(|l| l.contact()).collect();
+        let contacts: Vec<&ContactLoad> =
+            problem.loads().iter().filter_map(|l| l.contact()).collect();
         if contacts.len() > 1 {
             return Err(SensitivityError::Shell(ShellError::InvalidInput(format!(
                 "dual sensitivity reference: {} contact loads given, expected at most one",
@@ -379,20 +301,6 @@ impl<D: DesignDual> DualDsa<D> {
             .map(|c| c.contact.tools().iter().map(|t| t.name.as_str()).collect())
             .unwrap_or_default();
         super::check_tools(&variables, &tool_names)?;
-        if let Some(c) = contacts.first() {
-            if let Some(factor) = c.penalty_factor {
-                let model = &problem.model;
-                let omega = factor * model.material.young / model.thickness;
-                // The same product in f64: equal to round-off when the rule is the one used.
-                if (omega - c.contact.penalty()).abs() > 1e-12 * omega.abs() {
-                    return Err(SensitivityError::Shell(ShellError::InvalidInput(format!(
-                        "dual sensitivity reference: penalty_factor {factor} gives ω = {omega:e}, \
-                         the contact's penalty is {:e}: expected the same rule",
-                        c.contact.penalty()
-                    ))));
-                }
-            }
-        }
         let model = &problem.model;
         let design = Design::of(model);
         let nd = D::DIRECTIONS;
@@ -473,7 +381,6 @@ impl<D: DesignDual> DualDsa<D> {
             .collect::<Result<Vec<_>, SensitivityError>>()?;
         Ok(DualDsa {
             variables,
-            loads,
             monitors,
             groups,
             pending: None,
@@ -525,7 +432,8 @@ impl<D: DesignDual> DualDsa<D> {
     }
 
     /// The dual external force of group `g` (generalised rows) at the increment `dq` and load
-    /// `load` ([`Self::add_dual_load`] of every load).
+    /// `load`: every load of the problem on the group's state
+    /// ([`crate::shell::load::Load::force`]).
     pub(crate) fn dual_external(
         &self,
         problem: &ShellProblem,
@@ -533,22 +441,18 @@ impl<D: DesignDual> DualDsa<D> {
         dq: &[D],
         load: f64,
     ) -> Result<Vec<D>, ShellError> {
-        let n_q = problem.n_generalised();
-        let q_shift: Vec<D> = dq
-            .iter()
-            .enumerate()
-            .map(|(i, x)| {
-                let (p, c) = (i / DOFS_PER_PARTICLE, i % DOFS_PER_PARTICLE);
-                if c < 3 {
-                    *x + g.particles[p].u[c] - D::cst(g.particles[p].u[c].value())
-                } else {
-                    *x
-                }
-            })
-            .collect();
-        let mut f_ext = vec![D::zero(); n_q];
-        for l in &self.loads {
-            Self::add_dual_load(&problem.model, l, g, dq, &q_shift, load, &mut f_ext)?;
+        let state = LoadState {
+            particles: &g.particles,
+            surfaces: &g.surfaces,
+            positions: g.positions.as_deref(),
+            thickness: g.thickness,
+            young: g.material.young,
+            tool_offsets: &g.tool_offsets,
+            tool_rotations: &g.tool_rotations,
+        };
+        let mut f_ext = vec![D::zero(); problem.n_generalised()];
+        for l in problem.loads() {
+            l.force(&problem.model, Some(&state), dq, load, &mut f_ext)?;
         }
         Ok(f_ext)
     }
@@ -602,48 +506,6 @@ impl<D: DesignDual> DualDsa<D> {
         Ok(r)
     }
 
-    /// Add the force of load `l` in `D` at load factor `factor`: a pressure with the shifted
-    /// increment `q_shift` (its derivative part `ⁿū̇`) and gravity on the group's initial
-    /// geometry, the contact with the group's committed
-    /// particle states, thickness, penalty and tool offsets and the increment `dq`; dead point forces
-    /// carry no derivative and are left out.
-    fn add_dual_load(
-        model: &crate::shell::model::ShellModel,
-        l: &DualLoad,
-        g: &DualState<D>,
-        dq: &[D],
-        q_shift: &[D],
-        factor: f64,
-        f: &mut [D],
-    ) -> Result<(), ShellError> {
-        match l {
-            DualLoad::Pressure(p) => p.force_with_surfaces(model, &g.surfaces, q_shift, factor, f),
-            // A dead load per unit initial area: its derivative is the area element's (zero
-            // unless a shape variable moves the geometry).
-            DualLoad::Gravity(w) => w.force_with_surfaces(model, &g.surfaces, factor, f),
-            DualLoad::Contact(c) => {
-                let penalty = match c.penalty_factor {
-                    Some(k) => g.material.young * k / g.thickness,
-                    None => D::cst(c.contact.penalty()),
-                };
-                let inputs = ContactInputs {
-                    particles: &g.particles,
-                    thickness: g.thickness,
-                    penalty,
-                    offsets: &g.tool_offsets,
-                    rotations: &g.tool_rotations,
-                    initial: g.positions.as_ref().map(|x| InitialGeometry {
-                        positions: x,
-                        surfaces: &g.surfaces,
-                    }),
-                };
-                c.contact.force_with(model, &inputs, dq, factor, f)
-            }
-            DualLoad::Constant(inner) => Self::add_dual_load(model, inner, g, dq, q_shift, 1.0, f),
-            DualLoad::PointForce(_) => Ok(()),
-        }
-    }
-
     fn hook(
         &mut self,
         problem: &ShellProblem,
@@ -659,7 +521,6 @@ impl<D: DesignDual> DualDsa<D> {
         let n_q = problem.n_generalised();
         let committed = problem.state();
         let du: Vec<f64> = step.u.iter().zip(committed).map(|(a, b)| a - b).collect();
-        check_loads(problem, &self.loads, &du[..n_q], step.load)?;
         let dq_const: Vec<D> = du[..n_q].iter().map(|&v| D::cst(v)).collect();
         // 1. Right-hand sides of all variables, column-major n × n_variables.
         let nv = self.variables.len();
@@ -773,7 +634,8 @@ impl<D: DesignDual> DualDsa<D> {
 
 /// What both sensitivity methods check before the analysis: the design variables are
 /// admissible for the model (and for `surface`, which shape variables need), the problem is at
-/// its initial state, and every monitor can be evaluated.
+/// its initial state, its loads are of the kinds the methods carry, and every monitor can be
+/// evaluated.
 pub(crate) fn check_method_inputs(
     problem: &ShellProblem,
     surface: Option<&Surface<f64>>,
@@ -787,70 +649,21 @@ pub(crate) fn check_method_inputs(
     if let Some((index, &value)) = problem.state().iter().enumerate().find(|(_, v)| **v != 0.0) {
         return Err(SensitivityError::NotInitial { index, value });
     }
+    if let Some((index, l)) = problem
+        .loads()
+        .iter()
+        .enumerate()
+        .find(|(_, l)| !l.takes_state())
+    {
+        let kind = l.kind();
+        return Err(SensitivityError::UnsupportedLoad { index, kind });
+    }
     for m in monitors {
         m.value(&problem.model)
             .map_err(|e| DesignError::InvalidMonitor {
                 label: m.label.clone(),
                 detail: e.to_string(),
             })?;
-    }
-    Ok(())
-}
-
-/// Check that `loads` (given to a sensitivity method) are the problem's: equal forces at the
-/// increment `dq` and load level `load`.
-///
-/// A contact given as the same object the problem holds (`DualContact::contact`, an `Arc`
-/// whose handle the problem owns as a load: [`ExternalLoad::shared_object`]) is recognised by
-/// identity and not evaluated on either side: the contact force is the costly part of the
-/// check (two evaluations per step otherwise), and the same object gives the same force. Every
-/// other load, and a contact on one side only, is evaluated, so a load missing from either
-/// list still shows as a force difference.
-pub(crate) fn check_loads(
-    problem: &ShellProblem,
-    loads: &[DualLoad],
-    dq: &[f64],
-    load: f64,
-) -> Result<(), ProblemError> {
-    let model = &problem.model;
-    let mine_shared: Vec<*const ()> = loads
-        .iter()
-        .map(|l| match l {
-            DualLoad::Contact(c) => Arc::as_ptr(&c.contact).cast(),
-            _ => std::ptr::null(),
-        })
-        .collect();
-    let mut matched = vec![false; loads.len()];
-    let mut reference = vec![0.0; problem.n_generalised()];
-    for l in problem.loads() {
-        if let Some(ptr) = l.shared_object() {
-            if let Some(i) = (0..loads.len()).find(|&i| !matched[i] && mine_shared[i] == ptr) {
-                matched[i] = true;
-                continue;
-            }
-        }
-        l.add_force(model, dq, load, &mut reference)
-            .map_err(fatal)?;
-    }
-    let mut mine = vec![0.0; reference.len()];
-    for (l, _) in loads.iter().zip(&matched).filter(|(_, m)| !**m) {
-        l.add_force_f64(model, dq, load, &mut mine).map_err(fatal)?;
-    }
-    let scale = reference
-        .iter()
-        .chain(&mine)
-        .fold(0.0_f64, |m, v| m.max(v.abs()));
-    let diff = reference
-        .iter()
-        .zip(&mine)
-        .fold(0.0_f64, |m, (a, b)| m.max((a - b).abs()));
-    // Same loads summed in the same order give equal forces; 1e-12 of the largest
-    // component leaves room for a different summation order only.
-    if diff > 1e-12 * scale || (scale == 0.0 && diff > 0.0) {
-        return Err(fatal(format!(
-            "the loads given to the sensitivity method differ from the problem's at load \
-             {load}: largest force difference {diff:e} (largest force {scale:e})"
-        )));
     }
     Ok(())
 }
@@ -983,15 +796,12 @@ impl DualRun {
 pub fn run_dual(
     problem: ShellProblem,
     variables: Vec<DesignVariable>,
-    loads: Vec<DualLoad>,
     monitors: Vec<Monitor>,
     newton: &NewtonSolver,
     solver: SolverOptions,
     mode: DualMode,
 ) -> Result<DualRun, SensitivityError> {
-    run_dual_on(
-        problem, None, variables, loads, monitors, newton, solver, mode,
-    )
+    run_dual_on(problem, None, variables, monitors, newton, solver, mode)
 }
 
 /// [`run_dual`] for a problem whose model was built on `surface`, which admits shape design
@@ -1001,7 +811,6 @@ pub fn run_dual_on(
     problem: ShellProblem,
     surface: Option<&Surface<f64>>,
     variables: Vec<DesignVariable>,
-    loads: Vec<DualLoad>,
     monitors: Vec<Monitor>,
     newton: &NewtonSolver,
     solver: SolverOptions,
@@ -1015,7 +824,6 @@ pub fn run_dual_on(
         problem,
         surface,
         variables,
-        loads,
         monitors,
         newton,
         solver,

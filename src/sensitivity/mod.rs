@@ -747,7 +747,6 @@ pub fn run_hooked(
     problem: crate::shell::problem::ShellProblem,
     surface: Option<&Surface<f64>>,
     variables: Vec<DesignVariable>,
-    loads: Vec<dual::DualLoad>,
     monitors: Vec<Monitor>,
     newton: &crate::solver::NewtonSolver,
     solver: crate::solver::SolverOptions,
@@ -760,7 +759,6 @@ pub fn run_hooked(
         problem: crate::shell::problem::ShellProblem,
         surface: Option<&Surface<f64>>,
         variables: Vec<DesignVariable>,
-        loads: Vec<dual::DualLoad>,
         monitors: Vec<Monitor>,
         newton: &crate::solver::NewtonSolver,
         solver: crate::solver::SolverOptions,
@@ -778,18 +776,12 @@ pub fn run_hooked(
         let c = methods
             .continuum
             .then(|| {
-                continuum::ContinuumDsa::new(
-                    &problem,
-                    surface,
-                    variables.clone(),
-                    loads.clone(),
-                    monitors.clone(),
-                )
+                continuum::ContinuumDsa::new(&problem, surface, variables.clone(), monitors.clone())
             })
             .transpose()?;
         let d = methods
             .dual
-            .map(|_| dual::DualDsa::<D>::new(&problem, surface, variables, loads, monitors))
+            .map(|_| dual::DualDsa::<D>::new(&problem, surface, variables, monitors))
             .transpose()?;
         let mut tap = |o: &(Option<continuum::ContinuumDsa>, Option<dual::DualDsa<D>>)| {
             on_step(HookedRecords {
@@ -816,7 +808,7 @@ pub fn run_hooked(
         ($($n:literal),*) => {
             match variables.len() {
                 $($n => drive::<num_dual::DualSVec64<$n>>(
-                    problem, surface, variables, loads, monitors, newton, solver, methods,
+                    problem, surface, variables, monitors, newton, solver, methods,
                     on_step,
                 ),)*
                 count => Err(dual::SensitivityError::TooManyVariables { count, max: 8 }),
@@ -825,7 +817,7 @@ pub fn run_hooked(
     }
     match methods.dual {
         None | Some(dual::DualMode::PerVariable) => drive::<num_dual::Dual64>(
-            problem, surface, variables, loads, monitors, newton, solver, methods, on_step,
+            problem, surface, variables, monitors, newton, solver, methods, on_step,
         ),
         Some(dual::DualMode::Vector) => vector!(1, 2, 3, 4, 5, 6, 7, 8),
     }
@@ -838,7 +830,6 @@ pub fn run_continuum_and_dual(
     problem: crate::shell::problem::ShellProblem,
     surface: Option<&Surface<f64>>,
     variables: Vec<DesignVariable>,
-    loads: Vec<dual::DualLoad>,
     monitors: Vec<Monitor>,
     newton: &crate::solver::NewtonSolver,
     solver: crate::solver::SolverOptions,
@@ -852,7 +843,6 @@ pub fn run_continuum_and_dual(
         problem,
         surface,
         variables,
-        loads,
         monitors,
         newton,
         solver,

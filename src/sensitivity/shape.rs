@@ -27,8 +27,7 @@ use super::dual::DesignDual;
 use crate::geometry::{GeometryError, Surface, SurfaceDerivs};
 use crate::kinematics::M3;
 use crate::material::MaterialState;
-use crate::scalar::Real;
-use crate::shell::model::ShellModel;
+use crate::shell::model::{initial_histories, initial_particle, ShellModel};
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint};
 use nalgebra::Vector3;
 
@@ -92,14 +91,7 @@ impl SurfacePoint<f64> {
     }
 }
 
-/// Lamina vectors `e1 = (t − d (d·t))/|…|`, `e2 = d × e1` (as `ShellModel::new` builds them),
-/// generic over the scalar.
-pub fn lamina_vectors<T: Real>(d: &Vector3<T>, t: &Vector3<T>) -> [Vector3<T>; 2] {
-    let e1 = (t - d * d.dot(t)).normalize();
-    [e1, d.cross(&e1)]
-}
-
-/// `∂/∂τ` of [`lamina_vectors`] for the derivatives `d_dot`, `t_dot` of the director and the
+/// `∂/∂τ` of [`crate::shell::model::lamina_vectors`] for the derivatives `d_dot`, `t_dot` of the director and the
 /// hint: `w = t − d (d·t)`, `ẇ = ṫ − ḋ (d·t) − d (ḋ·t + d·ṫ)`, `ė1 = (ẇ − e1 (e1·ẇ))/|w|`,
 /// `ė2 = ḋ × e1 + d × ė1`.
 pub fn lamina_vectors_dot(d: &V3, d_dot: &V3, t: &V3, t_dot: &V3) -> [V3; 2] {
@@ -216,7 +208,8 @@ impl ShapeVelocity {
 
 /// The initial geometry of `model` in a dual scalar `D`, built from `surface` with its design
 /// parameters in `D` (`seeds[k]`: the derivative parts of parameter `k`, length
-/// `D::DIRECTIONS`), exactly as `ShellModel::new` builds it in `f64`: per quadrature point
+/// `D::DIRECTIONS`), with the model's own constructors ([`initial_particle`],
+/// [`initial_histories`]) as `ShellModel::new` builds it in `f64`: per quadrature point
 /// the [`SurfacePoint`], per particle `d = d⁰ = n(ξ_I)` and the lamina vectors, per point and
 /// layer the initial frame with the virgin material state.
 pub fn dual_geometry<D: DesignDual>(
@@ -250,29 +243,9 @@ pub fn dual_geometry<D: DesignDual>(
         .particle_uv
         .iter()
         .enumerate()
-        .map(|(i, &[u, v])| {
-            let sd = s.eval(D::cst(u), D::cst(v));
-            let n = sd.normal()?;
-            let t = hint(model, i).map_or(sd.xu, |h| h.map(D::cst));
-            Ok(ParticleState {
-                u: Vector3::zeros(),
-                d: n,
-                d0: n,
-                e: lamina_vectors(&n, &t),
-            })
-        })
+        .map(|(i, &uv)| initial_particle(&s, uv, hint(model, i)))
         .collect::<Result<Vec<_>, GeometryError>>()?;
-    let nl = model.thickness_rule.len();
-    let history = points
-        .iter()
-        .flat_map(|sp| {
-            let h = PointHistory {
-                frame: sp.initial_frame(),
-                material: MaterialState::virgin(),
-            };
-            std::iter::repeat_n(h, nl)
-        })
-        .collect();
+    let history = initial_histories(points.iter(), model.thickness_rule.len());
     Ok(DualGeometry {
         points,
         positions,

@@ -17,7 +17,7 @@
 //!   point, parameter coordinates and layer).
 
 use super::continuum::{fictitious_loads, SensitivityState, StepState, TermGroup};
-use super::dual::{DualDsa, DualLoad, DualState, SensitivityError};
+use super::dual::{DualDsa, DualState, SensitivityError};
 use super::DesignVariable;
 use crate::contact::sensitivity::ToolRate;
 use crate::geometry::Surface;
@@ -263,7 +263,6 @@ struct Breakdown {
     dual: DualDsa<Dual64>,
     /// 0-based converged step.
     step: usize,
-    loads: Vec<DualLoad>,
     /// The continuum's end-of-step sensitivities, per variable (set at the step).
     pending: Option<(f64, Vec<SensitivityState>)>,
     out: Vec<TermBreakdown>,
@@ -297,7 +296,7 @@ impl Breakdown {
             load: step.load,
         };
         let states: Vec<SensitivityState> = dp.groups().iter().map(seeds_of).collect();
-        let zero = SensitivityState::zero(problem, &self.loads);
+        let zero = SensitivityState::zero(problem);
         let mut per_var: Vec<Vec<GroupComparison>> = vec![Vec::new(); states.len()];
         let groups: Vec<Option<TermGroup>> = TermGroup::ALL
             .iter()
@@ -305,7 +304,7 @@ impl Breakdown {
             .chain([None])
             .collect();
         for group in groups {
-            let cont = fictitious_loads(problem, &self.loads, &states, &zero, at, group)?;
+            let cont = fictitious_loads(problem, &states, &zero, at, group)?;
             for (v, g) in dp.groups().iter().enumerate() {
                 let gm = match group {
                     Some(t) => masked(g, t),
@@ -341,7 +340,7 @@ impl Breakdown {
             }
         }
         // The continuum's own step: solve eq 65 with the total right-hand side, update.
-        let rhs = fictitious_loads(problem, &self.loads, &states, &zero, at, None)?;
+        let rhs = fictitious_loads(problem, &states, &zero, at, None)?;
         let nv = states.len();
         let mut b = vec![0.0; n * nv];
         for (v, r) in rhs.iter().enumerate() {
@@ -498,7 +497,6 @@ pub fn breakdown(
     problem: ShellProblem,
     surface: Option<&Surface<f64>>,
     variables: Vec<DesignVariable>,
-    loads: Vec<DualLoad>,
     newton: &NewtonSolver,
     solver: SolverOptions,
     step: usize,
@@ -512,11 +510,10 @@ pub fn breakdown(
     }
     let pattern = problem.pattern().clone();
     let mut linear = LinearSolver::new(&pattern, crate::solver::Method::auto(&pattern), solver)?;
-    let dual = DualDsa::<Dual64>::new(&problem, surface, variables, loads.clone(), Vec::new())?;
+    let dual = DualDsa::<Dual64>::new(&problem, surface, variables, Vec::new())?;
     let obs = Breakdown {
         dual,
         step: step - 1,
-        loads,
         pending: None,
         out: Vec::new(),
         failure: None,

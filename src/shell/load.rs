@@ -15,33 +15,39 @@
 //! - [`Moment`]: a line moment per unit initial length on a parametric edge, acting through the
 //!   rotation of the interpolated director, `δW = ∫ m · (d × δd)/|d|² ds`;
 //! - [`EdgeForce`]: a dead force per unit initial length on a parametric edge,
-//!   `f_I = ∫ Ψ_I p ds⁰`.
+//!   `f_I = ∫ Ψ_I p ds⁰`;
+//! - the contact with rigid tools ([`ContactLoad`], `crate::contact::shell`), the director
+//!   filter ([`DirectorFilter`]) and any of them held constant.
+//!
+//! [`Load`] is the one closed type of them all, which the problem owns and the design
+//! sensitivity methods evaluate.
 //!
 //! Every load goes from global to point-local degrees of freedom through the model's one seam
 //! ([`ShellModel::gather_local`], [`ShellModel::scatter_local`],
 //! [`ShellModel::scatter_particle`], [`ShellModel::particle_state`]); a load stiffness is mapped
 //! back with the transpose of the scatter ([`GatherMap`]), so a particle whose DOFs are a linear
-//! map of other particles' (a symmetry image) is handled by the seam alone. The forces of the
-//! configuration-dependent loads are written once, generic over the scalar
-//! ([`GenericLoad::force_generic`]), so that their dual-number Jacobian is the reference of the
-//! hand-derived stiffness. Formulas, signs and derivations: `docs/loads.md`.
+//! map of other particles' (a symmetry image) is handled by the seam alone. The forces are
+//! written once, generic over the scalar ([`Load::force`]), so that their dual-number Jacobian
+//! is the reference of the hand-derived stiffness. Formulas, signs and derivations: `docs/loads.md`.
 
+use super::gather::GatherMap;
 use super::model::ShellModel;
 use super::point::{director_first_derivatives, ParticleState, SurfacePoint, DOFS_PER_PARTICLE};
 use super::rotation::{director_derivatives, rotate_director};
+use super::stabilisation::DirectorFilter;
 use super::ShellError;
+use crate::contact::shell::{ContactInputs, InitialGeometry};
+use crate::contact::ShellContact;
 use crate::geometry::Surface;
 use crate::meshfree::quadrature::gauss_legendre;
 use crate::meshfree::Edge;
 use crate::meshfree::{ParamBox, ShapeValues};
 use crate::scalar::Real;
 use nalgebra::{DMatrix, Matrix3, Vector3};
-use std::collections::HashMap;
-use std::fmt::Debug;
+use std::sync::Arc;
 
 type V3<T> = Vector3<T>;
 
-/// An external load.
 /// How a load depends on the load factor `λ` of the nonlinear driver.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum LoadScaling {
@@ -49,62 +55,246 @@ pub enum LoadScaling {
     #[default]
     Proportional,
     /// `f_ext(q; λ)`: the load is a given function of the level `λ` and is not scaled by it
-    /// (contact with rigid tools moving along a path in the pseudo-time `λ`). Its
-    /// [`ExternalLoad::add_force`] and [`ExternalLoad::add_stiffness`] receive `factor = λ`.
+    /// (contact with rigid tools moving along a path in the pseudo-time `λ`, a load held
+    /// constant, the director filter). Its [`Load::add_force`] and [`Load::add_stiffness`]
+    /// receive `factor = λ`.
     Prescribed,
 }
 
-pub trait ExternalLoad: Send + Sync + Debug {
-    /// Add `factor · f_ext(q)` into `f` (global generalised DOFs; `q` is the generalised
-    /// increment from the committed state); for a [`LoadScaling::Prescribed`] load,
-    /// `f_ext(q; λ)` with `λ = factor`.
-    fn add_force(
+/// An external load of the shell problem: every kind the model has. The force is written once
+/// over any scalar ([`Load::force`]): the analysis evaluates it in `f64`, its dual-number
+/// Jacobian in `q` is the reference of the hand-derived [`Load::add_stiffness`]
+/// (`tests/shell_loads.rs`), and the dual-number design sensitivity reference evaluates the
+/// same object on its dual committed state ([`LoadState`]).
+#[derive(Clone, Debug)]
+pub enum Load {
+    /// A dead point force.
+    PointForce(PointForce),
+    /// A dead load per unit initial area.
+    Gravity(Gravity),
+    /// A follower pressure.
+    Pressure(Pressure),
+    /// A line moment on an edge, acting through the director.
+    Moment(Moment),
+    /// A dead force per unit initial length on an edge.
+    EdgeForce(EdgeForce),
+    /// Penalty contact with rigid tools moving with the pseudo-time (prescribed).
+    Contact(ContactLoad),
+    /// The director-filter stabilisation (prescribed: not scaled by the load factor).
+    DirectorFilter(DirectorFilter),
+    /// A load held at its full value at every load factor: the inner load at factor 1
+    /// (prescribed).
+    Constant(Box<Load>),
+}
+
+/// The contact with rigid tools as a load: the contact (shared, so that a run keeps a handle
+/// for its per-step reports and gap tracking) and how its penalty was set.
+#[derive(Clone, Debug)]
+pub struct ContactLoad {
+    /// The contact.
+    pub contact: Arc<ShellContact>,
+    /// `Some(c)` when the penalty is `ω = c E / t` (`penalty_factor`): a design sensitivity
+    /// then differentiates `ω` with `E` and `t`, as a re-run does; `None` for a given `ω`.
+    pub penalty_factor: Option<f64>,
+}
+
+/// A committed state and design other than the model's own, in scalar `T`, for
+/// [`Load::force`]: the dual-number reference's state of a group of design variables, whose
+/// derivative parts are the carried sensitivities (committed displacements, directors and
+/// lamina vectors, initial geometry, thickness, Young's modulus, tool positions).
+#[derive(Clone, Copy, Debug)]
+pub struct LoadState<'a, T> {
+    /// Committed states of the real particles (as `ShellModel::particles`).
+    pub particles: &'a [ParticleState<T>],
+    /// Initial geometry `x̄⁰,α, n⁰, n⁰,α` per quadrature point (as `ShellModel::points`).
+    pub surfaces: &'a [SurfacePoint<T>],
+    /// Initial mid-surface position `x̄⁰` per quadrature point when it carries a shape design
+    /// derivative (`None`: the contact's slave sites as built).
+    pub positions: Option<&'a [V3<T>]>,
+    /// Shell thickness.
+    pub thickness: T,
+    /// Young's modulus (of a penalty `ω = c E / t`).
+    pub young: T,
+    /// Per tool of the contact: a translation added to its path.
+    pub tool_offsets: &'a [V3<T>],
+    /// Per tool of the contact: a rotation vector of the tool as built about its pivot.
+    pub tool_rotations: &'a [V3<T>],
+}
+
+impl Load {
+    /// The kind, as the case format names it.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Load::PointForce(_) => "point-force",
+            Load::Gravity(_) => "gravity",
+            Load::Pressure(_) => "pressure",
+            Load::Moment(_) => "moment",
+            Load::EdgeForce(_) => "edge-force",
+            Load::Contact(_) => "contact",
+            Load::DirectorFilter(_) => "director-stabilisation",
+            Load::Constant(inner) => inner.kind(),
+        }
+    }
+
+    /// How the load depends on the load factor.
+    pub fn scaling(&self) -> LoadScaling {
+        match self {
+            Load::Contact(_) | Load::DirectorFilter(_) | Load::Constant(_) => {
+                LoadScaling::Prescribed
+            }
+            _ => LoadScaling::Proportional,
+        }
+    }
+
+    /// Whether `f_ext` depends on the configuration (then [`Load::add_stiffness`] is not
+    /// empty).
+    pub fn is_follower(&self) -> bool {
+        match self {
+            Load::PointForce(_) | Load::Gravity(_) | Load::EdgeForce(_) => false,
+            Load::Pressure(_) | Load::Moment(_) | Load::Contact(_) | Load::DirectorFilter(_) => {
+                true
+            }
+            Load::Constant(inner) => inner.is_follower(),
+        }
+    }
+
+    /// The contact of this load (also inside [`Load::Constant`]).
+    pub fn contact(&self) -> Option<&ContactLoad> {
+        match self {
+            Load::Contact(c) => Some(c),
+            Load::Constant(inner) => inner.contact(),
+            _ => None,
+        }
+    }
+
+    /// Whether [`Load::force`] takes a [`LoadState`]: every kind but the edge moment and edge
+    /// force (their design derivative through the edge's length element is not carried) and
+    /// the director filter (its blocks are built on the model's committed directors).
+    pub fn takes_state(&self) -> bool {
+        match self {
+            Load::Moment(_) | Load::EdgeForce(_) | Load::DirectorFilter(_) => false,
+            Load::Constant(inner) => inner.takes_state(),
+            _ => true,
+        }
+    }
+
+    /// Add `factor · f_ext(q)` into `f` in scalar `T` (global generalised DOFs; `q` is the
+    /// generalised increment from the committed state); for a [`LoadScaling::Prescribed`]
+    /// load `f_ext(q; λ)` with `λ = factor` (a [`Load::Constant`] evaluates its inner load at
+    /// factor 1). `state`: `None` for the model's committed state and design as built; a
+    /// [`LoadState`] for another one (the kinds of [`Load::takes_state`]). The contact is not
+    /// tracked here ([`Load::add_force`] is).
+    pub fn force<T: Real>(
+        &self,
+        model: &ShellModel,
+        state: Option<&LoadState<'_, T>>,
+        q: &[T],
+        factor: f64,
+        f: &mut [T],
+    ) -> Result<(), ShellError> {
+        match (self, state) {
+            (Load::PointForce(l), _) => l.force(model, factor, f),
+            (Load::Gravity(l), None) => l.force(model, q, factor, f),
+            // A dead load per unit initial area: on the state's initial geometry.
+            (Load::Gravity(l), Some(s)) => l.force_with_surfaces(model, s.surfaces, factor, f),
+            (Load::Pressure(l), None) => l.force(model, q, factor, f),
+            // The pressure depends on the committed displacement `ⁿū` and the increment `Δū`
+            // only through their sum: the increment carries the state's `ⁿū̇`.
+            (Load::Pressure(l), Some(s)) => {
+                check_sizes(model, q.len(), None)?;
+                let shifted: Vec<T> = q
+                    .iter()
+                    .enumerate()
+                    .map(|(i, x)| {
+                        let (p, c) = (i / DOFS_PER_PARTICLE, i % DOFS_PER_PARTICLE);
+                        match s.particles.get(p) {
+                            Some(st) if c < 3 => *x + st.u[c] - T::cst(st.u[c].value()),
+                            _ => *x,
+                        }
+                    })
+                    .collect();
+                l.force_with_surfaces(model, s.surfaces, &shifted, factor, f)
+            }
+            (Load::Moment(l), None) => l.force(model, q, factor, f),
+            (Load::EdgeForce(l), None) => l.force(model, q, factor, f),
+            (Load::DirectorFilter(l), None) => l.force(model, q, f),
+            (Load::Contact(c), None) => c.contact.force_generic(model, q, factor, f),
+            (Load::Contact(c), Some(s)) => {
+                let penalty = match c.penalty_factor {
+                    Some(k) => s.young * k / s.thickness,
+                    None => T::cst(c.contact.penalty()),
+                };
+                let inputs = ContactInputs {
+                    particles: s.particles,
+                    thickness: s.thickness,
+                    penalty,
+                    offsets: s.tool_offsets,
+                    rotations: s.tool_rotations,
+                    initial: s.positions.map(|positions| InitialGeometry {
+                        positions,
+                        surfaces: s.surfaces,
+                    }),
+                };
+                c.contact.force_with(model, &inputs, q, factor, f)
+            }
+            (Load::Constant(inner), s) => inner.force(model, s, q, 1.0, f),
+            (l @ (Load::Moment(_) | Load::EdgeForce(_) | Load::DirectorFilter(_)), Some(_)) => {
+                Err(ShellError::InvalidInput(format!(
+                    "{} load on a given committed state and design: not implemented \
+                     (expected point forces, gravity, pressure or contact)",
+                    l.kind()
+                )))
+            }
+        }
+    }
+
+    /// Add `factor · f_ext(q)` (a prescribed load: `f_ext(q; λ = factor)`) in `f64` on the
+    /// model's committed state: [`Load::force`], with the contact's gaps tracked (the check
+    /// for a tool crossing the sheet in one step).
+    pub fn add_force(
         &self,
         model: &ShellModel,
         q: &[f64],
         factor: f64,
         f: &mut [f64],
-    ) -> Result<(), ShellError>;
-    /// Whether `f_ext` depends on the configuration (then [`ExternalLoad::add_stiffness`] is
-    /// not empty).
-    fn is_follower(&self) -> bool {
-        false
-    }
-    /// How the load depends on the load factor (default [`LoadScaling::Proportional`]).
-    fn scaling(&self) -> LoadScaling {
-        LoadScaling::Proportional
-    }
-    /// The address of a shared object this load is a handle of (an `Arc` it delegates to), so
-    /// that a caller holding another handle recognises the same load without evaluating it
-    /// (the sensitivity methods' load check). Default: none.
-    fn shared_object(&self) -> Option<*const ()> {
-        None
-    }
-    /// Add `factor · ∂f_ext/∂q` (for a [`LoadScaling::Prescribed`] load `∂f_ext(q; λ)/∂q` with
-    /// `λ = factor`) as global `(row, column, value)` entries (default: a dead load).
-    fn add_stiffness(
-        &self,
-        _model: &ShellModel,
-        _q: &[f64],
-        _factor: f64,
-        _out: &mut Vec<(usize, usize, f64)>,
     ) -> Result<(), ShellError> {
-        Ok(())
+        match self {
+            Load::Contact(c) => c.contact.force_tracked(model, q, factor, f),
+            Load::Constant(inner) => inner.add_force(model, q, 1.0, f),
+            _ => self.force(model, None, q, factor, f),
+        }
+    }
+
+    /// Add `factor · ∂f_ext/∂q` (a prescribed load: `∂f_ext(q; λ)/∂q` with `λ = factor`) as
+    /// global `(row, column, value)` entries, hand-derived (empty for a dead load).
+    pub fn add_stiffness(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        factor: f64,
+        out: &mut Vec<(usize, usize, f64)>,
+    ) -> Result<(), ShellError> {
+        match self {
+            Load::PointForce(_) | Load::Gravity(_) | Load::EdgeForce(_) => Ok(()),
+            Load::Pressure(l) => l.add_stiffness(model, q, factor, out),
+            Load::Moment(l) => l.add_stiffness(model, q, factor, out),
+            Load::Contact(c) => c.contact.add_stiffness(model, q, factor, out),
+            Load::DirectorFilter(l) => l.add_stiffness(model, out),
+            Load::Constant(inner) => inner.add_stiffness(model, q, 1.0, out),
+        }
     }
 }
 
-/// A load whose force is written once over any scalar: with dual numbers its Jacobian is the
-/// reference of [`ExternalLoad::add_stiffness`] (`tests/shell_loads.rs`).
-pub trait GenericLoad {
-    /// Add `factor · f_ext(q)` into `f`, in scalar `T`.
-    fn force_generic<T: Real>(
-        &self,
-        model: &ShellModel,
-        q: &[T],
-        factor: f64,
-        f: &mut [T],
-    ) -> Result<(), ShellError>;
+macro_rules! load_from {
+    ($($kind:ident),*) => {
+        $(impl From<$kind> for Load {
+            fn from(l: $kind) -> Self {
+                Load::$kind(l)
+            }
+        })*
+    };
 }
+load_from!(PointForce, Gravity, Pressure, Moment, EdgeForce);
 
 fn check_sizes(model: &ShellModel, q: usize, f: Option<usize>) -> Result<(), ShellError> {
     let n = model.n_dofs();
@@ -157,87 +347,6 @@ fn selected_points(
     Ok(sel)
 }
 
-/// The gather map of shape-function particles: for each of a particle's 5 local components,
-/// the global `(dof, coefficient)` pairs it is gathered from. It is built as the transpose of
-/// [`ShellModel::scatter_particle`] (scatter a unit local vector, read the global entries), so
-/// whatever linear map the seam applies (identity for a real particle, a reflection for a
-/// symmetry image) the load stiffness `Gᵀ K_loc G` follows it.
-#[derive(Debug)]
-pub struct GatherMap {
-    rows: HashMap<usize, [Vec<(usize, f64)>; DOFS_PER_PARTICLE]>,
-    scratch: Vec<f64>,
-}
-
-impl GatherMap {
-    /// An empty map for `model`.
-    pub fn new(model: &ShellModel) -> Self {
-        GatherMap {
-            rows: HashMap::new(),
-            scratch: vec![0.0; model.n_dofs()],
-        }
-    }
-
-    /// The rows of shape-function particle `j` (computed on first use: one scatter and one scan
-    /// of the global vector per component).
-    pub fn rows(
-        &mut self,
-        model: &ShellModel,
-        j: usize,
-    ) -> &[Vec<(usize, f64)>; DOFS_PER_PARTICLE] {
-        let scratch = &mut self.scratch;
-        self.rows.entry(j).or_insert_with(|| {
-            std::array::from_fn(|c| {
-                let mut e = [0.0; DOFS_PER_PARTICLE];
-                e[c] = 1.0;
-                model.scatter_particle(j, &e, scratch);
-                let mut row = Vec::new();
-                for (i, v) in scratch.iter_mut().enumerate() {
-                    if *v != 0.0 {
-                        row.push((i, *v));
-                        *v = 0.0;
-                    }
-                }
-                row
-            })
-        })
-    }
-
-    /// Component `c` of particle `j` gathered from the global vector `q`.
-    pub fn gather<T: Real>(&mut self, model: &ShellModel, j: usize, c: usize, q: &[T]) -> T {
-        self.rows(model, j)[c]
-            .iter()
-            .fold(T::zero(), |s, &(i, g)| s + q[i] * g)
-    }
-
-    /// Add `Gᵀ K_loc G` as triplets: `k_loc` is indexed by `(particle, component)` pairs
-    /// `local[a]` on both sides.
-    pub fn add_triplets(
-        &mut self,
-        model: &ShellModel,
-        local: &[(usize, usize)],
-        k_loc: &DMatrix<f64>,
-        out: &mut Vec<(usize, usize, f64)>,
-    ) {
-        let rows: Vec<Vec<(usize, f64)>> = local
-            .iter()
-            .map(|&(j, c)| self.rows(model, j)[c].clone())
-            .collect();
-        for (a, ra) in rows.iter().enumerate() {
-            for (b, rb) in rows.iter().enumerate() {
-                let v = k_loc[(a, b)];
-                if v == 0.0 {
-                    continue;
-                }
-                for &(i, gi) in ra {
-                    for &(jj, gj) in rb {
-                        out.push((i, jj, gi * v * gj));
-                    }
-                }
-            }
-        }
-    }
-}
-
 /// `[a]×`, the matrix of `v ↦ a × v`.
 fn skew(a: &V3<f64>) -> Matrix3<f64> {
     Matrix3::new(0.0, -a[2], a[1], a[2], 0.0, -a[0], -a[1], a[0], 0.0)
@@ -253,14 +362,15 @@ pub struct PointForce {
     pub force: [f64; 3],
 }
 
-impl ExternalLoad for PointForce {
-    fn add_force(
+impl PointForce {
+    /// Add `factor · f` into `f` (dead: no dependence on the state).
+    pub fn force<T: Real>(
         &self,
         model: &ShellModel,
-        _q: &[f64],
         factor: f64,
-        f: &mut [f64],
+        f: &mut [T],
     ) -> Result<(), ShellError> {
+        check_sizes(model, f.len(), None)?;
         let mut sv = ShapeValues::new();
         model
             .shape_functions
@@ -268,11 +378,11 @@ impl ExternalLoad for PointForce {
             .map_err(|e| ShellError::InvalidInput(format!("point force at {:?}: {e}", self.uv)))?;
         for (j, psi, _) in sv.iter() {
             let l = [
-                psi * self.force[0] * factor,
-                psi * self.force[1] * factor,
-                psi * self.force[2] * factor,
-                0.0,
-                0.0,
+                T::cst(psi * self.force[0] * factor),
+                T::cst(psi * self.force[1] * factor),
+                T::cst(psi * self.force[2] * factor),
+                T::zero(),
+                T::zero(),
             ];
             model.scatter_particle(j, &l, f);
         }
@@ -308,9 +418,6 @@ impl Gravity {
         self.load
     }
 
-    /// [`GenericLoad::force_generic`] with the initial geometry of every quadrature point in
-    /// `T` (`surfaces`, as `model.points`): the area element `|x̄⁰,1 × x̄⁰,2|` then carries a
-    /// shape design derivative (the dual reference for shape design variables).
     /// The shape design derivative of the force (hand-derived): with the design velocity
     /// `V,α = ẋ⁰,α` at every quadrature point (`velocity`, as `model.points`), the area element
     /// `|c|`, `c = x̄⁰,1 × x̄⁰,2`, changes by `n⁰ · (V,1 × x̄⁰,2 + x̄⁰,1 × V,2)`.
@@ -348,6 +455,9 @@ impl Gravity {
         Ok(())
     }
 
+    /// [`Gravity::force`] with the initial geometry of every quadrature point in `T`
+    /// (`surfaces`, as `model.points`): the area element `|x̄⁰,1 × x̄⁰,2|` then carries a shape
+    /// design derivative (the dual reference for shape design variables).
     pub fn force_with_surfaces<T: Real>(
         &self,
         model: &ShellModel,
@@ -392,8 +502,9 @@ fn check_surfaces<T>(model: &ShellModel, surfaces: &[SurfacePoint<T>]) -> Result
     Ok(())
 }
 
-impl GenericLoad for Gravity {
-    fn force_generic<T: Real>(
+impl Gravity {
+    /// Add `factor · f` into `f`, in scalar `T` (dead: `q` is checked for its size only).
+    pub fn force<T: Real>(
         &self,
         model: &ShellModel,
         q: &[T],
@@ -421,18 +532,6 @@ impl GenericLoad for Gravity {
             model.scatter_local(k, &local, f);
         }
         Ok(())
-    }
-}
-
-impl ExternalLoad for Gravity {
-    fn add_force(
-        &self,
-        model: &ShellModel,
-        q: &[f64],
-        factor: f64,
-        f: &mut [f64],
-    ) -> Result<(), ShellError> {
-        self.force_generic(model, q, factor, f)
     }
 }
 
@@ -542,8 +641,8 @@ impl Pressure {
         Ok(())
     }
 
-    /// [`GenericLoad::force_generic`] with the initial geometry of every quadrature point in
-    /// `T` (`surfaces`, as `model.points`): `x̄⁰,α` then carries a shape design derivative
+    /// [`Pressure::force`] with the initial geometry of every quadrature point in `T`
+    /// (`surfaces`, as `model.points`): `x̄⁰,α` then carries a shape design derivative
     /// (the dual reference for shape design variables).
     pub fn force_with_surfaces<T: Real>(
         &self,
@@ -574,8 +673,9 @@ impl Pressure {
     }
 }
 
-impl GenericLoad for Pressure {
-    fn force_generic<T: Real>(
+impl Pressure {
+    /// Add `factor · f(q)` into `f`, in scalar `T`.
+    pub fn force<T: Real>(
         &self,
         model: &ShellModel,
         q: &[T],
@@ -602,20 +702,9 @@ impl GenericLoad for Pressure {
     }
 }
 
-impl ExternalLoad for Pressure {
-    fn add_force(
-        &self,
-        model: &ShellModel,
-        q: &[f64],
-        factor: f64,
-        f: &mut [f64],
-    ) -> Result<(), ShellError> {
-        self.force_generic(model, q, factor, f)
-    }
-    fn is_follower(&self) -> bool {
-        true
-    }
-    fn add_stiffness(
+impl Pressure {
+    /// Add `factor · ∂f/∂q` as global entries (hand-derived: the type's documentation).
+    pub fn add_stiffness(
         &self,
         model: &ShellModel,
         q: &[f64],
@@ -736,7 +825,7 @@ impl EdgeForce {
     }
 
     /// The force per unit length.
-    pub fn force(&self) -> [f64; 3] {
+    pub fn per_length(&self) -> [f64; 3] {
         self.force
     }
 
@@ -746,13 +835,14 @@ impl EdgeForce {
     }
 }
 
-impl ExternalLoad for EdgeForce {
-    fn add_force(
+impl EdgeForce {
+    /// Add `factor · f` into `f`, in scalar `T` (dead: `q` is checked for its size only).
+    pub fn force<T: Real>(
         &self,
         model: &ShellModel,
-        q: &[f64],
+        q: &[T],
         factor: f64,
-        f: &mut [f64],
+        f: &mut [T],
     ) -> Result<(), ShellError> {
         if model.n_dofs() != self.n_dofs {
             return Err(ShellError::InvalidInput(format!(
@@ -767,11 +857,11 @@ impl ExternalLoad for EdgeForce {
             for &(j, psi) in &ep.shape {
                 let c = psi * s;
                 let local = [
-                    c * self.force[0],
-                    c * self.force[1],
-                    c * self.force[2],
-                    0.0,
-                    0.0,
+                    T::cst(c * self.force[0]),
+                    T::cst(c * self.force[1]),
+                    T::cst(c * self.force[2]),
+                    T::zero(),
+                    T::zero(),
                 ];
                 model.scatter_particle(j, &local, f);
             }
@@ -860,8 +950,9 @@ impl Moment {
     }
 }
 
-impl GenericLoad for Moment {
-    fn force_generic<T: Real>(
+impl Moment {
+    /// Add `factor · f(q)` into `f`, in scalar `T`.
+    pub fn force<T: Real>(
         &self,
         model: &ShellModel,
         q: &[T],
@@ -898,20 +989,9 @@ impl GenericLoad for Moment {
     }
 }
 
-impl ExternalLoad for Moment {
-    fn add_force(
-        &self,
-        model: &ShellModel,
-        q: &[f64],
-        factor: f64,
-        f: &mut [f64],
-    ) -> Result<(), ShellError> {
-        self.force_generic(model, q, factor, f)
-    }
-    fn is_follower(&self) -> bool {
-        true
-    }
-    fn add_stiffness(
+impl Moment {
+    /// Add `factor · ∂f/∂q` as global entries (hand-derived: the type's documentation).
+    pub fn add_stiffness(
         &self,
         model: &ShellModel,
         q: &[f64],

@@ -7,6 +7,7 @@
 //! directional derivatives; the director rotation ([`rotation`]).
 
 pub mod constraints;
+pub mod gather;
 pub mod integration;
 pub mod load;
 pub mod model;

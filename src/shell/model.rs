@@ -20,7 +20,7 @@ use super::rotation::{director_derivatives, rotate_director, DirectorDerivatives
 use super::symmetry::{SymmetryLayout, SymmetryPlane};
 use super::tangent::{CellSlot, ThicknessTangent};
 use super::ShellError;
-use crate::geometry::Surface;
+use crate::geometry::{GeometryError, Surface};
 use crate::material::{MaterialParams, MaterialState};
 use crate::meshfree::{Basis, MeshfreeError, ShapeFunctions, ShapeValues};
 use crate::scalar::Real;
@@ -155,10 +155,64 @@ struct DofMap {
     map: Option<(Matrix3<f64>, f64)>,
 }
 
-/// Lamina vectors `e1, e2 ⟂ d`: `e1` along the projection of `t` (a surface tangent).
-fn lamina_vectors(d: &Vector3<f64>, t: &Vector3<f64>) -> [Vector3<f64>; 2] {
+/// Lamina vectors `e1, e2 ⟂ d`: `e1 = (t − d (d·t))/|…|` along the projection of `t` (a
+/// surface tangent), `e2 = d × e1`; generic over the scalar.
+pub fn lamina_vectors<T: Real>(d: &Vector3<T>, t: &Vector3<T>) -> [Vector3<T>; 2] {
     let e1 = (t - d * d.dot(t)).normalize();
     [e1, d.cross(&e1)]
+}
+
+/// The particle update of a converged step, generic over the scalar (the analysis' commit and
+/// the dual reference's): `ū += Δū`, the director and the first lamina vector rotated by
+/// Rodrigues' formula with the increment's `α`, the lamina vectors re-orthogonalised.
+pub fn commit_particle<T: Real>(p: &ParticleState<T>, q: &[T]) -> ParticleState<T> {
+    let alpha = [q[3], q[4]];
+    let d = rotate_director(&p.d, &p.e[0], &p.e[1], alpha);
+    let e0 = rotate_director(&p.e[0], &p.e[0], &p.e[1], alpha);
+    ParticleState {
+        u: p.u + Vector3::new(q[0], q[1], q[2]),
+        d,
+        d0: p.d0,
+        e: lamina_vectors(&d, &e0),
+    }
+}
+
+/// The initial state of the particle at `uv` of `surface`, generic over the scalar (the
+/// model's and, with the design parameters in a dual scalar, the dual reference's):
+/// `ū = 0`, `d = d⁰ = n(ξ_I)`, and the lamina vectors with `e1` along the projection of
+/// `hint` (a symmetry plane's normal) or else of `x,u`.
+pub fn initial_particle<T: Real>(
+    surface: &Surface<T>,
+    [u, v]: [f64; 2],
+    hint: Option<Vector3<f64>>,
+) -> Result<ParticleState<T>, GeometryError> {
+    let sd = surface.eval(T::cst(u), T::cst(v));
+    let n = sd.normal()?;
+    let t = hint.map_or(sd.xu, |h| h.map(T::cst));
+    Ok(ParticleState {
+        u: Vector3::zeros(),
+        d: n,
+        d0: n,
+        e: lamina_vectors(&n, &t),
+    })
+}
+
+/// The initial histories of points with the initial geometry `surfaces`, generic over the
+/// scalar: per point and each of its `layers`, the initial lamina frame and the virgin
+/// material state.
+pub fn initial_histories<'a, T: Real>(
+    surfaces: impl Iterator<Item = &'a SurfacePoint<T>>,
+    layers: usize,
+) -> Vec<PointHistory<T>> {
+    surfaces
+        .flat_map(|s| {
+            let h = PointHistory {
+                frame: s.initial_frame(),
+                material: MaterialState::virgin(),
+            };
+            std::iter::repeat_n(h, layers)
+        })
+        .collect()
 }
 
 impl ShellModel {
@@ -200,19 +254,10 @@ impl ShellModel {
             .iter()
             .enumerate()
             .map(|(i, &[u, v])| {
-                let sd = surface.eval(u, v);
-                let n = sd.normal().map_err(|e| {
-                    ShellError::InvalidInput(format!("particle at ({u}, {v}): {e}"))
-                })?;
                 // On a symmetry edge e1 = n_s (which lies in the tangent plane there), so that
                 // the symmetric rotation is α1 and the forbidden one α2.
-                let t = layout.lamina_hint(i).unwrap_or(sd.xu);
-                Ok(ParticleState {
-                    u: Vector3::zeros(),
-                    d: n,
-                    d0: n,
-                    e: lamina_vectors(&n, &t),
-                })
+                initial_particle(surface, [u, v], layout.lamina_hint(i))
+                    .map_err(|e| ShellError::InvalidInput(format!("particle at ({u}, {v}): {e}")))
             })
             .collect::<Result<Vec<_>, ShellError>>()?;
         let n_real = particle_uv.len();
@@ -268,16 +313,7 @@ impl ShellModel {
                 })
             })
             .collect::<Result<Vec<_>, ShellError>>()?;
-        let history = points
-            .iter()
-            .flat_map(|p| {
-                let h = PointHistory {
-                    frame: p.surface.initial_frame(),
-                    material: MaterialState::virgin(),
-                };
-                std::iter::repeat_n(h, thickness_rule.len())
-            })
-            .collect();
+        let history = initial_histories(points.iter().map(|p| &p.surface), thickness_rule.len());
         Ok(ShellModel {
             particles,
             particle_uv,
@@ -967,14 +1003,12 @@ impl ShellModel {
     /// [`ShellModel::commit`] with the trial histories given per in-plane point (the layers of
     /// point `k` in `histories[k]`).
     pub fn commit_histories(&mut self, dofs: &[f64], histories: Vec<Vec<PointHistory<f64>>>) {
-        for (i, p) in self.particles.iter_mut().enumerate() {
-            let q = &dofs[DOFS_PER_PARTICLE * i..DOFS_PER_PARTICLE * (i + 1)];
-            let alpha = [q[3], q[4]];
-            let d_new = rotate_director(&p.d, &p.e[0], &p.e[1], alpha);
-            let e0 = rotate_director(&p.e[0], &p.e[0], &p.e[1], alpha);
-            p.u += Vector3::new(q[0], q[1], q[2]);
-            p.d = d_new;
-            p.e = lamina_vectors(&d_new, &e0);
+        for (p, q) in self
+            .particles
+            .iter_mut()
+            .zip(dofs.chunks_exact(DOFS_PER_PARTICLE))
+        {
+            *p = commit_particle(p, q);
         }
         let nl = self.thickness_rule.len();
         for (k, hs) in histories.into_iter().enumerate() {

@@ -258,7 +258,7 @@ fn particle_increment_dot_with(
     )
 }
 
-/// Derivative of [`crate::sensitivity::dual::commit_particle`], the particle update of a
+/// Derivative of [`crate::shell::model::commit_particle`], the particle update of a
 /// converged step: `ū̇ + Δū̇`, the director and first lamina vector rotated by Rodrigues'
 /// formula (derivatives as [`PointIncrementDot`]), and the re-orthogonalised lamina vectors
 /// `e1 = a/|a|`, `a = t − d (d·t)`: `ė1 = (ȧ − e1 (e1·ȧ))/|a|`, `ė2 = ḋ × e1 + d × ė1`.

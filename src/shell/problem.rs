@@ -31,7 +31,7 @@
 //! zero): its entries at `q = 0` enter the pattern.
 
 use super::constraints::{assemble, LinearConstraint, MergedRow, RowKind, SymmetryRows};
-use super::load::{ExternalLoad, LoadScaling};
+use super::load::{Load, LoadScaling};
 use super::model::ShellModel;
 use super::point::{PointHistory, DOFS_PER_PARTICLE};
 use super::ShellError;
@@ -69,7 +69,7 @@ type Histories = Vec<Vec<PointHistory<f64>>>;
 pub struct ShellProblem {
     /// The discrete shell (committed state).
     pub model: ShellModel,
-    loads: Vec<Box<dyn ExternalLoad>>,
+    loads: Vec<Load>,
     constraints: Vec<LinearConstraint>,
     scales: Vec<f64>,
     fixed: Vec<usize>,
@@ -133,7 +133,7 @@ impl ShellProblem {
     /// The problem with default options ([`SymmetryTreatment::Eliminate`], parallel assembly).
     pub fn new(
         model: ShellModel,
-        loads: Vec<Box<dyn ExternalLoad>>,
+        loads: Vec<Load>,
         constraints: Vec<LinearConstraint>,
     ) -> Result<Self, ShellError> {
         Self::with_options(model, loads, constraints, ProblemOptions::default())
@@ -144,7 +144,7 @@ impl ShellProblem {
     /// rows merged: [`super::constraints::assemble`]).
     pub fn with_options(
         model: ShellModel,
-        loads: Vec<Box<dyn ExternalLoad>>,
+        loads: Vec<Load>,
         constraints: Vec<LinearConstraint>,
         options: ProblemOptions,
     ) -> Result<Self, ShellError> {
@@ -346,7 +346,7 @@ impl ShellProblem {
     }
 
     /// The external loads, in the order given.
-    pub fn loads(&self) -> &[Box<dyn ExternalLoad>] {
+    pub fn loads(&self) -> &[Load] {
         &self.loads
     }
 

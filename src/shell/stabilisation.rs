@@ -22,13 +22,13 @@
 //! a bending mode of wavelength of the order of the spacing. The term is linear in the rotation
 //! increments of the step (the lamina vectors and directors are the committed ones), so its
 //! residual `κ Bᵀ B α` and tangent `κ Bᵀ B` are exact and symmetric positive semi-definite.
-//! It enters the problem as a [`LoadScaling::Prescribed`] configuration-dependent load
-//! `f = −κ Bᵀ B α`.
+//! It enters the problem as the prescribed configuration-dependent load `f = −κ Bᵀ B α`
+//! ([`super::load::Load::DirectorFilter`]).
 
-use super::load::{ExternalLoad, LoadScaling};
 use super::model::ShellModel;
 use super::point::DOFS_PER_PARTICLE;
 use super::ShellError;
+use crate::scalar::Real;
 use nalgebra::{Matrix3x2, Vector3};
 
 /// The stabilisation of one model (module documentation).
@@ -90,14 +90,15 @@ impl DirectorFilter {
 
 const ROT: usize = 3;
 
-impl ExternalLoad for DirectorFilter {
-    fn add_force(
+impl DirectorFilter {
+    /// Add `f = −κ Bᵀ B α` (the rotation increments of `q`) into `f`, in scalar `T`.
+    pub fn force<T: Real>(
         &self,
         model: &ShellModel,
-        q: &[f64],
-        _factor: f64,
-        f: &mut [f64],
+        q: &[T],
+        f: &mut [T],
     ) -> Result<(), ShellError> {
+        let kappa = T::cst(self.kappa);
         for row in self.blocks(model) {
             let mut g = Vector3::zeros();
             for (s, b) in &row {
@@ -105,27 +106,21 @@ impl ExternalLoad for DirectorFilter {
                     q[DOFS_PER_PARTICLE * s + ROT],
                     q[DOFS_PER_PARTICLE * s + ROT + 1],
                 );
-                g += b * a;
+                g += b.map(T::cst) * a;
             }
             for (s, b) in &row {
-                let r = b.transpose() * g * self.kappa;
+                let r = b.map(T::cst).transpose() * g * kappa;
                 f[DOFS_PER_PARTICLE * s + ROT] -= r[0];
                 f[DOFS_PER_PARTICLE * s + ROT + 1] -= r[1];
             }
         }
         Ok(())
     }
-    fn is_follower(&self) -> bool {
-        true
-    }
-    fn scaling(&self) -> LoadScaling {
-        LoadScaling::Prescribed
-    }
-    fn add_stiffness(
+
+    /// Add the tangent `−κ Bᵀ B` as global entries (independent of the increment).
+    pub fn add_stiffness(
         &self,
         model: &ShellModel,
-        _q: &[f64],
-        _factor: f64,
         out: &mut Vec<(usize, usize, f64)>,
     ) -> Result<(), ShellError> {
         for row in self.blocks(model) {

@@ -16,7 +16,7 @@ use shelldsa::material::MaterialParams;
 use shelldsa::meshfree::quadrature::{gauss_legendre, CellQuadrature};
 use shelldsa::meshfree::{regular_grid, Basis, Edge, ParamBox, ShapeFunctions, ShapeValues};
 use shelldsa::shell::constraints::{edge_constraints, EdgeCondition, LinearConstraint, RowKind};
-use shelldsa::shell::load::{ExternalLoad, Gravity, PointForce};
+use shelldsa::shell::load::{Gravity, Load, PointForce};
 use shelldsa::shell::model::{Discretisation, ShellModel};
 use shelldsa::shell::problem::ShellProblem;
 use shelldsa::shell::symmetry::on_edge;
@@ -213,28 +213,27 @@ pub fn strip(spec: &StripSpec) -> Strip {
 impl Strip {
     /// The tip load of total force `total` (global axes), uniform over the tip edge u = 1:
     /// `f_I = ∫ Ψ_I(1, v) dv total`, as point forces at 6 Gauss points per particle interval.
-    pub fn tip_load(&self, total: [f64; 3]) -> Vec<Box<dyn ExternalLoad>> {
+    pub fn tip_load(&self, total: [f64; 3]) -> Vec<Load> {
         let (gn, gw) = gauss_legendre(6).unwrap().mapped(0.0, 1.0);
         let cells = self.n_v - 1;
-        let mut loads: Vec<Box<dyn ExternalLoad>> = Vec::new();
+        let mut loads: Vec<Load> = Vec::new();
         for cell in 0..cells {
             let (a, b) = (cell as f64 / cells as f64, (cell + 1) as f64 / cells as f64);
             for (&x, &w) in gn.iter().zip(&gw) {
-                loads.push(Box::new(PointForce {
-                    uv: [1.0, a + (b - a) * x],
-                    force: total.map(|f| f * w * (b - a)),
-                }));
+                loads.push(
+                    PointForce {
+                        uv: [1.0, a + (b - a) * x],
+                        force: total.map(|f| f * w * (b - a)),
+                    }
+                    .into(),
+                );
             }
         }
         loads
     }
 
     /// The clamped strip under `loads` with the further constraint rows `extra`.
-    pub fn problem(
-        &self,
-        loads: Vec<Box<dyn ExternalLoad>>,
-        extra: Vec<LinearConstraint>,
-    ) -> ShellProblem {
+    pub fn problem(&self, loads: Vec<Load>, extra: Vec<LinearConstraint>) -> ShellProblem {
         let mut rows = self.clamp.clone();
         rows.extend(extra);
         ShellProblem::new(self.model.clone(), loads, rows).unwrap()
@@ -306,7 +305,7 @@ pub fn scordelis_lo_deflection(
     let first_end = particles_on_edges(&model.particle_uv, &[Edge::VMin]);
     let mid = model.particle_uv[first_end[first_end.len() / 2]];
     rows.push(LinearConstraint::displacement(&model, mid, Vector3::x(), 0.0).unwrap());
-    let weight: Box<dyn ExternalLoad> = Box::new(Gravity::new([0.0, 0.0, -90.0]).unwrap());
+    let weight = Load::Gravity(Gravity::new([0.0, 0.0, -90.0]).unwrap());
     let mut problem = ShellProblem::new(model, vec![weight], rows).unwrap();
     let q = linear_solution(&mut problem);
     -field(&problem.model, &q, 2, [1.0, 0.5])

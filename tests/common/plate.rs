@@ -14,7 +14,7 @@ use shelldsa::sensitivity::dual::SensitivityError;
 use shelldsa::sensitivity::fd::Analysis;
 use shelldsa::sensitivity::{Design, DesignVariable, MaterialParameter, Monitor};
 use shelldsa::shell::constraints::LinearConstraint;
-use shelldsa::shell::load::{ExternalLoad, Pressure};
+use shelldsa::shell::load::Pressure;
 use shelldsa::shell::model::{Discretisation, ShellModel};
 use shelldsa::shell::problem::ShellProblem;
 use shelldsa::solver::{LoadStepping, NewtonOptions, NewtonSolver, Predictor};
@@ -98,7 +98,7 @@ impl Plate {
                 }
             }
         }
-        let loads: Vec<Box<dyn ExternalLoad>> = vec![Box::new(Self::pressure())];
+        let loads = vec![Self::pressure().into()];
         ShellProblem::new(model, loads, rows).unwrap()
     }
 
