@@ -184,7 +184,8 @@ pub enum ConvergedTangent {
 pub enum FactorisedAt {
     /// The tangent at the converged unknowns.
     Converged,
-    /// The tangent of the previous iterate (residual-first acceptance).
+    /// An earlier tangent (residual-first acceptance): the previous iterate's, or after GMRES
+    /// updates the factorisation held, possibly from an earlier step.
     PreviousIterate,
 }
 
