@@ -1560,3 +1560,100 @@ fn krylov_updates_near_convergence_keep_the_newton_iterates() {
         .converged_steps()
         .all(|s| s.factorised_at == Some(FactorisedAt::Converged)));
 }
+
+#[test]
+fn held_factorisation_updates_keep_the_newton_iterates_across_steps() {
+    // The softening chain with direct updates and with every update by GMRES preconditioned by
+    // the held factorisation (`KrylovHeld`), for both converged-tangent policies: the same
+    // iteration counts and converged unknowns to far below the tolerance, fewer
+    // factorisations, factors reused across steps (GMRES at the first iteration of a step),
+    // and with the converged tangent required, the solver holds it at every hook.
+    let run = |updates: LinearUpdates, policy: ConvergedTangent| {
+        let chain = SpringChain::new(10, 0.05, 2.0, None);
+        let pattern = chain.pattern.clone();
+        let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+        let newton = NewtonSolver {
+            options: NewtonOptions {
+                residual_rtol: 1e-12,
+                linear_updates: updates,
+                ..Default::default()
+            },
+            stepping: LoadStepping {
+                initial_step: 0.2,
+                max_step: 0.2,
+                ..Default::default()
+            },
+        };
+        let mut prob = Counting {
+            chain,
+            policy,
+            tangents: 0,
+            hooks: Vec::new(),
+        };
+        let report = newton
+            .run(&mut prob, &pattern, &mut solver, &[0.0; 11])
+            .unwrap();
+        (report, solver.n_factorizations(), prob.hooks)
+    };
+    let its = |r: &NewtonReport| {
+        r.converged_steps()
+            .map(|s| s.iterations)
+            .collect::<Vec<_>>()
+    };
+    for policy in [ConvergedTangent::Required, ConvergedTangent::NotNeeded] {
+        let (direct, f_direct, _) = run(LinearUpdates::Direct, policy);
+        let (held, f_held, hooks) = run(LinearUpdates::KrylovHeld, policy);
+        let used: usize = held.converged_steps().map(|s| s.krylov.len()).sum();
+        let at_start = held
+            .converged_steps()
+            .filter(|s| s.krylov.iter().any(|&(k, _)| k == 0))
+            .count();
+        println!(
+            "{policy:?}: factorisations {f_direct} direct, {f_held} held with {used} GMRES \
+             updates ({at_start} steps started on an earlier step's factors)"
+        );
+        assert!(f_held < f_direct, "{f_held} vs {f_direct}");
+        assert!(at_start > 0);
+        assert_eq!(its(&direct), its(&held));
+        let scale = norm(&direct.u);
+        let diff = direct
+            .u
+            .iter()
+            .zip(&held.u)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        // Both stop below 1e-12 of the force and GMRES solves to 1e-12 of the force scale;
+        // the chain's compliance is O(1).
+        assert!(diff <= 1e-10 * scale, "{diff:e}");
+        if policy == ConvergedTangent::Required {
+            assert!(hooks.iter().all(|&f| f == FactorisedAt::Converged));
+        }
+    }
+}
+
+#[test]
+fn auto_linear_updates_follow_the_factorisation() {
+    // Dense LU: a factorisation per update; the sparse factorisations: the held one.
+    let chain = SpringChain::new(10, 0.05, 2.0, None);
+    let dense =
+        LinearSolver::new(&chain.pattern, Method::DenseLu, SolverOptions::default()).unwrap();
+    let sparse = LinearSolver::new(
+        &chain.pattern,
+        Method::SupernodalLu,
+        SolverOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(LinearUpdates::Auto.resolve(&dense), LinearUpdates::Direct);
+    assert_eq!(
+        LinearUpdates::Auto.resolve(&sparse),
+        LinearUpdates::KrylovHeld
+    );
+    assert_eq!(
+        LinearUpdates::KrylovNearConvergence.resolve(&sparse),
+        LinearUpdates::KrylovNearConvergence
+    );
+    // At least the singularity probe's solve and product, one GMRES step's work.
+    assert!(sparse.refactorisation_cost() >= 1.0);
+    assert!(dense.refactorisation_cost() >= 1.0);
+}

@@ -36,9 +36,9 @@ use crate::shell::symmetry::SymmetryPlane;
 use crate::shell::ShellError;
 use crate::solver::observe::{Observed, StepObserver};
 use crate::solver::{
-    ArcLength, ConvergedStep, LinearSolver, LinearUpdates, LoadStepping, Method, NewtonOptions,
-    NewtonSolver, NonlinearProblem, Parallelism, Predictor, ProblemError, SolverError,
-    SolverOptions, SparsityPattern, StepRecord,
+    ArcLength, ConvergedStep, LinearSolver, LoadStepping, Method, NewtonOptions, NewtonSolver,
+    NonlinearProblem, Parallelism, Predictor, ProblemError, SolverError, SolverOptions,
+    SparsityPattern, StepRecord,
 };
 use nalgebra::Vector3;
 use serde_json::json;
@@ -154,11 +154,7 @@ pub fn newton_settings(case: &ShellCase) -> (NewtonOptions, LoadStepping) {
             energy_rtol: s.energy_rtol,
             energy_atol: s.energy_atol,
             max_iterations: s.max_iterations,
-            linear_updates: if s.krylov_updates {
-                LinearUpdates::KrylovNearConvergence
-            } else {
-                LinearUpdates::Direct
-            },
+            linear_updates: s.linear_updates,
             ..NewtonOptions::default()
         },
         LoadStepping {

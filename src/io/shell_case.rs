@@ -531,9 +531,11 @@ pub struct StepsSpec {
     pub easy_iterations: usize,
     /// Predictor (`None`: the driver's default).
     pub predictor: Option<PredictorKind>,
-    /// How Newton updates are solved near convergence (`false`: always a fresh factorisation,
-    /// the default; `true`: GMRES preconditioned by the step's last factorisation).
-    pub krylov_updates: bool,
+    /// How Newton updates are solved (`steps.linear_updates`): `"auto"` (the default: GMRES
+    /// preconditioned by the held factorisation with the sparse solvers, a factorisation per
+    /// update with the dense one), `"direct"`, `"krylov"` (near convergence, preconditioned by
+    /// the step's last factorisation) or `"krylov-held"`.
+    pub linear_updates: crate::solver::LinearUpdates,
     /// Load levels the stepping lands on exactly (strictly ascending, finite, in
     /// `(0, final_load]`; possibly empty).
     pub stops: Vec<f64>,
@@ -2204,14 +2206,16 @@ impl Checker<'_> {
                 ))
             }
         };
-        let krylov_updates = match s.linear_updates.as_deref() {
-            None | Some("direct") => false,
-            Some("krylov") => true,
+        let linear_updates = match s.linear_updates.as_deref() {
+            None | Some("auto") => crate::solver::LinearUpdates::Auto,
+            Some("direct") => crate::solver::LinearUpdates::Direct,
+            Some("krylov") => crate::solver::LinearUpdates::KrylovNearConvergence,
+            Some("krylov-held") => crate::solver::LinearUpdates::KrylovHeld,
             Some(other) => {
                 return Err(self.err(
                     "steps.linear_updates",
                     format!("{other:?}"),
-                    "\"direct\" or \"krylov\"",
+                    "\"auto\", \"direct\", \"krylov\" or \"krylov-held\"",
                 ))
             }
         };
@@ -2304,7 +2308,7 @@ impl Checker<'_> {
             grow_factor: s.grow_factor,
             easy_iterations,
             predictor,
-            krylov_updates,
+            linear_updates,
             stops: s.stops.clone(),
             max_attempts,
             arc_length,

@@ -58,6 +58,30 @@ pub fn gmres(
     rtol: f64,
     max_iterations: usize,
 ) -> Result<Option<GmresInfo>, SolverError> {
+    let tol = rtol * norm(b);
+    gmres_to(pattern, values, m, b, x, tol, max_iterations, false)
+}
+
+/// Check points of the early abort of [`gmres_to`]: every this many Arnoldi steps.
+const ABORT_EVERY: usize = 3;
+
+/// [`gmres`] to the absolute tolerance `‖b − A x‖ ≤ tol`. With `abort_early`, the iteration
+/// also gives up (`Ok(None)`) at every [`ABORT_EVERY`]-th step `j` when the mean contraction so
+/// far, `(‖r_j‖/‖r_0‖)^(1/j)`, would need more than `max_iterations` steps in all to reach
+/// `tol`: GMRES contracts at a rate that does not fall much once the preconditioner's error is
+/// resolved, so such a solve is very unlikely to end within the budget and the steps already
+/// taken are the only ones wasted.
+#[allow(clippy::too_many_arguments)]
+pub fn gmres_to(
+    pattern: &SparsityPattern,
+    values: &[f64],
+    m: &LinearSolver,
+    b: &[f64],
+    x: &mut [f64],
+    tol: f64,
+    max_iterations: usize,
+    abort_early: bool,
+) -> Result<Option<GmresInfo>, SolverError> {
     let n = b.len();
     let b_norm = norm(b);
     if b_norm == 0.0 {
@@ -67,7 +91,6 @@ pub fn gmres(
             relative_residual: 0.0,
         }));
     }
-    let tol = rtol * b_norm;
     x.copy_from_slice(b);
     m.solve_in_place(x)?;
     let mut ax = vec![0.0; n];
@@ -125,6 +148,14 @@ pub fn gmres(
         if g[j + 1].abs() <= tol {
             converged = true;
             break;
+        }
+        if abort_early && (j + 1) % ABORT_EVERY == 0 {
+            // Steps in all at the mean contraction so far.
+            let rate = (g[j + 1].abs() / beta).ln() / (j + 1) as f64;
+            let needed = (tol / beta).ln() / rate;
+            if rate >= 0.0 || needed > max_iterations as f64 {
+                return Ok(None);
+            }
         }
         if h_next == 0.0 {
             // Lucky breakdown: the Krylov space is invariant and the least-squares solution

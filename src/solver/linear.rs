@@ -113,6 +113,16 @@ impl Default for SolverOptions {
     }
 }
 
+/// Ratio of the flop rate of a numeric factorisation to that of a triangular solve, for
+/// [`LinearSolver::refactorisation_cost`]. One supernodal factorisation of the hemisphere's
+/// tangent took the CPU time of 31 products and solves at 33 × 33 (8.5e9 flops against
+/// 2 · 2.8e6 + 2 · 8.9e6 per step: a rate ratio of 12), and it runs on both cores where the
+/// solves run on one (`examples/solver_probe.rs`).
+pub const FACTOR_RATE_RATIO: f64 = 15.0;
+
+/// [`LinearSolver::refactorisation_cost`] of the methods that do not count their flops.
+pub const DEFAULT_REFACTORISATION_COST: f64 = 20.0;
+
 /// faer's sparse LU (symbolic and numeric), the supernodal LU's fallback.
 type FallbackLu = (lu::SymbolicLu<usize>, lu::NumericLu<usize, f64>);
 
@@ -345,6 +355,26 @@ impl LinearSolver {
             )),
             _ => None,
         }
+    }
+
+    /// Estimated cost of one numeric factorisation (with its singularity probe) in units of
+    /// one step of GMRES preconditioned by it: one product with the matrix and one pair of
+    /// triangular solves (`2 nnz(A) + 2 nnz(L+U)` flops, memory-bound). The factorisation's
+    /// flops run [`FACTOR_RATE_RATIO`] times faster than those of a solve (dense blocked
+    /// kernels against one pass over the factors). [`Method::SupernodalLu`] and
+    /// [`Method::DenseLu`] count their flops; the other methods give
+    /// [`DEFAULT_REFACTORISATION_COST`].
+    pub fn refactorisation_cost(&self) -> f64 {
+        let nnz = self.pattern.row_idx().len() as f64;
+        let n = self.n as f64;
+        let (flops, factor_entries) = match &self.factor {
+            Factor::Supernodal { symbolic, .. } => (symbolic.flops, symbolic.factor_entries as f64),
+            Factor::Dense { .. } => (2.0 / 3.0 * n * n * n, n * n),
+            _ => return DEFAULT_REFACTORISATION_COST,
+        };
+        let step = 2.0 * nnz + 2.0 * factor_entries;
+        // The probe is one more solve and product.
+        flops / (FACTOR_RATE_RATIO * step.max(1.0)) + 1.0
     }
 
     /// Number of DOFs.

@@ -70,7 +70,7 @@
 //! `min_step` the run stops with a [`NewtonFailure`] naming the load level, the reason and the
 //! residual norms, and keeping every converged step.
 
-use super::krylov::gmres;
+use super::krylov::{gmres, gmres_to};
 use super::{EssentialBc, LinearSolver, SolverError, SparsityPattern};
 use std::fmt;
 use std::time::Instant;
@@ -184,7 +184,8 @@ pub enum ConvergedTangent {
 pub enum FactorisedAt {
     /// The tangent at the converged unknowns.
     Converged,
-    /// The tangent of the previous iterate (residual-first acceptance).
+    /// An earlier tangent (residual-first acceptance): the previous iterate's, or after GMRES
+    /// updates the factorisation held, possibly from an earlier step.
     PreviousIterate,
 }
 
@@ -273,6 +274,98 @@ pub enum LinearUpdates {
     /// factorised before [`NonlinearProblem::on_converged`] when the problem requires the
     /// converged tangent.
     KrylovNearConvergence,
+    /// Every update by GMRES right-preconditioned with the factorisation the solver holds,
+    /// whichever tangent of the run it was computed for (an earlier iterate of this step, an
+    /// earlier step, a rejected attempt: it is only a preconditioner), to 1e-12 of `‖r_k‖`, so
+    /// the updates equal the direct ones to that tolerance and the iteration stays Newton's.
+    /// The tangent is factorised (and the update solved directly) when no factorisation of
+    /// this run is held, when GMRES does not converge within the budget (the estimated cost of
+    /// a factorisation in Arnoldi steps, [`LinearSolver::refactorisation_cost`], between
+    /// [`HELD_MIN_BUDGET`] and [`HELD_MAX_BUDGET`] steps), or when the preconditioner has gone
+    /// stale: the last solve's Arnoldi steps reached the average cost per solve since the last
+    /// factorisation (factorisation included), beyond which keeping the factors no longer
+    /// lowers that average (the replacement rule of a cost that grows with age). The
+    /// residual-first energy test solves with the previous iterate's tangent by GMRES too, and
+    /// an accepted iterate is factorised before [`NonlinearProblem::on_converged`] when the
+    /// problem requires the converged tangent.
+    KrylovHeld,
+    /// [`LinearUpdates::KrylovHeld`] with the sparse factorisations, [`LinearUpdates::Direct`]
+    /// with [`super::Method::DenseLu`] (small systems, where a factorisation costs a few
+    /// solves).
+    Auto,
+}
+
+/// Tolerance of the GMRES updates of [`LinearUpdates::KrylovHeld`]: `‖K Δu + r_k‖ ≤ HELD_RTOL ·
+/// max(‖r_k‖, r_ref)`. The iterate then differs from the direct update's by `K⁻¹` of a residual
+/// four orders below the Newton tolerance's `10⁻⁸ r_ref` (the default `residual_rtol`), so the
+/// acceptance tests see the same residuals. Relative to `‖r_k‖` alone, the late iterations
+/// (residuals of `10⁻⁴ r_ref` and less) would spend Arnoldi steps on digits of `Δu` far below
+/// `10⁻¹²` of the unknowns.
+pub const HELD_RTOL: f64 = 1e-12;
+
+/// Fewest Arnoldi steps GMRES may take under [`LinearUpdates::KrylovHeld`] before the tangent
+/// is factorised instead.
+pub const HELD_MIN_BUDGET: usize = 10;
+/// Most Arnoldi steps GMRES may take under [`LinearUpdates::KrylovHeld`] (the Krylov basis holds
+/// this many vectors of the system's size).
+pub const HELD_MAX_BUDGET: usize = 60;
+
+impl LinearUpdates {
+    /// The mode used with `solver` ([`LinearUpdates::Auto`] resolved by its method).
+    pub fn resolve(self, solver: &LinearSolver) -> LinearUpdates {
+        match self {
+            LinearUpdates::Auto if solver.method() == super::Method::DenseLu => {
+                LinearUpdates::Direct
+            }
+            LinearUpdates::Auto => LinearUpdates::KrylovHeld,
+            other => other,
+        }
+    }
+}
+
+/// The factorisation held across iterations and steps under [`LinearUpdates::KrylovHeld`], and
+/// the cost of the solves made with it (in Arnoldi steps).
+#[derive(Debug, Clone, Copy, Default)]
+struct Held {
+    /// The solver holds a factorisation computed in this run.
+    valid: bool,
+    /// The last solve reached the cycle's average cost: factorise at the next update.
+    stale: bool,
+    /// Estimated cost of one factorisation, in Arnoldi steps.
+    cost: f64,
+    /// Arnoldi steps (plus one per solve for the chord step) since the last factorisation.
+    spent: f64,
+    /// Solves since the last factorisation (the direct one included).
+    solves: usize,
+}
+
+impl Held {
+    /// A factorisation was just computed (and will serve one direct solve).
+    fn refreshed(&mut self) {
+        self.valid = true;
+        self.stale = false;
+        self.spent = 0.0;
+        self.solves = 0;
+    }
+
+    /// A direct solve with the fresh factors.
+    fn direct_solve(&mut self) {
+        self.spent += 1.0;
+        self.solves += 1;
+    }
+
+    /// A GMRES solve of `arnoldi` steps: stale when its cost reached the cycle's average.
+    fn krylov_solve(&mut self, arnoldi: usize) {
+        let c = arnoldi as f64 + 1.0;
+        self.spent += c;
+        self.solves += 1;
+        self.stale = c >= (self.cost + self.spent) / self.solves as f64;
+    }
+
+    /// GMRES budget in Arnoldi steps.
+    fn budget(&self) -> usize {
+        (self.cost.ceil() as usize).clamp(HELD_MIN_BUDGET, HELD_MAX_BUDGET)
+    }
 }
 
 /// How a load step's iteration starts.
@@ -559,6 +652,9 @@ struct Work {
     du: Vec<f64>,
     values: Vec<f64>,
     g: Vec<f64>,
+    /// The mode in use ([`LinearUpdates::Auto`] resolved).
+    updates: LinearUpdates,
+    held: Held,
 }
 
 impl NewtonSolver {
@@ -635,6 +731,11 @@ impl NewtonSolver {
             du: vec![0.0; n],
             values: vec![0.0; pattern.nnz()],
             g: Vec::new(),
+            updates: self.options.linear_updates.resolve(solver),
+            held: Held {
+                cost: solver.refactorisation_cost(),
+                ..Held::default()
+            },
         };
         let mut step = st.initial_step.min(st.max_step);
         let mut n_converged = 0;
@@ -797,6 +898,7 @@ impl NewtonSolver {
                 if predicted_next.is_finite() && predicted_next <= 100.0 * tol {
                     if let Some(how) = self.residual_only(
                         problem,
+                        pattern,
                         solver,
                         u,
                         load,
@@ -847,14 +949,18 @@ impl NewtonSolver {
                 * r_ref.max(problem.residual_scale()).max(unknowns_terms);
             rec.roundoff_floors.push(floor);
             let floor_ok = constraints_met && rnorm <= floor;
-            let krylov = o.linear_updates == LinearUpdates::KrylovNearConvergence
-                && held_in_step
-                && k >= 1
-                && constraints_met
-                && rnorm <= 1e-2 * r_ref;
+            let krylov = match w.updates {
+                LinearUpdates::KrylovNearConvergence => {
+                    held_in_step && k >= 1 && constraints_met && rnorm <= 1e-2 * r_ref
+                }
+                LinearUpdates::KrylovHeld => {
+                    w.held.valid && !w.held.stale && solver.is_factorized()
+                }
+                LinearUpdates::Direct | LinearUpdates::Auto => false,
+            };
             let mut factorised_here = false;
             if !krylov {
-                factorise(solver, &w.values, rec)?;
+                factorise_held(solver, &w.values, rec, &mut w.held)?;
                 held_in_step = true;
                 factorised_here = true;
             }
@@ -865,27 +971,48 @@ impl NewtonSolver {
                 } else {
                     Acceptance::RoundoffFloor
                 };
-                let at = accepted_at(factorised_here, residual_first, solver, &w.values, rec)?;
+                let at = accepted_at(
+                    factorised_here,
+                    residual_first,
+                    solver,
+                    &w.values,
+                    rec,
+                    &mut w.held,
+                )?;
                 return Ok((bc, how, at));
             }
             if res_ok && k == 0 {
                 return Ok((bc, Acceptance::Tolerance, FactorisedAt::Converged));
             }
             let clock = Instant::now();
-            let iterative = if krylov {
-                gmres(pattern, &w.values, solver, &w.rhs, &mut w.du, 1e-12, 20)
-                    .map_err(FailureReason::LinearSolver)?
-            } else {
-                None
+            let iterative = match (krylov, w.updates) {
+                (false, _) => None,
+                (true, LinearUpdates::KrylovHeld) => gmres_to(
+                    pattern,
+                    &w.values,
+                    solver,
+                    &w.rhs,
+                    &mut w.du,
+                    HELD_RTOL * rnorm.max(r_ref),
+                    w.held.budget(),
+                    true,
+                )
+                .map_err(FailureReason::LinearSolver)?,
+                (true, _) => gmres(pattern, &w.values, solver, &w.rhs, &mut w.du, 1e-12, 20)
+                    .map_err(FailureReason::LinearSolver)?,
             };
             rec.timing.solve_s += clock.elapsed().as_secs_f64();
             match iterative {
-                Some(info) => rec.krylov.push((k, info.iterations)),
+                Some(info) => {
+                    rec.krylov.push((k, info.iterations));
+                    w.held.krylov_solve(info.iterations);
+                }
                 None => {
                     if !factorised_here {
-                        factorise(solver, &w.values, rec)?;
+                        factorise_held(solver, &w.values, rec, &mut w.held)?;
                         factorised_here = true;
                     }
+                    w.held.direct_solve();
                     w.du.copy_from_slice(&w.rhs);
                     let clock = Instant::now();
                     let solved = solver.solve_in_place(&mut w.du);
@@ -906,7 +1033,14 @@ impl NewtonSolver {
             }
             let energy_ok = e <= (o.energy_rtol * e0).max(o.energy_atol);
             if res_ok && energy_ok {
-                let at = accepted_at(factorised_here, residual_first, solver, &w.values, rec)?;
+                let at = accepted_at(
+                    factorised_here,
+                    residual_first,
+                    solver,
+                    &w.values,
+                    rec,
+                    &mut w.held,
+                )?;
                 return Ok((bc, Acceptance::Tolerance, at));
             }
             // The residual tests come before the energy's divergence test: a residual at the
@@ -914,7 +1048,14 @@ impl NewtonSolver {
             // singular tangent the update of a round-off residual is large, and the energy
             // product with it).
             if k >= 1 && res_ok && rnorm <= ROUNDOFF_BAND * f64::EPSILON * r_ref {
-                let at = accepted_at(factorised_here, residual_first, solver, &w.values, rec)?;
+                let at = accepted_at(
+                    factorised_here,
+                    residual_first,
+                    solver,
+                    &w.values,
+                    rec,
+                    &mut w.held,
+                )?;
                 return Ok((bc, Acceptance::ResidualRoundoff, at));
             }
             if k >= 1 && !res_ok && e0 > 0.0 && e > o.divergence_factor * e0 {
@@ -930,7 +1071,14 @@ impl NewtonSolver {
                 && stalled(r_prev, r_prev2)
                 && rnorm <= o.residual_rtol.sqrt() * r_ref;
             if stagnated {
-                let at = accepted_at(factorised_here, residual_first, solver, &w.values, rec)?;
+                let at = accepted_at(
+                    factorised_here,
+                    residual_first,
+                    solver,
+                    &w.values,
+                    rec,
+                    &mut w.held,
+                )?;
                 return Ok((bc, Acceptance::Stagnation, at));
             }
             if k == o.max_iterations {
@@ -959,6 +1107,7 @@ impl NewtonSolver {
     fn residual_only<P: NonlinearProblem>(
         &self,
         problem: &mut P,
+        pattern: &SparsityPattern,
         solver: &mut LinearSolver,
         u: &[f64],
         load: f64,
@@ -990,11 +1139,31 @@ impl NewtonSolver {
         let floor = o.roundoff_factor
             * f64::EPSILON
             * r_ref.max(problem.residual_scale()).max(unknowns_terms);
-        w.du.copy_from_slice(&w.rhs);
         let clock = Instant::now();
-        let solved = solver.solve_in_place(&mut w.du);
-        rec.timing.solve_s += clock.elapsed().as_secs_f64();
-        solved.map_err(FailureReason::LinearSolver)?;
+        if w.updates == LinearUpdates::KrylovHeld {
+            // `values` still holds the previous iterate's eliminated tangent; the solver may
+            // hold an older one.
+            let solved = gmres_to(
+                pattern,
+                &w.values,
+                solver,
+                &w.rhs,
+                &mut w.du,
+                HELD_RTOL * rnorm.max(r_ref),
+                w.held.budget(),
+                true,
+            );
+            rec.timing.solve_s += clock.elapsed().as_secs_f64();
+            match solved.map_err(FailureReason::LinearSolver)? {
+                Some(info) => w.held.krylov_solve(info.iterations),
+                None => return Ok(None),
+            }
+        } else {
+            w.du.copy_from_slice(&w.rhs);
+            let solved = solver.solve_in_place(&mut w.du);
+            rec.timing.solve_s += clock.elapsed().as_secs_f64();
+            solved.map_err(FailureReason::LinearSolver)?;
+        }
         let e = free_dot(bc, &w.du, &w.rhs).abs();
         // As in the full path: the residual tolerance holds, and either the energy test, the
         // round-off floor (where the energy product is round-off too) or the residual at the
@@ -1020,15 +1189,29 @@ fn accepted_at(
     solver: &mut LinearSolver,
     values: &[f64],
     rec: &mut StepRecord,
+    held: &mut Held,
 ) -> Result<FactorisedAt, FailureReason> {
     if factorised_here {
         Ok(FactorisedAt::Converged)
     } else if residual_first {
         Ok(FactorisedAt::PreviousIterate)
     } else {
-        factorise(solver, values, rec)?;
+        factorise_held(solver, values, rec, held)?;
         Ok(FactorisedAt::Converged)
     }
+}
+
+/// [`factorise`], recording the fresh factors in `held` (invalid after a failure).
+fn factorise_held(
+    solver: &mut LinearSolver,
+    values: &[f64],
+    rec: &mut StepRecord,
+    held: &mut Held,
+) -> Result<(), FailureReason> {
+    held.valid = false;
+    factorise(solver, values, rec)?;
+    held.refreshed();
+    Ok(())
 }
 
 /// Numeric factorisation of the tangent, timed into `rec`.
