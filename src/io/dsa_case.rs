@@ -501,7 +501,10 @@ pub fn check_dsa_loads(case: &ShellCase) -> Result<(), CaseError> {
                 "for the sensitivity methods (the design derivative of an edge force, through \
                  the edge's length element, is not carried by them yet)",
             ),
-            Load::PointForce { .. } | Load::Gravity { .. } | Load::Pressure { .. } => continue,
+            Load::PointForce { .. }
+            | Load::Gravity { .. }
+            | Load::GravityPerVolume { .. }
+            | Load::Pressure { .. } => continue,
         };
         return Err(invalid(
             &case.path,

@@ -449,6 +449,9 @@ pub fn case_loads(
             }
             .into(),
             Load::Gravity { per_area } => load::Gravity::new(*per_area).map_err(err)?.into(),
+            Load::GravityPerVolume { per_volume } => {
+                load::Gravity::per_volume(*per_volume).map_err(err)?.into()
+            }
             Load::Pressure { value } => load::Pressure::new(*value).map_err(err)?.into(),
             Load::Moment { edge, per_length } => {
                 load::Moment::on_edge(model, &case.surface, *edge, *per_length, intervals(edge), 4)

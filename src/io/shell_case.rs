@@ -140,6 +140,8 @@ struct LoadFile {
     value: Option<f64>,
     #[serde(default, deserialize_with = "exact_opt")]
     per_area: Option<[f64; 3]>,
+    #[serde(default, deserialize_with = "exact_opt")]
+    per_volume: Option<[f64; 3]>,
     edge: Option<String>,
     #[serde(default, deserialize_with = "exact_opt")]
     per_length: Option<[f64; 3]>,
@@ -469,6 +471,12 @@ pub enum Load {
     Gravity {
         /// Force per unit area (global axes).
         per_area: [f64; 3],
+    },
+    /// Dead load per unit (initial) volume, `ρ g`: per unit area it is `ρ g t`, so it follows
+    /// the thickness (and its design derivative).
+    GravityPerVolume {
+        /// Force per unit volume (global axes).
+        per_volume: [f64; 3],
     },
     /// Moment per unit length about a fixed axis, along a parametric edge.
     Moment {
@@ -2011,6 +2019,7 @@ impl Checker<'_> {
             ("force", l.force.is_some()),
             ("value", l.value.is_some()),
             ("per_area", l.per_area.is_some()),
+            ("per_volume", l.per_volume.is_some()),
             ("edge", l.edge.is_some()),
             ("per_length", l.per_length.is_some()),
             ("follower", l.follower.is_some()),
@@ -2046,15 +2055,31 @@ impl Checker<'_> {
                 Ok(Load::Pressure { value })
             }
             "gravity" => {
-                self.only(&key, kind, &present, &["per_area"])?;
-                Ok(Load::Gravity {
-                    per_area: vec3(
-                        self,
-                        "per_area",
-                        l.per_area,
-                        "a force per unit area [bx, by, bz]",
-                    )?,
-                })
+                self.only(&key, kind, &present, &["per_area", "per_volume"])?;
+                match (l.per_area, l.per_volume) {
+                    (Some(_), Some(_)) => Err(self.err(
+                        format!("{key}.per_volume"),
+                        "(given)",
+                        "either `per_area` (force per unit area) or `per_volume` (force per \
+                         unit volume, scaled by the thickness), not both",
+                    )),
+                    (None, Some(_)) => Ok(Load::GravityPerVolume {
+                        per_volume: vec3(
+                            self,
+                            "per_volume",
+                            l.per_volume,
+                            "a force per unit volume [ρgx, ρgy, ρgz]",
+                        )?,
+                    }),
+                    _ => Ok(Load::Gravity {
+                        per_area: vec3(
+                            self,
+                            "per_area",
+                            l.per_area,
+                            "a force per unit area [bx, by, bz] (or `per_volume`)",
+                        )?,
+                    }),
+                }
             }
             "moment" => {
                 self.only(&key, kind, &present, &["edge", "per_length"])?;

@@ -631,8 +631,11 @@ fn add_load_dot(
             }
         }
         Load::Gravity(g) => {
-            if let (true, Some(v)) = (on(TermGroup::Load), &s.surface) {
-                g.add_design_derivative(model, v, factor, f)?;
+            if on(TermGroup::Load) {
+                if let Some(v) = &s.surface {
+                    g.add_design_derivative(model, v, factor, f)?;
+                }
+                g.add_thickness_derivative(model, s.thickness, factor, f)?;
             }
         }
         Load::PointForce(_) => {}

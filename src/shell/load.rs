@@ -196,7 +196,9 @@ impl Load {
             (Load::PointForce(l), _) => l.force(model, factor, f),
             (Load::Gravity(l), None) => l.force(model, q, factor, f),
             // A dead load per unit initial area: on the state's initial geometry.
-            (Load::Gravity(l), Some(s)) => l.force_with_surfaces(model, s.surfaces, factor, f),
+            (Load::Gravity(l), Some(s)) => {
+                l.force_with_surfaces(model, s.surfaces, s.thickness, factor, f)
+            }
             (Load::Pressure(l), None) => l.force(model, q, factor, f),
             // The pressure depends on the committed displacement `ⁿū` and the increment `Δū`
             // only through their sum: the increment carries the state's `ⁿū̇`.
@@ -394,17 +396,74 @@ impl PointForce {
 /// whole surface or on the quadrature points inside a parameter box:
 /// `f_I = ∫ Ψ_I b dA⁰ = Σ_qp Ψ_I b |x̄⁰,1 × x̄⁰,2| w` (the paper's eq. 33 with the body force
 /// integrated through the thickness). Translations only.
+///
+/// Given per unit volume (`ρ g`), the load per unit area is `ρ g t`: it follows the thickness,
+/// and a thickness design variable differentiates it ([`Gravity::add_thickness_derivative`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Gravity {
     load: [f64; 3],
+    basis: GravityBasis,
     region: Option<ParamBox>,
+}
+
+/// What a [`Gravity`] load is given per.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GravityBasis {
+    /// Force per unit area (`b`).
+    Area,
+    /// Force per unit volume (`ρ g`; per unit area `ρ g t`).
+    Volume,
 }
 
 impl Gravity {
     /// Load `b` per unit area (global axes) over the whole surface.
     pub fn new(load: [f64; 3]) -> Result<Self, ShellError> {
         check_finite("gravity load per unit area", &load)?;
-        Ok(Gravity { load, region: None })
+        Ok(Gravity {
+            load,
+            basis: GravityBasis::Area,
+            region: None,
+        })
+    }
+    /// Load `ρ g` per unit volume (global axes) over the whole surface: `ρ g t` per unit area.
+    pub fn per_volume(load: [f64; 3]) -> Result<Self, ShellError> {
+        check_finite("gravity load per unit volume", &load)?;
+        Ok(Gravity {
+            load,
+            basis: GravityBasis::Volume,
+            region: None,
+        })
+    }
+    /// What the load is given per.
+    pub fn basis(&self) -> GravityBasis {
+        self.basis
+    }
+    /// The factor from the given load to the load per unit area: `t` per volume, else 1.
+    fn per_area_factor<T: Real>(&self, thickness: T) -> T {
+        match self.basis {
+            GravityBasis::Area => T::one(),
+            GravityBasis::Volume => thickness,
+        }
+    }
+    /// The thickness design derivative of the force (hand-derived): per unit volume,
+    /// `∂f_I/∂t · ṫ = ṫ ∫ Ψ_I ρg dA⁰`; nothing per unit area.
+    pub fn add_thickness_derivative(
+        &self,
+        model: &ShellModel,
+        t_dot: f64,
+        factor: f64,
+        f: &mut [f64],
+    ) -> Result<(), ShellError> {
+        check_sizes(model, f.len(), None)?;
+        if self.basis == GravityBasis::Area || t_dot == 0.0 {
+            return Ok(());
+        }
+        let per_thickness = Gravity {
+            basis: GravityBasis::Area,
+            ..self.clone()
+        };
+        let q = vec![0.0; f.len()];
+        per_thickness.force(model, &q, factor * t_dot, f)
     }
     /// Restrict to the quadrature points inside `region` (a box that cuts through background
     /// cells integrates the cut cells only approximately).
@@ -413,7 +472,7 @@ impl Gravity {
         check_region("gravity region", &self.region)?;
         Ok(self)
     }
-    /// The load per unit area.
+    /// The load as given: per unit area, or per unit volume ([`Gravity::basis`]).
     pub fn load(&self) -> [f64; 3] {
         self.load
     }
@@ -435,7 +494,10 @@ impl Gravity {
             let [x1, x2] = p.surface.x_a;
             let [v1, v2] = velocity[k].x_a;
             let c = x1.cross(&x2);
-            let da_dot = c.dot(&(v1.cross(&x2) + x1.cross(&v2))) / c.norm() * p.weight * factor;
+            let da_dot = c.dot(&(v1.cross(&x2) + x1.cross(&v2))) / c.norm()
+                * p.weight
+                * factor
+                * self.per_area_factor(model.thickness);
             let local: Vec<f64> = p
                 .shape
                 .iter()
@@ -456,21 +518,24 @@ impl Gravity {
     }
 
     /// [`Gravity::force`] with the initial geometry of every quadrature point in `T`
-    /// (`surfaces`, as `model.points`): the area element `|x̄⁰,1 × x̄⁰,2|` then carries a shape
-    /// design derivative (the dual reference for shape design variables).
+    /// (`surfaces`, as `model.points`) and the thickness in `T`: the area element
+    /// `|x̄⁰,1 × x̄⁰,2|` then carries a shape design derivative and a load per unit volume a
+    /// thickness derivative (the dual reference).
     pub fn force_with_surfaces<T: Real>(
         &self,
         model: &ShellModel,
         surfaces: &[SurfacePoint<T>],
+        thickness: T,
         factor: f64,
         f: &mut [T],
     ) -> Result<(), ShellError> {
         check_sizes(model, f.len(), None)?;
         check_surfaces(model, surfaces)?;
+        let scale = self.per_area_factor(thickness);
         for k in selected_points(model, &self.region, "gravity")? {
             let p = &model.points[k];
             let s = &surfaces[k];
-            let da = s.x_a[0].cross(&s.x_a[1]).norm() * p.weight * factor;
+            let da = s.x_a[0].cross(&s.x_a[1]).norm() * scale * p.weight * factor;
             let local: Vec<T> = p
                 .shape
                 .iter()
@@ -512,9 +577,10 @@ impl Gravity {
         f: &mut [T],
     ) -> Result<(), ShellError> {
         check_sizes(model, q.len(), Some(f.len()))?;
+        let scale = self.per_area_factor(model.thickness);
         for k in selected_points(model, &self.region, "gravity")? {
             let p = &model.points[k];
-            let da = p.surface.x_a[0].cross(&p.surface.x_a[1]).norm() * p.weight * factor;
+            let da = p.surface.x_a[0].cross(&p.surface.x_a[1]).norm() * scale * p.weight * factor;
             let local: Vec<T> = p
                 .shape
                 .iter()
