@@ -94,6 +94,24 @@ fn write_case(dir: &Path, text: &str) -> PathBuf {
     case
 }
 
+/// `shelldsa dsa` on the case `text` written into `dir`, with its output in `dir/out`: the
+/// process' output (checked for a panic) and the output directory.
+fn dsa_in(dir: &Path, text: &str) -> (Output, PathBuf) {
+    let case = write_case(dir, text);
+    let out = dir.join("out");
+    let o = shelldsa()
+        .args([
+            "dsa",
+            case.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert_no_panic(&o);
+    (o, out)
+}
+
 fn json(path: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -364,7 +382,7 @@ fn dsa_keeps_the_other_variables_when_a_re_run_fails() {
     let design = "[[design]]\nname = \"s0\"\nkind = \"material.sigma0\"\nfd_steps = [1e-3, 0.5]\n\
                   [[design]]\nname = \"t\"\nkind = \"thickness\"\nfd_steps = [1e-3]\n\
                   [dsa]\nmonitors = [\"tip\"]\nmethods = [\"fd\"]\n";
-    let case = write_case(
+    let (o, out) = dsa_in(
         &dir,
         &cantilever(
             0.02,
@@ -373,17 +391,6 @@ fn dsa_keeps_the_other_variables_when_a_re_run_fails() {
             design,
         ),
     );
-    let out = dir.join("out");
-    let o = shelldsa()
-        .args([
-            "dsa",
-            case.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
-    assert_no_panic(&o);
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert_eq!(o.status.code(), Some(EXIT_STOPPED), "{stdout}");
     assert!(
@@ -426,7 +433,7 @@ fn dsa_whose_analysis_stops_keeps_its_converged_steps() {
     let dir = unique_dir("dsa-analysis-stops");
     let design = "[[design]]\nname = \"t\"\nkind = \"thickness\"\nfd_steps = [1e-3]\n\
                   [dsa]\nmonitors = [\"tip\"]\nmethods = [\"continuum\", \"dual\"]\n";
-    let case = write_case(
+    let (o, out) = dsa_in(
         &dir,
         &cantilever(
             0.04,
@@ -435,17 +442,6 @@ fn dsa_whose_analysis_stops_keeps_its_converged_steps() {
             design,
         ),
     );
-    let out = dir.join("out");
-    let o = shelldsa()
-        .args([
-            "dsa",
-            case.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
-    assert_no_panic(&o);
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert_eq!(o.status.code(), Some(EXIT_STOPPED), "{stdout}");
     let s = json(&out.join("sensitivity.json"));
