@@ -525,6 +525,13 @@ fn dsa(
         } else {
             say!(con, "wrote {}", path.display());
         }
+        match crate::io::dsa_plots::write_terms(out, &bs) {
+            Ok(p) => say!(con, "wrote {}", p.display()),
+            Err(e) => {
+                err!("error: {e}");
+                code = EXIT_OUTPUT;
+            }
+        }
     }
     code
 }

@@ -276,6 +276,9 @@ fn run_ci(out: &Path) -> Value {
         "12",
     ]);
     assert_eq!(code, 0);
+    // The term groups at step 12 as bars, beside terms.json.
+    let bars = std::fs::read(out.join("terms_step12.png")).unwrap();
+    assert!(bars.starts_with(b"\x89PNG\r\n\x1a\n"));
     serde_json::from_str(&std::fs::read_to_string(out.join("sensitivity.json")).unwrap()).unwrap()
 }
 

@@ -1,10 +1,13 @@
 //! The figures `shelldsa dsa` writes beside `sensitivity.json`: per design variable, each
 //! monitored response's derivative along the load path with the methods overlaid
 //! (`dsa_<variable>.png`), and, with finite differences, the step-size study and the Taylor
-//! remainders on log–log axes with the reference slope 2 (`dsa_<variable>_fd.png`).
+//! remainders on log–log axes with the reference slope 2 (`dsa_<variable>_fd.png`); with
+//! `--terms STEP`, the term groups of the continuum right-hand side against the dual reference
+//! as bars (`terms_step<STEP>.png`).
 
 use super::dsa_run::{max_rel_diff, DsaResult, VariableResult};
-use super::plot::{figure, Panel, Scale, Series};
+use super::plot::{bar_figure, figure, BarPanel, Panel, Scale, Series};
+use crate::sensitivity::terms::TermBreakdown;
 use std::path::{Path, PathBuf};
 
 /// Height of one panel (pixels).
@@ -235,4 +238,56 @@ fn fd_figure(path: &Path, r: &DsaResult, v: &VariableResult) -> Result<(), Strin
         },
     ];
     figure(path, WIDTH, 2 * PANEL_HEIGHT + 80, &panels)
+}
+
+/// `--terms STEP`: one bar panel per design variable, per term group (and the whole right-hand
+/// side) the largest entry of the continuum fictitious load, of the dual reference seeded with
+/// that group, and of their difference. Returns the file written.
+pub fn write_terms(dir: &Path, breakdowns: &[TermBreakdown]) -> Result<PathBuf, String> {
+    let step = breakdowns.first().map_or(0, |b| b.step);
+    let path = dir.join(format!("terms_step{step}.png"));
+    let titles: Vec<String> = breakdowns
+        .iter()
+        .map(|b| {
+            format!(
+                "{}: term groups at step {} (load factor {})",
+                b.variable.name,
+                b.step,
+                super::plot::plain_tick(b.load)
+            )
+        })
+        .collect();
+    let categories: Vec<Vec<String>> = breakdowns
+        .iter()
+        .map(|b| {
+            b.groups
+                .iter()
+                .map(|g| g.group.map_or("all".to_string(), |g| g.name().to_string()))
+                .collect()
+        })
+        .collect();
+    let panels: Vec<BarPanel> = breakdowns
+        .iter()
+        .zip(&titles)
+        .zip(&categories)
+        .map(|((b, title), categories)| BarPanel {
+            title,
+            y_label: "largest entry",
+            categories,
+            series: vec![
+                (
+                    "continuum",
+                    b.groups.iter().map(|g| g.continuum_max).collect(),
+                ),
+                ("dual", b.groups.iter().map(|g| g.dual_max).collect()),
+                (
+                    "|continuum − dual|",
+                    b.groups.iter().map(|g| g.max_difference).collect(),
+                ),
+            ],
+        })
+        .collect();
+    let height = PANEL_HEIGHT * panels.len().max(1) as u32;
+    bar_figure(&path, WIDTH, height, &panels)?;
+    Ok(path)
 }

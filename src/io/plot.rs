@@ -174,6 +174,90 @@ pub fn figure(path: &Path, width: u32, height: u32, panels: &[Panel]) -> Result<
     Ok(())
 }
 
+/// One panel of a bar chart: per category, one bar per series (the series' values in
+/// category order), on a log y axis (non-positive values are not drawn).
+pub struct BarPanel<'a> {
+    /// Panel title.
+    pub title: &'a str,
+    /// y-axis label.
+    pub y_label: &'a str,
+    /// Category names along x.
+    pub categories: &'a [String],
+    /// `(legend label, value per category)`.
+    pub series: Vec<(&'a str, Vec<f64>)>,
+}
+
+/// Draw bar-chart panels stacked vertically into a PNG of `width × height` pixels.
+pub fn bar_figure(path: &Path, width: u32, height: u32, panels: &[BarPanel]) -> Result<(), String> {
+    let e = |e: &dyn std::fmt::Display| format!("plotting {}: {e}", path.display());
+    register_font();
+    let root = BitMapBackend::new(path, (width, height)).into_drawing_area();
+    root.fill(&WHITE).map_err(|x| e(&x))?;
+    let areas = root.split_evenly((panels.len().max(1), 1));
+    for (area, p) in areas.iter().zip(panels) {
+        let n = p.categories.len().max(1);
+        let ys = range(p.series.iter().flat_map(|s| s.1.iter().copied()), true);
+        let mut chart = ChartBuilder::on(area)
+            .caption(p.title, ("sans-serif", 20))
+            .margin(10)
+            .x_label_area_size(40)
+            .y_label_area_size(80)
+            .build_cartesian_2d(0f64..n as f64, (ys.0..ys.1).log_scale())
+            .map_err(|x| e(&x))?;
+        let names = p.categories;
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(2 * n + 1)
+            .x_label_formatter(&|x| {
+                // Names at the category centres (k + ½), nothing at the boundaries.
+                let k = x.floor();
+                if (x - k - 0.5).abs() < 1e-6 && k >= 0.0 {
+                    names.get(k as usize).cloned().unwrap_or_default()
+                } else {
+                    String::new()
+                }
+            })
+            .y_desc(p.y_label)
+            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .draw()
+            .map_err(|x| e(&x))?;
+        let m = p.series.len().max(1) as f64;
+        let width = 0.8 / m;
+        for (j, (label, values)) in p.series.iter().enumerate() {
+            let color = COLORS[j % COLORS.len()];
+            let bars: Vec<Rectangle<(f64, f64)>> = values
+                .iter()
+                .enumerate()
+                .filter_map(|(k, &v)| {
+                    let v = axis_value(v, true)?.clamp(ys.0, ys.1);
+                    let x0 = k as f64 + 0.1 + j as f64 * width;
+                    Some(Rectangle::new(
+                        [(x0, ys.0), (x0 + width, v)],
+                        color.filled(),
+                    ))
+                })
+                .collect();
+            chart
+                .draw_series(bars)
+                .map_err(|x| e(&x))?
+                .label(*label)
+                .legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 5), (x + 12, y + 5)], color.filled())
+                });
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperMiddle)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(|x| e(&x))?;
+    }
+    root.present().map_err(|x| e(&x))?;
+    Ok(())
+}
+
 /// A tick label in plain notation (`0.25`, `1500`, `-3.2`), with exponents only outside
 /// `[1e-3, 1e6)`: six significant digits at most, trailing zeros removed.
 pub(crate) fn plain_tick(v: f64) -> String {
