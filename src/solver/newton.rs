@@ -959,6 +959,21 @@ impl NewtonSolver {
                 LinearUpdates::Direct | LinearUpdates::Auto => false,
             };
             let mut factorised_here = false;
+            // Accept the iterate (`how`): the factorisation the problem's hooks see is the one
+            // `accepted_at` settles.
+            macro_rules! accept {
+                ($how:expr) => {{
+                    let at = accepted_at(
+                        factorised_here,
+                        residual_first,
+                        solver,
+                        &w.values,
+                        rec,
+                        &mut w.held,
+                    )?;
+                    return Ok((bc, $how, at));
+                }};
+            }
             if !krylov {
                 factorise_held(solver, &w.values, rec, &mut w.held)?;
                 held_in_step = true;
@@ -971,15 +986,7 @@ impl NewtonSolver {
                 } else {
                     Acceptance::RoundoffFloor
                 };
-                let at = accepted_at(
-                    factorised_here,
-                    residual_first,
-                    solver,
-                    &w.values,
-                    rec,
-                    &mut w.held,
-                )?;
-                return Ok((bc, how, at));
+                accept!(how);
             }
             if res_ok && k == 0 {
                 return Ok((bc, Acceptance::Tolerance, FactorisedAt::Converged));
@@ -1033,30 +1040,14 @@ impl NewtonSolver {
             }
             let energy_ok = e <= (o.energy_rtol * e0).max(o.energy_atol);
             if res_ok && energy_ok {
-                let at = accepted_at(
-                    factorised_here,
-                    residual_first,
-                    solver,
-                    &w.values,
-                    rec,
-                    &mut w.held,
-                )?;
-                return Ok((bc, Acceptance::Tolerance, at));
+                accept!(Acceptance::Tolerance);
             }
             // The residual tests come before the energy's divergence test: a residual at the
             // round-off of its reference is converged whatever `Δu_kᵀ r_k` says (near a
             // singular tangent the update of a round-off residual is large, and the energy
             // product with it).
             if k >= 1 && res_ok && rnorm <= ROUNDOFF_BAND * f64::EPSILON * r_ref {
-                let at = accepted_at(
-                    factorised_here,
-                    residual_first,
-                    solver,
-                    &w.values,
-                    rec,
-                    &mut w.held,
-                )?;
-                return Ok((bc, Acceptance::ResidualRoundoff, at));
+                accept!(Acceptance::ResidualRoundoff);
             }
             if k >= 1 && !res_ok && e0 > 0.0 && e > o.divergence_factor * e0 {
                 return Err(FailureReason::Diverged { ratio: e / e0 });
@@ -1071,15 +1062,7 @@ impl NewtonSolver {
                 && stalled(r_prev, r_prev2)
                 && rnorm <= o.residual_rtol.sqrt() * r_ref;
             if stagnated {
-                let at = accepted_at(
-                    factorised_here,
-                    residual_first,
-                    solver,
-                    &w.values,
-                    rec,
-                    &mut w.held,
-                )?;
-                return Ok((bc, Acceptance::Stagnation, at));
+                accept!(Acceptance::Stagnation);
             }
             if k == o.max_iterations {
                 return Err(FailureReason::MaxIterations(o.max_iterations));
