@@ -112,6 +112,21 @@ fn dsa_in(dir: &Path, text: &str) -> (Output, PathBuf) {
     (o, out)
 }
 
+/// `shelldsa run CASE --out OUT` started with its standard output and error piped to the test.
+fn spawn_run(case: &Path, out: &Path) -> std::process::Child {
+    shelldsa()
+        .args([
+            "run",
+            case.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
 fn json(path: &Path) -> Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
@@ -162,17 +177,7 @@ fn run_with_stdout_closed_by_its_reader_finishes_its_files() {
     let dir = unique_dir("pipe-closed");
     let case = write_case(&dir, &elastic(40));
     let out = dir.join("out");
-    let mut child = shelldsa()
-        .args([
-            "run",
-            case.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = spawn_run(&case, &out);
     drop(child.stdout.take()); // the read end closed: every write gets EPIPE
     let o = child.wait_with_output().unwrap();
     assert_no_panic(&o);
@@ -194,17 +199,7 @@ fn run_piped_into_head_1_finishes_its_files() {
     let dir = unique_dir("pipe-head");
     let case = write_case(&dir, &elastic(40));
     let out = dir.join("out");
-    let mut child = shelldsa()
-        .args([
-            "run",
-            case.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = spawn_run(&case, &out);
     let mut first = String::new();
     BufReader::new(child.stdout.take().unwrap())
         .read_line(&mut first)
@@ -687,16 +682,7 @@ fn a_killed_run_leaves_valid_results() {
     let case = write_case(&dir, &elastic(300));
     for after in [1usize, 40, 150] {
         let out = dir.join(format!("out-{after}"));
-        let mut child = shelldsa()
-            .args([
-                "run",
-                case.to_str().unwrap(),
-                "--out",
-                out.to_str().unwrap(),
-            ])
-            .stdout(Stdio::piped())
-            .spawn()
-            .unwrap();
+        let mut child = spawn_run(&case, &out);
         let mut reader = BufReader::new(child.stdout.take().unwrap());
         let mut line = String::new();
         // Progress lines of converged steps start with "step"; the header and the case's
