@@ -1507,6 +1507,23 @@ fn gmres_preconditioned_by_a_nearby_factorisation_matches_the_direct_solve() {
     assert!(out.is_none(), "{out:?}");
 }
 
+/// The driver of the softening-chain comparisons of linear-update policies: residual to 1e-12,
+/// five equal load steps of 0.2, updates by `updates`.
+fn chain_newton(updates: LinearUpdates) -> NewtonSolver {
+    NewtonSolver {
+        options: NewtonOptions {
+            residual_rtol: 1e-12,
+            linear_updates: updates,
+            ..Default::default()
+        },
+        stepping: LoadStepping {
+            initial_step: 0.2,
+            max_step: 0.2,
+            ..Default::default()
+        },
+    }
+}
+
 #[test]
 fn krylov_updates_near_convergence_keep_the_newton_iterates() {
     // The softening chain with direct updates and with GMRES updates near convergence: the
@@ -1517,18 +1534,7 @@ fn krylov_updates_near_convergence_keep_the_newton_iterates() {
         let mut chain = SpringChain::new(10, 0.05, 2.0, None);
         let pattern = chain.pattern.clone();
         let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
-        let newton = NewtonSolver {
-            options: NewtonOptions {
-                residual_rtol: 1e-12,
-                linear_updates: updates,
-                ..Default::default()
-            },
-            stepping: LoadStepping {
-                initial_step: 0.2,
-                max_step: 0.2,
-                ..Default::default()
-            },
-        };
+        let newton = chain_newton(updates);
         let report = newton
             .run(&mut chain, &pattern, &mut solver, &[0.0; 11])
             .unwrap();
@@ -1572,18 +1578,7 @@ fn held_factorisation_updates_keep_the_newton_iterates_across_steps() {
         let chain = SpringChain::new(10, 0.05, 2.0, None);
         let pattern = chain.pattern.clone();
         let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
-        let newton = NewtonSolver {
-            options: NewtonOptions {
-                residual_rtol: 1e-12,
-                linear_updates: updates,
-                ..Default::default()
-            },
-            stepping: LoadStepping {
-                initial_step: 0.2,
-                max_step: 0.2,
-                ..Default::default()
-            },
-        };
+        let newton = chain_newton(updates);
         let mut prob = Counting {
             chain,
             policy,
