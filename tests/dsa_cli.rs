@@ -67,7 +67,10 @@ fn design_tables_parse() {
     assert_eq!(d.methods.len(), 3);
     assert_eq!(d.monitors.len(), 6);
     assert_eq!(d.monitors[4].label, "B.uy");
-    assert_eq!(d.monitors[4].component, 1);
+    assert!(matches!(
+        d.monitors[4].quantity,
+        shelldsa::sensitivity::Quantity::Displacement { component: 1, .. }
+    ));
 
     // A monitor named alone selects its three components.
     let c = parse_shell_case(

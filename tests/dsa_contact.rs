@@ -282,7 +282,141 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
             "{}: hand vs central differences {e_cd:e}",
             seed.name
         );
+
+        // The forces on the tools (the punch force): the same three ways.
+        let hand = contact
+            .tool_force_dots(&model, &q, t, std::slice::from_ref(&cs))
+            .unwrap()
+            .pop()
+            .unwrap();
+        let hand: Vec<f64> = hand.iter().flatten().copied().collect();
+        let dual = tool_forces_dual(&model, &contact, &q, t, seed);
+        let fp = tool_forces_f64(&model, &contact, &q, t, seed, h);
+        let fm = tool_forces_f64(&model, &contact, &q, t, seed, -h);
+        let cd: Vec<f64> = fp
+            .iter()
+            .zip(&fm)
+            .map(|(a, b)| (a - b) / (2.0 * h))
+            .collect();
+        let scale = max_abs(&dual);
+        let e_dual = max_diff(&hand, &dual) / scale;
+        let e_cd = max_diff(&hand, &cd) / scale;
+        println!(
+            "{:<20} tool forces: max|Ḟ| {scale:.4e}  |hand − dual| {e_dual:.2e}  \
+             |hand − central| {e_cd:.2e}",
+            seed.name
+        );
+        assert!(
+            scale > 0.0,
+            "{}: the seed must move a tool force",
+            seed.name
+        );
+        // Sums of the same per-point terms as above (no shape-function weights): the same
+        // round-off and truncation bounds, relative to the largest tool-force rate.
+        assert!(
+            e_dual < 1e-10,
+            "{}: tool forces hand vs dual {e_dual:e}",
+            seed.name
+        );
+        assert!(
+            e_cd < 1e-7,
+            "{}: tool forces hand vs central differences {e_cd:e}",
+            seed.name
+        );
     }
+    // The generic tool forces in f64 are the contact report's.
+    let none = Seed {
+        name: "none",
+        tools: vec![ToolRate::default(); 2],
+        thickness: 0.0,
+        penalty: 0.0,
+        particles: vec![zero_state(); np],
+        increment: vec![0.0; n],
+    };
+    let generic = tool_forces_f64(&model, &contact, &q, t, &none, 0.0);
+    let reported: Vec<f64> = report.tools.iter().flat_map(|r| r.force).collect();
+    // The same sum in the same order: bit-identical up to the order of one addition.
+    assert!(max_diff(&generic, &reported) <= 1e-12 * max_abs(&reported));
+}
+
+/// The forces on the tools, flattened `[tool][component]`, with every input shifted by
+/// `s` times the seed (`ShellContact::tool_forces_with` in f64).
+fn tool_forces_f64(
+    model: &ShellModel,
+    contact: &ShellContact,
+    q: &[f64],
+    t: f64,
+    seed: &Seed,
+    s: f64,
+) -> Vec<f64> {
+    let particles = shifted(model, seed, s);
+    let offsets: Vec<Vector3<f64>> = seed
+        .tools
+        .iter()
+        .map(|a| Vector3::from(a.translation) * s)
+        .collect();
+    let rotations: Vec<Vector3<f64>> = seed
+        .tools
+        .iter()
+        .map(|a| Vector3::from(a.rotation) * s)
+        .collect();
+    let inputs = ContactInputs {
+        particles: &particles,
+        thickness: model.thickness + s * seed.thickness,
+        penalty: contact.penalty() + s * seed.penalty,
+        offsets: &offsets,
+        rotations: &rotations,
+        initial: None,
+    };
+    let qs: Vec<f64> = q
+        .iter()
+        .zip(&seed.increment)
+        .map(|(a, b)| a + s * b)
+        .collect();
+    let f = contact.tool_forces_with(model, &inputs, &qs, t).unwrap();
+    f.iter().flat_map(|v| [v[0], v[1], v[2]]).collect()
+}
+
+/// The derivative parts of the forces on the tools evaluated with dual inputs seeded by `seed`.
+fn tool_forces_dual(
+    model: &ShellModel,
+    contact: &ShellContact,
+    q: &[f64],
+    t: f64,
+    seed: &Seed,
+) -> Vec<f64> {
+    let dv = |a: &Vector3<f64>, b: &Vector3<f64>| a.zip_map(b, Dual64::new);
+    let particles: Vec<ParticleState<Dual64>> = model
+        .particles
+        .iter()
+        .zip(&seed.particles)
+        .map(|(p, d)| ParticleState {
+            u: dv(&p.u, &d.u),
+            d: dv(&p.d, &d.d),
+            d0: dv(&p.d0, &d.d0),
+            e: [dv(&p.e[0], &d.e[0]), dv(&p.e[1], &d.e[1])],
+        })
+        .collect();
+    let seeded = |v: [f64; 3]| Vector3::from(v).map(|x| Dual64::new(0.0, x));
+    let offsets: Vec<Vector3<Dual64>> = seed.tools.iter().map(|a| seeded(a.translation)).collect();
+    let rotations: Vec<Vector3<Dual64>> = seed.tools.iter().map(|a| seeded(a.rotation)).collect();
+    let inputs = ContactInputs {
+        particles: &particles,
+        thickness: Dual64::new(model.thickness, seed.thickness),
+        penalty: Dual64::new(contact.penalty(), seed.penalty),
+        offsets: &offsets,
+        rotations: &rotations,
+        initial: None,
+    };
+    let qd: Vec<Dual64> = q
+        .iter()
+        .zip(&seed.increment)
+        .map(|(a, b)| Dual64::new(*a, *b))
+        .collect();
+    let f = contact.tool_forces_with(model, &inputs, &qd, t).unwrap();
+    f.iter()
+        .flat_map(|v| [v[0].eps, v[1].eps, v[2].eps])
+        .collect()
 }
 
 /// The contact of `model` with `contact`'s tools on new paths (`path(i, tool)`), on both faces
@@ -610,6 +744,44 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
     // The die's horizontal position moves the sheet: non-zero derivatives.
     let d = r.variables[0].dual.as_ref().unwrap();
     assert!(d.last().unwrap().iter().any(|x| x.abs() > 1e-3));
+}
+
+/// The forces on the tools as responses (`dsa.monitors = ["tool.<name>.<fx|fy|fz>"]`, the
+/// punch force of a forming process): the continuum derivative (`ShellContact::tool_force_dots`
+/// with the carried sensitivities at every converged state) equals the dual one (the tool
+/// forces evaluated on the dual state), and both match central differences of complete
+/// re-runs, for the die's horizontal position, the thickness and the die's height.
+#[test]
+fn tool_force_derivatives_match_dual_and_re_runs() {
+    let design = r#"
+[[design]]
+name = "die.x"
+kind = "tool.die.x"
+fd_steps = [4e-3, 2e-3, 1e-3, 5e-4]
+[[design]]
+name = "t"
+kind = "thickness"
+fd_steps = [4e-3, 2e-3, 1e-3, 5e-4]
+[[design]]
+name = "die.z"
+kind = "tool.die.z"
+fd_steps = [4e-3, 2e-3, 1e-3, 5e-4]
+[dsa]
+monitors = ["tool.punch.fz", "tool.die.fx", "tool.die.fz"]
+"#;
+    let c = case(0.5, design);
+    let spec = dsa_run::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
+    let r = dsa_run::run(&c, &spec, &mut |_| {}).unwrap();
+    // Tool-force monitors are evaluated from the contact at every step (values and both
+    // methods' derivatives).
+    let labels: Vec<&str> = r.spec.monitors.iter().map(|m| m.label.as_str()).collect();
+    assert_eq!(labels, ["tool.punch.fz", "tool.die.fx", "tool.die.fz"]);
+    // The punch pushes down on the sheet, so the sheet pushes the punch up: fz > 0 at the end.
+    let last = r.nominal.values.last().unwrap();
+    assert!(last[0] > 0.0 && last[2] < 0.0, "tool forces {last:?}");
+    for v in 0..r.variables.len() {
+        check_variable(&r, v);
+    }
 }
 
 /// Whole runs for tool rotations: the die and the punch turn about their own axes along the

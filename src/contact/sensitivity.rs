@@ -178,6 +178,43 @@ impl ShellContact {
         load: f64,
         seeds: &[ContactSeeds<'_>],
     ) -> Result<Vec<Vec<f64>>, ShellError> {
+        self.check_seeds(model, q, seeds)?;
+        let surfaces: Vec<_> = self.tools().iter().map(|tl| tl.surface.clone()).collect();
+        let evals = self.evaluate(model, q, load, &surfaces)?;
+        seeds
+            .iter()
+            .map(|sd| Ok(self.dot_with(model, &evals, load, sd)?.0))
+            .collect()
+    }
+
+    /// The hand-derived derivatives of the forces the sheet exerts on the tools
+    /// ([`ShellContact::tool_forces_with`]): per seed set, per tool, `−Σ ḟ` over the tool's
+    /// active slave points (the same eqs 78–83 as [`Self::force_dots`]). At a converged state
+    /// (`q = 0`) with the seeds of the carried sensitivities this is the total design
+    /// derivative of the punch force.
+    pub fn tool_force_dots(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        load: f64,
+        seeds: &[ContactSeeds<'_>],
+    ) -> Result<Vec<Vec<[f64; 3]>>, ShellError> {
+        self.check_seeds(model, q, seeds)?;
+        let surfaces: Vec<_> = self.tools().iter().map(|tl| tl.surface.clone()).collect();
+        let evals = self.evaluate(model, q, load, &surfaces)?;
+        seeds
+            .iter()
+            .map(|sd| Ok(self.dot_with(model, &evals, load, sd)?.1))
+            .collect()
+    }
+
+    /// The seed sets fit `model`, `q` and the tools.
+    fn check_seeds(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        seeds: &[ContactSeeds<'_>],
+    ) -> Result<(), ShellError> {
         for sd in seeds {
             self.check_model(model, q.len(), Some(sd.increment.len()))?;
             for (expected, got) in [
@@ -192,22 +229,18 @@ impl ShellContact {
                 g.check(model)?;
             }
         }
-        let surfaces: Vec<_> = self.tools().iter().map(|tl| tl.surface.clone()).collect();
-        let evals = self.evaluate(model, q, load, &surfaces)?;
-        seeds
-            .iter()
-            .map(|sd| self.dot_with(model, &evals, load, sd))
-            .collect()
+        Ok(())
     }
 
-    /// The force derivative for one seed set from the evaluated sites at pseudo-time `load`.
+    /// The force derivative for one seed set from the evaluated sites at pseudo-time `load`:
+    /// the generalised `ḟ_c` and, per tool, the derivative of the force on it (`−Σ ḟ`).
     fn dot_with(
         &self,
         model: &ShellModel,
         evals: &[SiteEval<f64>],
         load: f64,
         seeds: &ContactSeeds<'_>,
-    ) -> Result<Vec<f64>, ShellError> {
+    ) -> Result<(Vec<f64>, Vec<[f64; 3]>), ShellError> {
         let omega = self.penalty();
         // Per tool: ȧ, the spin ω_t = R(θ(t)) φ̇ (Ω = [ω_t]×) and the moved pivot p = c + a(t).
         let tool_motion: Vec<(V3, V3, V3)> = self
@@ -221,6 +254,7 @@ impl ShellContact {
             })
             .collect();
         let mut out = vec![0.0; model.n_dofs()];
+        let mut on_tools = vec![[0.0; 3]; self.tools().len()];
         for (site, ev) in self.sites().iter().zip(evals) {
             let active: Vec<_> = ev
                 .faces
@@ -317,6 +351,9 @@ impl ShellContact {
                     * -(seeds.penalty * w * g + omega * w_dot * g + omega * w * g_dot)
                     - n_dot * (omega * w * g);
                 fsum_dot += f_dot;
+                for (a, b) in on_tools[tool].iter_mut().zip(f_dot.iter()) {
+                    *a -= b;
+                }
                 msum += f * zh;
                 msum_dot += f * zh_dot + f_dot * zh;
             }
@@ -333,6 +370,6 @@ impl ShellContact {
             }
             model.scatter_local(site.point, &local, &mut out);
         }
-        Ok(out)
+        Ok((out, on_tools))
     }
 }

@@ -560,6 +560,44 @@ impl ShellContact {
         Ok(())
     }
 
+    /// The force the sheet exerts on each tool (in the contact's order), `−Σ f` over the tool's
+    /// active slave points (eq 70's `f = −ω w g n`), in scalar `T` with the design-dependent
+    /// inputs of [`Self::force_with`]: the response a load cell in the press measures (the
+    /// punch force), generic so that the dual-number reference differentiates it through the
+    /// same evaluation. Not tracked.
+    pub fn tool_forces_with<T: Real>(
+        &self,
+        model: &ShellModel,
+        inputs: &ContactInputs<'_, T>,
+        q: &[T],
+        t: f64,
+    ) -> Result<Vec<V3<T>>, ShellError> {
+        self.check_model(model, q.len(), None)?;
+        if inputs.particles.len() != model.particles.len() {
+            return Err(ShellError::Dimension {
+                expected: model.particles.len(),
+                got: inputs.particles.len(),
+            });
+        }
+        if let Some(g) = &inputs.initial {
+            g.check(model)?;
+        }
+        let surfaces: Vec<Surface<T>> = self.tools.iter().map(|tl| tl.surface.lift()).collect();
+        let evals = self.evaluate_with(model, inputs, q, t, &surfaces)?;
+        let mut out = vec![V3::zeros(); self.tools.len()];
+        for ev in &evals {
+            for face in &ev.faces {
+                if let Some((i, cp)) = face.nearest() {
+                    if cp.is_active() {
+                        // −f = ω w g n on the tool.
+                        out[i] += cp.normal * (cp.gap * (ev.penalty * face.area));
+                    }
+                }
+            }
+        }
+        Ok(out)
+    }
+
     /// Record the gaps of an f64 evaluation at `t` and check for a tool crossing the sheet.
     fn track(
         &self,

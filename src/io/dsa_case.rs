@@ -15,7 +15,9 @@
 //!
 //! [dsa]
 //! methods = ["continuum", "dual", "fd"]   # default: all three
-//! monitors = ["A.ux", "B"]        # `<monitor>.<ux|uy|uz>` or `<monitor>` (all three);
+//! monitors = ["A.ux", "B"]        # `<monitor>.<ux|uy|uz>` or `<monitor>` (all three),
+//!                                 # `tool.<name>.<fx|fy|fz>` or `tool.<name>` (the force the
+//!                                 # sheet exerts on a tool: the punch force);
 //!                                 # default: every [[monitor]], all three components
 //! ```
 //!
@@ -30,7 +32,7 @@ use super::CaseError;
 use crate::contact::RigidTool;
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
-use crate::sensitivity::{check_tools, Design, DesignKind, DesignVariable, Monitor};
+use crate::sensitivity::{check_tools, Design, DesignKind, DesignVariable, Monitor, Quantity};
 use serde::Deserialize;
 use std::path::Path;
 
@@ -41,6 +43,9 @@ pub const DEFAULT_FD_STEPS: [f64; 2] = [1e-3, 1e-4];
 
 /// The displacement components a sensitivity monitor can name.
 pub const COMPONENT_NAMES: [&str; 3] = ["ux", "uy", "uz"];
+
+/// The force components a tool-force monitor (`tool.<name>.<fx|fy|fz>`) can name.
+pub const FORCE_NAMES: [&str; 3] = ["fx", "fy", "fz"];
 
 /// One `[[design]]` table as written.
 #[derive(Debug, Deserialize)]
@@ -428,6 +433,29 @@ fn monitor_selection(
             .map(|(c, n)| sens_monitor(path, key, m, c, n))
             .collect();
     }
+    // The force on a tool: `tool.<name>.<fx|fy|fz>` or `tool.<name>` (all three).
+    if let Some(rest) = s.strip_prefix("tool.") {
+        let (name, comps) = match rest.rsplit_once('.') {
+            Some((name, comp)) if FORCE_NAMES.contains(&comp) => (name, vec![comp]),
+            _ => (rest, FORCE_NAMES.to_vec()),
+        };
+        if name.is_empty() {
+            return Err(invalid(
+                path,
+                key,
+                format!("{s:?}"),
+                "`tool.<name>` or `tool.<name>.<fx|fy|fz>` with a tool of the case",
+            ));
+        }
+        return comps
+            .into_iter()
+            .map(|comp| {
+                let c = FORCE_NAMES.iter().position(|n| *n == comp).unwrap_or(0);
+                Monitor::tool_force(format!("tool.{name}.{comp}"), name, c)
+                    .map_err(|e| invalid(path, key, format!("{s:?}"), e.to_string()))
+            })
+            .collect();
+    }
     let Some((name, comp)) = s.rsplit_once('.') else {
         return find(s).map(|_| Vec::new());
     };
@@ -481,6 +509,18 @@ pub fn check_tool_names(path: &Path, tools: &[RigidTool], spec: &DsaSpec) -> Res
                 format!("a tool of the case's [[tool]] tables {names:?} ({err})"),
             )
         })?;
+    }
+    for m in &spec.monitors {
+        if let Quantity::ToolForce { tool, .. } = &m.quantity {
+            if !names.contains(&tool.as_str()) {
+                return Err(invalid(
+                    path,
+                    "dsa.monitors",
+                    format!("{:?}", m.label),
+                    format!("the force on a tool of the case's [[tool]] tables {names:?}"),
+                ));
+            }
+        }
     }
     Ok(())
 }

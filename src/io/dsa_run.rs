@@ -22,7 +22,9 @@ use crate::contact::ShellContact;
 use crate::sensitivity::dual::{DualMode, SensitivityError};
 use crate::sensitivity::fd::{self, fit_rate, Analysis, RunResponse, TaylorFit, TaylorRow};
 use crate::sensitivity::terms::{breakdown, TermBreakdown};
-use crate::sensitivity::{run_hooked, validate_design_on, Design, DesignVariable, HookedMethods};
+use crate::sensitivity::{
+    run_hooked, validate_design_on, Design, DesignVariable, HookedMethods, Quantity,
+};
 use crate::shell::problem::ShellProblem;
 use crate::shell::ShellError;
 use crate::solver::NewtonSolver;
@@ -873,7 +875,14 @@ pub fn to_json(case: &ShellCase, r: &DsaResult, status: &str) -> Value {
         .spec
         .monitors
         .iter()
-        .map(|m| json!({"label": m.label, "uv": m.uv, "component": m.component}))
+        .map(|m| match &m.quantity {
+            Quantity::Displacement { uv, component } => {
+                json!({"label": m.label, "quantity": "displacement", "uv": uv, "component": component})
+            }
+            Quantity::ToolForce { tool, component } => {
+                json!({"label": m.label, "quantity": "tool-force", "tool": tool, "component": component})
+            }
+        })
         .collect();
     let variables: Vec<Value> = r
         .variables

@@ -483,7 +483,6 @@ impl ContinuumDsa {
             .ok_or("commit without a converged-step hook")?;
         let old = std::mem::replace(&mut self.states, next);
         self.spare = old.into_iter().map(|s| s.history).collect();
-        let model = &problem.model;
         let n_q = problem.n_generalised();
         let udot: Vec<Vec<f64>> = self
             .states
@@ -498,7 +497,11 @@ impl ContinuumDsa {
                 g
             })
             .collect();
-        let (values, derivatives) = record_monitors(model, &self.monitors, &udot)?;
+        let (states, zero) = (&self.states, &self.zero);
+        let (values, derivatives) =
+            record_monitors(problem, load, &self.monitors, &udot, &mut || {
+                tool_force_dots(problem, states, zero, load).map_err(|e| e.to_string())
+            })?;
         self.records.push(ContinuumStepRecord {
             step: self.records.len(),
             load,
@@ -533,8 +536,22 @@ fn contact_dots(
     }) else {
         return Ok(None);
     };
-    let on = |g: TermGroup| group.is_none_or(|x| x == g);
     let increment = vec![0.0; dq.len()];
+    let seeds = contact_seeds(model, c, states, zero, group, &increment)?;
+    Ok(Some(c.contact.force_dots(model, dq, factor, &seeds)?))
+}
+
+/// The contact's input derivatives ([`ContactSeeds`]) of every state's seeds restricted to
+/// `group` (`None`: all), with the increment's derivative `increment`.
+fn contact_seeds<'a>(
+    model: &ShellModel,
+    c: &crate::shell::load::ContactLoad,
+    states: &'a [SensitivityState],
+    zero: &'a SensitivityState,
+    group: Option<TermGroup>,
+    increment: &'a [f64],
+) -> Result<Vec<ContactSeeds<'a>>, SensitivityError> {
+    let on = |g: TermGroup| group.is_none_or(|x| x == g);
     if states
         .iter()
         .any(|s| s.surface.is_some() != s.position.is_some())
@@ -548,7 +565,7 @@ fn contact_dots(
             ),
         ));
     }
-    let seeds: Vec<ContactSeeds> = states
+    Ok(states
         .iter()
         .map(|s| {
             let t_dot = if on(TermGroup::Load) {
@@ -580,7 +597,7 @@ fn contact_dots(
                 } else {
                     &zero.particles
                 },
-                increment: &increment,
+                increment,
                 initial: match (on(TermGroup::Load), &s.surface, &s.position) {
                     (true, Some(surfaces), Some(positions)) => {
                         Some(crate::contact::shell::InitialGeometry {
@@ -592,8 +609,25 @@ fn contact_dots(
                 },
             }
         })
-        .collect();
-    Ok(Some(c.contact.force_dots(model, dq, factor, &seeds)?))
+        .collect())
+}
+
+/// The total derivatives of the forces on the tools at the committed state of `problem`
+/// (pseudo-time `load`, increment zero) for the carried sensitivities `states`
+/// ([`crate::contact::ShellContact::tool_force_dots`]): `[variable][tool]`.
+fn tool_force_dots(
+    problem: &ShellProblem,
+    states: &[SensitivityState],
+    zero: &SensitivityState,
+    load: f64,
+) -> Result<Vec<Vec<[f64; 3]>>, SensitivityError> {
+    let model = &problem.model;
+    let Some(c) = problem.loads().iter().find_map(|l| l.contact()) else {
+        return Ok(vec![Vec::new(); states.len()]);
+    };
+    let q = vec![0.0; model.n_dofs()];
+    let seeds = contact_seeds(model, c, states, zero, None, &q)?;
+    Ok(c.contact.tool_force_dots(model, &q, load, &seeds)?)
 }
 
 /// Add the derivative of load `l` at the increment `dq` and factor `factor` for the seeds of

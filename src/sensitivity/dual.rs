@@ -172,6 +172,21 @@ pub struct DualState<D> {
     pub tool_rotations: Vec<Vector3<D>>,
 }
 
+impl<D: DesignDual> DualState<D> {
+    /// The state as the loads see it ([`crate::shell::load::Load::force`]).
+    pub fn load_state(&self) -> LoadState<'_, D> {
+        LoadState {
+            particles: &self.particles,
+            surfaces: &self.surfaces,
+            positions: self.positions.as_deref(),
+            thickness: self.thickness,
+            young: self.material.young,
+            tool_offsets: &self.tool_offsets,
+            tool_rotations: &self.tool_rotations,
+        }
+    }
+}
+
 /// The sensitivities recorded at one converged step.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DualStepRecord {
@@ -441,15 +456,7 @@ impl<D: DesignDual> DualDsa<D> {
         dq: &[D],
         load: f64,
     ) -> Result<Vec<D>, ShellError> {
-        let state = LoadState {
-            particles: &g.particles,
-            surfaces: &g.surfaces,
-            positions: g.positions.as_deref(),
-            thickness: g.thickness,
-            young: g.material.young,
-            tool_offsets: &g.tool_offsets,
-            tool_rotations: &g.tool_rotations,
-        };
+        let state = g.load_state();
         let mut f_ext = vec![D::zero(); problem.n_generalised()];
         for l in problem.loads() {
             l.force(&problem.model, Some(&state), dq, load, &mut f_ext)?;
@@ -619,7 +626,11 @@ impl<D: DesignDual> DualDsa<D> {
                 }
             }
         }
-        let (values, derivatives) = super::record_monitors(model, &self.monitors, &udot)?;
+        let groups = &self.groups;
+        let (values, derivatives) =
+            super::record_monitors(problem, load, &self.monitors, &udot, &mut || {
+                dual_tool_force_dots(problem, groups, nv, load)
+            })?;
         self.records.push(DualStepRecord {
             step: self.records.len(),
             load,
@@ -630,6 +641,34 @@ impl<D: DesignDual> DualDsa<D> {
         });
         Ok(())
     }
+}
+
+/// The derivatives of the forces on the tools at the committed state (pseudo-time `load`),
+/// `[variable][tool]`: the contact's tool forces evaluated on every group's dual state
+/// ([`crate::shell::load::ContactLoad::tool_forces`]), their derivative parts.
+fn dual_tool_force_dots<D: DesignDual>(
+    problem: &ShellProblem,
+    groups: &[DualState<D>],
+    nv: usize,
+    load: f64,
+) -> Result<Vec<Vec<[f64; 3]>>, String> {
+    let mut out = vec![Vec::new(); nv];
+    let Some(c) = problem.loads().iter().find_map(|l| l.contact()) else {
+        return Ok(out);
+    };
+    let q = vec![D::zero(); problem.model.n_dofs()];
+    for g in groups {
+        let forces = c
+            .tool_forces(&problem.model, &g.load_state(), &q, load)
+            .map_err(|e| e.to_string())?;
+        for k in 0..g.count {
+            out[g.first + k] = forces
+                .iter()
+                .map(|f| [f[0].part(k), f[1].part(k), f[2].part(k)])
+                .collect();
+        }
+    }
+    Ok(out)
 }
 
 /// What both sensitivity methods check before the analysis: the design variables are
@@ -659,7 +698,7 @@ pub(crate) fn check_method_inputs(
         return Err(SensitivityError::UnsupportedLoad { index, kind });
     }
     for m in monitors {
-        m.value(&problem.model)
+        m.value(problem, 0.0)
             .map_err(|e| DesignError::InvalidMonitor {
                 label: m.label.clone(),
                 detail: e.to_string(),

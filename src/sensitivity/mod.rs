@@ -27,6 +27,7 @@ pub mod terms;
 use crate::geometry::Surface;
 use crate::material::{MaterialError, MaterialParams, PARAM_NAMES};
 use crate::shell::model::ShellModel;
+use crate::shell::problem::ShellProblem;
 use crate::shell::ShellError;
 use std::collections::BTreeMap;
 use thiserror::Error;
@@ -558,41 +559,114 @@ pub fn check_tools(variables: &[DesignVariable], tools: &[&str]) -> Result<(), D
     Ok(())
 }
 
-/// The monitors' values on `model` and their derivatives for the generalised displacement
-/// sensitivities `udot` (one vector per design variable, translations used):
-/// `(values[m], derivatives[m][v])`.
+/// The monitors' values at the committed state of `problem` (pseudo-time `load`) and their
+/// derivatives: a displacement from the generalised displacement sensitivities `udot` (one
+/// vector per design variable, translations used), a tool force from `tool_dots`
+/// (`tool_dots()[v][tool]`, the method's derivative of the force on each tool, asked for only
+/// when a monitor needs it): `(values[m], derivatives[m][v])`.
 pub fn record_monitors(
-    model: &ShellModel,
+    problem: &ShellProblem,
+    load: f64,
     monitors: &[Monitor],
     udot: &[Vec<f64>],
+    tool_dots: &mut dyn FnMut() -> Result<Vec<Vec<[f64; 3]>>, String>,
 ) -> Result<(Vec<f64>, Vec<Vec<f64>>), String> {
+    let model = &problem.model;
     let mut values = Vec::with_capacity(monitors.len());
     let mut derivatives = vec![vec![0.0; udot.len()]; monitors.len()];
+    let mut tools: Option<Vec<Vec<[f64; 3]>>> = None;
     for (mi, m) in monitors.iter().enumerate() {
-        values.push(m.value(model).map_err(|e| e.to_string())?);
-        for (v, ud) in udot.iter().enumerate() {
-            derivatives[mi][v] = model
-                .interpolate_translation(m.uv, ud)
-                .map_err(|e| e.to_string())?[m.component];
+        values.push(m.value(problem, load).map_err(|e| e.to_string())?);
+        match &m.quantity {
+            Quantity::Displacement { uv, component } => {
+                for (v, ud) in udot.iter().enumerate() {
+                    derivatives[mi][v] = model
+                        .interpolate_translation(*uv, ud)
+                        .map_err(|e| e.to_string())?[*component];
+                }
+            }
+            Quantity::ToolForce { tool, component } => {
+                let i = tool_index(problem, tool).map_err(|e| e.to_string())?;
+                if tools.is_none() {
+                    tools = Some(tool_dots()?);
+                }
+                let dots = tools.as_deref().unwrap_or_default();
+                for (v, d) in derivatives[mi].iter_mut().enumerate() {
+                    *d = dots
+                        .get(v)
+                        .and_then(|per_tool| per_tool.get(i))
+                        .ok_or_else(|| {
+                            format!(
+                                "monitor `{}`: no force derivative of tool `{tool}` for design \
+                                 variable {v}",
+                                m.label
+                            )
+                        })?[*component];
+                }
+            }
         }
     }
     Ok((values, derivatives))
 }
 
-/// A monitored response: a component of the RK-interpolated mid-surface displacement
-/// `Σ Ψ_J ū_J` at parameter coordinates `uv` ([`ShellModel::displacement_at`]).
+/// The index of the tool `name` in the problem's contact load.
+fn tool_index(problem: &ShellProblem, name: &str) -> Result<usize, ShellError> {
+    let contact = problem
+        .loads()
+        .iter()
+        .find_map(|l| l.contact())
+        .ok_or_else(|| {
+            ShellError::InvalidInput(format!(
+                "the force on tool `{name}`: the problem has no contact (expected a case with \
+                 [[tool]] tables)"
+            ))
+        })?;
+    let names: Vec<&str> = contact
+        .contact
+        .tools()
+        .iter()
+        .map(|t| t.name.as_str())
+        .collect();
+    names.iter().position(|n| *n == name).ok_or_else(|| {
+        ShellError::InvalidInput(format!(
+            "the force on tool `{name}`: no such tool (expected one of {names:?})"
+        ))
+    })
+}
+
+/// What a monitor measures.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Quantity {
+    /// A component (0, 1, 2: x, y, z) of the RK-interpolated mid-surface displacement
+    /// `Σ Ψ_J ū_J` at parameter coordinates `uv` ([`ShellModel::displacement_at`]).
+    Displacement {
+        /// Parameter coordinates.
+        uv: [f64; 2],
+        /// Component 0, 1, 2 (x, y, z).
+        component: usize,
+    },
+    /// A component (0, 1, 2: x, y, z) of the force the sheet exerts on the named tool
+    /// ([`crate::contact::ShellContact::tool_forces_with`], eq 70 summed over the tool's
+    /// active slave points): the punch or die force of a forming process.
+    ToolForce {
+        /// The tool's name.
+        tool: String,
+        /// Component 0, 1, 2 (x, y, z).
+        component: usize,
+    },
+}
+
+/// A monitored response ([`Quantity`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Monitor {
     /// Label (for tables and output).
     pub label: String,
-    /// Parameter coordinates.
-    pub uv: [f64; 2],
-    /// Component 0, 1, 2 (x, y, z).
-    pub component: usize,
+    /// What it measures.
+    pub quantity: Quantity,
 }
 
 impl Monitor {
-    /// A monitor, checked: `component` in 0..3, `uv` finite.
+    /// A displacement monitor, checked: `component` in 0..3, `uv` finite.
     pub fn new(
         label: impl Into<String>,
         uv: [f64; 2],
@@ -610,14 +684,53 @@ impl Monitor {
         }
         Ok(Monitor {
             label,
-            uv,
-            component,
+            quantity: Quantity::Displacement { uv, component },
         })
     }
 
-    /// Its committed value in `model`.
-    pub fn value(&self, model: &ShellModel) -> Result<f64, ShellError> {
-        Ok(model.displacement_at(self.uv)?[self.component])
+    /// A monitor of the force on the tool `tool`, checked: `component` in 0..3 (the tool's
+    /// existence is checked against the problem by the methods).
+    pub fn tool_force(
+        label: impl Into<String>,
+        tool: impl Into<String>,
+        component: usize,
+    ) -> Result<Self, DesignError> {
+        let label = label.into();
+        if component > 2 {
+            return Err(DesignError::InvalidMonitor {
+                label,
+                detail: format!("component = {component}: expected a component in 0..3"),
+            });
+        }
+        Ok(Monitor {
+            label,
+            quantity: Quantity::ToolForce {
+                tool: tool.into(),
+                component,
+            },
+        })
+    }
+
+    /// Its committed value in `problem` at pseudo-time `load` (the load factor of the
+    /// converged step: the tools' position along their paths).
+    pub fn value(&self, problem: &ShellProblem, load: f64) -> Result<f64, ShellError> {
+        let model = &problem.model;
+        match &self.quantity {
+            Quantity::Displacement { uv, component } => Ok(model.displacement_at(*uv)?[*component]),
+            Quantity::ToolForce { tool, component } => {
+                let i = tool_index(problem, tool)?;
+                let c = problem
+                    .loads()
+                    .iter()
+                    .find_map(|l| l.contact())
+                    .ok_or_else(|| ShellError::InvalidInput("no contact".into()))?;
+                let report = c
+                    .contact
+                    .report(model, &vec![0.0; model.n_dofs()], load)
+                    .map_err(ShellError::from)?;
+                Ok(report.tools[i].force[*component])
+            }
+        }
     }
 }
 

@@ -98,6 +98,41 @@ pub struct ContactLoad {
     pub penalty_factor: Option<f64>,
 }
 
+impl ContactLoad {
+    /// The contact's inputs on the committed state and design `s`: its particles, thickness,
+    /// tool placements, initial geometry and the penalty (`ω = c E / t` follows `E` and `t`).
+    pub fn inputs<'a, T: Real>(&self, s: &LoadState<'a, T>) -> ContactInputs<'a, T> {
+        let penalty = match self.penalty_factor {
+            Some(k) => s.young * k / s.thickness,
+            None => T::cst(self.contact.penalty()),
+        };
+        ContactInputs {
+            particles: s.particles,
+            thickness: s.thickness,
+            penalty,
+            offsets: s.tool_offsets,
+            rotations: s.tool_rotations,
+            initial: s.positions.map(|positions| InitialGeometry {
+                positions,
+                surfaces: s.surfaces,
+            }),
+        }
+    }
+
+    /// The forces the sheet exerts on the tools at the increment `q` from the committed state
+    /// `s` and pseudo-time `factor` ([`ShellContact::tool_forces_with`]), in scalar `T`.
+    pub fn tool_forces<T: Real>(
+        &self,
+        model: &ShellModel,
+        s: &LoadState<'_, T>,
+        q: &[T],
+        factor: f64,
+    ) -> Result<Vec<V3<T>>, ShellError> {
+        self.contact
+            .tool_forces_with(model, &self.inputs(s), q, factor)
+    }
+}
+
 /// A committed state and design other than the model's own, in scalar `T`, for
 /// [`Load::force`]: the dual-number reference's state of a group of design variables, whose
 /// derivative parts are the carried sensitivities (committed displacements, directors and
@@ -221,24 +256,7 @@ impl Load {
             (Load::EdgeForce(l), None) => l.force(model, q, factor, f),
             (Load::DirectorFilter(l), None) => l.force(model, q, f),
             (Load::Contact(c), None) => c.contact.force_generic(model, q, factor, f),
-            (Load::Contact(c), Some(s)) => {
-                let penalty = match c.penalty_factor {
-                    Some(k) => s.young * k / s.thickness,
-                    None => T::cst(c.contact.penalty()),
-                };
-                let inputs = ContactInputs {
-                    particles: s.particles,
-                    thickness: s.thickness,
-                    penalty,
-                    offsets: s.tool_offsets,
-                    rotations: s.tool_rotations,
-                    initial: s.positions.map(|positions| InitialGeometry {
-                        positions,
-                        surfaces: s.surfaces,
-                    }),
-                };
-                c.contact.force_with(model, &inputs, q, factor, f)
-            }
+            (Load::Contact(c), Some(s)) => c.contact.force_with(model, &c.inputs(s), q, factor, f),
             (Load::Constant(inner), s) => inner.force(model, s, q, 1.0, f),
             (l @ (Load::Moment(_) | Load::EdgeForce(_) | Load::DirectorFilter(_)), Some(_)) => {
                 Err(ShellError::InvalidInput(format!(
