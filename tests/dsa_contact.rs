@@ -747,7 +747,8 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
 }
 
 /// The forces on the tools as responses (`dsa.monitors = ["tool.<name>.<fx|fy|fz>"]`, the
-/// punch force of a forming process): the continuum derivative (`ShellContact::tool_force_dots`
+/// punch force of a forming process), a chord angle (`[[dsa.angle]]`) and the mean squared
+/// distance of points from targets (`[[dsa.distance]]`): the continuum derivative (`ShellContact::tool_force_dots`
 /// with the carried sensitivities at every converged state) equals the dual one (the tool
 /// forces evaluated on the dual state), and both match central differences of complete
 /// re-runs, for the die's horizontal position, the thickness and the die's height.
@@ -768,6 +769,15 @@ kind = "tool.die.z"
 fd_steps = [4e-3, 2e-3, 1e-3, 5e-4]
 [dsa]
 monitors = ["tool.punch.fz", "tool.die.fx", "tool.die.fz"]
+[[dsa.angle]]
+name = "arm angle"
+from = [0.5, 0.0]
+to = [1.0, 0.5]
+plane = ["x", "z"]
+[[dsa.distance]]
+name = "from target"
+at = [[0.0, 0.0], [0.5, 0.5], [1.0, 1.0]]
+target = [[0.0, 0.0, -3.0], [15.0, 2.5, -1.0], [30.0, 5.0, 1.0]]
 "#;
     let c = case(0.5, design);
     let spec = dsa_run::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
@@ -775,10 +785,26 @@ monitors = ["tool.punch.fz", "tool.die.fx", "tool.die.fz"]
     // Tool-force monitors are evaluated from the contact at every step (values and both
     // methods' derivatives).
     let labels: Vec<&str> = r.spec.monitors.iter().map(|m| m.label.as_str()).collect();
-    assert_eq!(labels, ["tool.punch.fz", "tool.die.fx", "tool.die.fz"]);
+    assert_eq!(
+        labels,
+        [
+            "tool.punch.fz",
+            "tool.die.fx",
+            "tool.die.fz",
+            "arm angle",
+            "from target"
+        ]
+    );
     // The punch pushes down on the sheet, so the sheet pushes the punch up: fz > 0 at the end.
     let last = r.nominal.values.last().unwrap();
     assert!(last[0] > 0.0 && last[2] < 0.0, "tool forces {last:?}");
+    // The arm rises as the centre goes down: a positive chord angle (degrees) at the end;
+    // flat at the start the chord from (15, 0, 0) to (30, 2.5, 0) has angle 0.
+    assert!(last[3] > 1.0, "arm angle {}", last[3]);
+    // The initial mean squared distance of the three points from their targets is
+    // (9 + 1 + 1)/3; the bent sheet moves the centre towards its target z = −3.
+    let first = &r.nominal.values[0];
+    assert!(first[4] < 11.0 / 3.0 && last[4] < first[4], "distance {first:?} {last:?}");
     for v in 0..r.variables.len() {
         check_variable(&r, v);
     }

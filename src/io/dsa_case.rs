@@ -19,6 +19,17 @@
 //!                                 # `tool.<name>.<fx|fy|fz>` or `tool.<name>` (the force the
 //!                                 # sheet exerts on a tool: the punch force);
 //!                                 # default: every [[monitor]], all three components
+//!
+//! [[dsa.angle]]                   # a chord angle (degrees) in the plane of two global axes:
+//! name = "flange"                 # atan2(Δ_j, Δ_i), Δ = x(to) − x(from) in the current state
+//! from = [0.8, 0.0]               # parameter coordinates
+//! to = [1.0, 0.0]
+//! plane = ["x", "z"]
+//!
+//! [[dsa.distance]]                # mean squared distance (1/n) Σ |x_k − x*_k|² of sheet
+//! name = "shape"                  # points from targets (least squares)
+//! at = [[0.5, 0.0], [1.0, 0.0]]   # parameter coordinates
+//! target = [[0.0, 0.0, -20.0], [30.0, 0.0, -5.0]]
 //! ```
 //!
 //! Everything is checked here, before any analysis: each wrong key is a
@@ -65,6 +76,29 @@ pub(crate) struct DsaFile {
     methods: Option<Vec<String>>,
     #[serde(default)]
     monitors: Option<Vec<String>>,
+    #[serde(default)]
+    angle: Vec<AngleFile>,
+    #[serde(default)]
+    distance: Vec<DistanceFile>,
+}
+
+/// One `[[dsa.angle]]` table as written: a chord angle response.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct AngleFile {
+    name: String,
+    from: [f64; 2],
+    to: [f64; 2],
+    plane: [String; 2],
+}
+
+/// One `[[dsa.distance]]` table as written: the mean squared distance of points from targets.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct DistanceFile {
+    name: String,
+    at: Vec<[f64; 2]>,
+    target: Vec<[f64; 3]>,
 }
 
 /// A sensitivity method.
@@ -387,11 +421,113 @@ pub(crate) fn check(
             out
         }
     };
+    let mut sel = sel;
+    let functionals = position_functionals(path, &dsa, surface)?;
+    if !functionals.is_empty() {
+        if let Some((k, e)) = entries
+            .iter()
+            .enumerate()
+            .find(|(_, e)| matches!(e.variable.kind, DesignKind::Shape { .. }))
+        {
+            return Err(invalid(
+                path,
+                format!("design[{k}].kind"),
+                format!("{:?}", super::dsa_run::kind_name(&e.variable)),
+                "a thickness, material or tool variable with [[dsa.angle]] or [[dsa.distance]] \
+                 responses (their initial points would move with a shape variable, whose \
+                 design velocity these responses do not carry)",
+            ));
+        }
+    }
+    for m in functionals {
+        if sel.iter().any(|o| o.label == m.label) {
+            return Err(invalid(
+                path,
+                "dsa",
+                format!("{:?}", m.label),
+                "response names not used by another monitored component",
+            ));
+        }
+        sel.push(m);
+    }
     Ok(Some(DsaSpec {
         design: entries,
         methods,
         monitors: sel,
     }))
+}
+
+/// The `[[dsa.angle]]` and `[[dsa.distance]]` responses, checked, with their points' initial
+/// positions on `surface`.
+fn position_functionals(
+    path: &Path,
+    dsa: &DsaFile,
+    surface: &Surface<f64>,
+) -> Result<Vec<Monitor>, CaseError> {
+    let dom = surface.domain();
+    let at = |key: &str, uv: [f64; 2]| -> Result<[f64; 3], CaseError> {
+        let inside = (0..2).all(|k| uv[k] >= dom[k][0] && uv[k] <= dom[k][1]);
+        if !inside {
+            return Err(invalid(
+                path,
+                key,
+                fmt_list(&uv),
+                format!("parameter coordinates in the surface's domain {dom:?}"),
+            ));
+        }
+        Ok(surface.eval(uv[0], uv[1]).x.into())
+    };
+    let axis = |key: &str, a: &str| -> Result<usize, CaseError> {
+        ["x", "y", "z"]
+            .iter()
+            .position(|n| *n == a)
+            .ok_or_else(|| invalid(path, key, format!("{a:?}"), "\"x\", \"y\" or \"z\""))
+    };
+    let mut out = Vec::new();
+    for (k, a) in dsa.angle.iter().enumerate() {
+        let key = format!("dsa.angle[{k}]");
+        if !super::is_name(&a.name) {
+            return Err(invalid(
+                path,
+                format!("{key}.name"),
+                format!("{:?}", a.name),
+                super::NAME_EXPECTED,
+            ));
+        }
+        let initial = [
+            at(&format!("{key}.from"), a.from)?,
+            at(&format!("{key}.to"), a.to)?,
+        ];
+        let plane = [
+            axis(&format!("{key}.plane[0]"), &a.plane[0])?,
+            axis(&format!("{key}.plane[1]"), &a.plane[1])?,
+        ];
+        out.push(
+            Monitor::chord_angle(a.name.clone(), [a.from, a.to], initial, plane)
+                .map_err(|e| invalid(path, &key, format!("{:?}", a.name), e.to_string()))?,
+        );
+    }
+    for (k, d) in dsa.distance.iter().enumerate() {
+        let key = format!("dsa.distance[{k}]");
+        if !super::is_name(&d.name) {
+            return Err(invalid(
+                path,
+                format!("{key}.name"),
+                format!("{:?}", d.name),
+                super::NAME_EXPECTED,
+            ));
+        }
+        let initial =
+            d.at.iter()
+                .enumerate()
+                .map(|(i, uv)| at(&format!("{key}.at[{i}]"), *uv))
+                .collect::<Result<Vec<_>, _>>()?;
+        out.push(
+            Monitor::target_distance(d.name.clone(), d.at.clone(), initial, d.target.clone())
+                .map_err(|e| invalid(path, &key, format!("{:?}", d.name), e.to_string()))?,
+        );
+    }
+    Ok(out)
 }
 
 fn sens_monitor(

@@ -882,6 +882,14 @@ pub fn to_json(case: &ShellCase, r: &DsaResult, status: &str) -> Value {
             Quantity::ToolForce { tool, component } => {
                 json!({"label": m.label, "quantity": "tool-force", "tool": tool, "component": component})
             }
+            Quantity::ChordAngle { points, plane, .. } => {
+                json!({"label": m.label, "quantity": "chord-angle", "points": points, "plane": plane})
+            }
+            Quantity::TargetDistance {
+                points, targets, ..
+            } => {
+                json!({"label": m.label, "quantity": "target-distance", "points": points, "targets": targets})
+            }
         })
         .collect();
     let variables: Vec<Value> = r

@@ -29,6 +29,7 @@ use crate::material::{MaterialError, MaterialParams, PARAM_NAMES};
 use crate::shell::model::ShellModel;
 use crate::shell::problem::ShellProblem;
 use crate::shell::ShellError;
+use nalgebra::Vector3;
 use std::collections::BTreeMap;
 use thiserror::Error;
 
@@ -585,6 +586,26 @@ pub fn record_monitors(
                         .map_err(|e| e.to_string())?[*component];
                 }
             }
+            q @ (Quantity::ChordAngle { .. } | Quantity::TargetDistance { .. }) => {
+                let pts = q.functional_points();
+                let u: Vec<Vector3<f64>> = pts
+                    .iter()
+                    .map(|uv| model.displacement_at(*uv))
+                    .collect::<Result<_, _>>()
+                    .map_err(|e| e.to_string())?;
+                for (v, ud) in udot.iter().enumerate() {
+                    let seeded: Vec<Vector3<crate::scalar::Dual>> = pts
+                        .iter()
+                        .zip(&u)
+                        .map(|(uv, ui)| {
+                            let d = model.interpolate_translation(*uv, ud)?;
+                            Ok(ui.zip_map(&d, crate::scalar::Dual::new))
+                        })
+                        .collect::<Result<_, ShellError>>()
+                        .map_err(|e| e.to_string())?;
+                    derivatives[mi][v] = position_functional(q, &seeded).map_or(0.0, |x| x.eps);
+                }
+            }
             Quantity::ToolForce { tool, component } => {
                 let i = tool_index(problem, tool).map_err(|e| e.to_string())?;
                 if tools.is_none() {
@@ -654,6 +675,70 @@ pub enum Quantity {
         /// Component 0, 1, 2 (x, y, z).
         component: usize,
     },
+    /// The angle in degrees, in the plane of the global axes `plane = [i, j]`, of the chord
+    /// from the sheet's point at `from` to its point at `to` (parameter coordinates) in the
+    /// current configuration: `atan2(Δ_j, Δ_i)` with `Δ = (X⁰_to + u_to) − (X⁰_from + u_from)`
+    /// ([`position_functional`]). The springback angle of a bent flange is its change from the
+    /// loaded to the released state (two steps of the same monitor).
+    ChordAngle {
+        /// Parameter coordinates of the chord's start and end.
+        points: [[f64; 2]; 2],
+        /// Their initial positions `X⁰` (from the case's surface).
+        initial: [[f64; 3]; 2],
+        /// The plane's axes `[i, j]` (0, 1, 2: x, y, z), `i ≠ j`.
+        plane: [usize; 2],
+    },
+    /// The mean squared distance of sheet points from their targets,
+    /// `(1/n) Σ_k |X⁰_k + u_k − x*_k|²` (least squares; the shape deviation from a target
+    /// surface sampled at the points) ([`position_functional`]).
+    TargetDistance {
+        /// Parameter coordinates of the points.
+        points: Vec<[f64; 2]>,
+        /// Their initial positions `X⁰` (from the case's surface).
+        initial: Vec<[f64; 3]>,
+        /// Their target positions `x*`.
+        targets: Vec<[f64; 3]>,
+    },
+}
+
+impl Quantity {
+    /// The parameter points whose displacements a position functional reads (empty for a
+    /// displacement or a tool force).
+    pub fn functional_points(&self) -> &[[f64; 2]] {
+        match self {
+            Quantity::ChordAngle { points, .. } => points,
+            Quantity::TargetDistance { points, .. } => points,
+            Quantity::Displacement { .. } | Quantity::ToolForce { .. } => &[],
+        }
+    }
+}
+
+/// A position functional's value from the displacements `u` at its
+/// [`Quantity::functional_points`], generic over the scalar: in `f64` the response, with
+/// `Dual64` displacements `u + ε u̇` its derivative (one formula for the value, the continuum
+/// and dual derivatives, and the re-runs of the finite differences). `None` for a quantity
+/// that is not a position functional.
+pub fn position_functional<T: crate::scalar::Real>(q: &Quantity, u: &[Vector3<T>]) -> Option<T> {
+    let pos = |x0: &[f64; 3], u: &Vector3<T>| {
+        Vector3::new(T::cst(x0[0]), T::cst(x0[1]), T::cst(x0[2])) + u
+    };
+    match q {
+        Quantity::ChordAngle { initial, plane, .. } => {
+            let d = pos(&initial[1], &u[1]) - pos(&initial[0], &u[0]);
+            Some(d[plane[1]].atan2(d[plane[0]]) * (180.0 / std::f64::consts::PI))
+        }
+        Quantity::TargetDistance {
+            initial, targets, ..
+        } => {
+            let mut sum = T::zero();
+            for ((x0, t), uk) in initial.iter().zip(targets).zip(u) {
+                let r = pos(x0, uk) - Vector3::new(T::cst(t[0]), T::cst(t[1]), T::cst(t[2]));
+                sum += r.dot(&r);
+            }
+            Some(sum / (initial.len().max(1) as f64))
+        }
+        Quantity::Displacement { .. } | Quantity::ToolForce { .. } => None,
+    }
 }
 
 /// A monitored response ([`Quantity`]).
@@ -711,12 +796,101 @@ impl Monitor {
         })
     }
 
+    /// A chord-angle monitor ([`Quantity::ChordAngle`]), checked: finite coordinates, two
+    /// different axes in 0..3, a chord of non-zero length in the plane at the initial state.
+    pub fn chord_angle(
+        label: impl Into<String>,
+        points: [[f64; 2]; 2],
+        initial: [[f64; 3]; 2],
+        plane: [usize; 2],
+    ) -> Result<Self, DesignError> {
+        let label = label.into();
+        let finite = points
+            .iter()
+            .flatten()
+            .chain(initial.iter().flatten())
+            .all(|v| v.is_finite());
+        let d = [0, 1].map(|k| initial[1][plane[k].min(2)] - initial[0][plane[k].min(2)]);
+        if !finite
+            || plane[0] > 2
+            || plane[1] > 2
+            || plane[0] == plane[1]
+            || d[0].hypot(d[1]) == 0.0
+        {
+            return Err(DesignError::InvalidMonitor {
+                label,
+                detail: format!(
+                    "points {points:?} at {initial:?}, plane axes {plane:?}: expected finite \
+                     coordinates, two different axes of x, y, z and two points apart in that \
+                     plane"
+                ),
+            });
+        }
+        Ok(Monitor {
+            label,
+            quantity: Quantity::ChordAngle {
+                points,
+                initial,
+                plane,
+            },
+        })
+    }
+
+    /// A target-distance monitor ([`Quantity::TargetDistance`]), checked: at least one point,
+    /// as many targets as points, finite coordinates.
+    pub fn target_distance(
+        label: impl Into<String>,
+        points: Vec<[f64; 2]>,
+        initial: Vec<[f64; 3]>,
+        targets: Vec<[f64; 3]>,
+    ) -> Result<Self, DesignError> {
+        let label = label.into();
+        let finite = points.iter().flatten().all(|v| v.is_finite())
+            && initial
+                .iter()
+                .chain(&targets)
+                .flatten()
+                .all(|v| v.is_finite());
+        if points.is_empty()
+            || points.len() != targets.len()
+            || points.len() != initial.len()
+            || !finite
+        {
+            return Err(DesignError::InvalidMonitor {
+                label,
+                detail: format!(
+                    "{} point(s), {} target(s): expected at least one point, one target per \
+                     point, finite coordinates",
+                    points.len(),
+                    targets.len()
+                ),
+            });
+        }
+        Ok(Monitor {
+            label,
+            quantity: Quantity::TargetDistance {
+                points,
+                initial,
+                targets,
+            },
+        })
+    }
+
     /// Its committed value in `problem` at pseudo-time `load` (the load factor of the
     /// converged step: the tools' position along their paths).
     pub fn value(&self, problem: &ShellProblem, load: f64) -> Result<f64, ShellError> {
         let model = &problem.model;
         match &self.quantity {
             Quantity::Displacement { uv, component } => Ok(model.displacement_at(*uv)?[*component]),
+            q @ (Quantity::ChordAngle { .. } | Quantity::TargetDistance { .. }) => {
+                let u: Vec<Vector3<f64>> = q
+                    .functional_points()
+                    .iter()
+                    .map(|uv| model.displacement_at(*uv))
+                    .collect::<Result<_, _>>()?;
+                position_functional(q, &u)
+                    .ok_or_else(|| ShellError::InvalidInput("not a position functional".into()))
+            }
             Quantity::ToolForce { tool, component } => {
                 let i = tool_index(problem, tool)?;
                 let c = problem
