@@ -381,7 +381,8 @@ fn dsa(
     let mut write_error: Option<String> = None;
     // The last results written: kept with the failure if the run stops.
     let mut last: Option<serde_json::Value> = None;
-    let run = dsa_run::run_observed(c, &spec, terms, &mut |line| con.line(line), &mut |r| {
+    let progress = &mut |line: &str| con.line(line);
+    let run = dsa_run::run_with_output(c, &spec, terms, Some(out), progress, &mut |r| {
         if write_error.is_none() {
             let doc = dsa_run::to_json(c, r, "running");
             if let Err(e) = dsa_run::write_json(&path, &doc) {
@@ -478,6 +479,19 @@ fn dsa(
         return EXIT_OUTPUT;
     }
     say!(con, "wrote {} ({status})", path.display());
+    if let Some(e) = &result.vtu_error {
+        // The other files are still written; the exit status says an output failed.
+        err!("error: {e}");
+        write_error.get_or_insert_with(|| e.clone());
+    }
+    if !result.vtu.is_empty() {
+        say!(
+            con,
+            "wrote {} VTU file(s) with the sensitivity fields and {}",
+            result.vtu.len(),
+            out.join(crate::io::shell_output::PVD_FILE).display()
+        );
+    }
     match crate::io::dsa_plots::write(out, &result) {
         Ok(files) => say!(
             con,

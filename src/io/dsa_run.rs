@@ -16,6 +16,10 @@ use super::dsa_case::{
 };
 use super::shell_build;
 use super::shell_case::ShellCase;
+use super::shell_output::{
+    add_sensitivity_fields, shell_vtu_with_contact, OutputGrid, SensitivityField, PVD_FILE,
+};
+use super::vtu::PvdCollection;
 use super::CaseError;
 use super::RewriteSchedule;
 use crate::contact::ShellContact;
@@ -24,11 +28,14 @@ use crate::sensitivity::fd::{self, fit_rate, Analysis, RunResponse, TaylorFit, T
 use crate::sensitivity::terms::{breakdown, TermBreakdown};
 use crate::sensitivity::{
     run_hooked, validate_design_on, Design, DesignVariable, HookedMethods, Quantity,
+    SensitivityFields,
 };
+use crate::shell::model::ShellModel;
 use crate::shell::problem::ShellProblem;
 use crate::shell::ShellError;
 use crate::solver::NewtonSolver;
 use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 use thiserror::Error;
@@ -238,6 +245,151 @@ pub struct DsaResult {
     /// Methods and re-runs that failed after the plain analysis (their results are missing,
     /// everything else is kept).
     pub failures: Vec<DsaFailure>,
+    /// The VTU files of the run with the derivative methods ([`StepVtu`]), relative to the
+    /// output directory.
+    pub vtu: Vec<VtuStep>,
+    /// Wall time of writing them (s; left out of the hooked run's total).
+    pub time_vtu: Option<f64>,
+    /// The first error writing them (no further VTU is written after it).
+    pub vtu_error: Option<String>,
+}
+
+/// A VTU file with the sensitivity fields of a converged step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VtuStep {
+    /// Converged step (0: the initial state).
+    pub step: usize,
+    /// Its load factor.
+    pub load: f64,
+    /// The file, relative to the output directory (`steps/step_NNNN.vtu`).
+    pub file: String,
+}
+
+/// The VTU files of the run that carries the derivative methods, in the plain run's layout
+/// (`[output] vtu`, `every`, `subdivide`; `shell.pvd` and `steps/step_NNNN.vtu`, step 0 the
+/// initial state, every `every`-th converged step and the one reaching `final_load`): every
+/// array of the plain run's VTU ([`shell_vtu_with_contact`]) and, per design variable and
+/// method, the sensitivity fields of [`add_sensitivity_fields`], named
+/// `d_u/d_<variable> (<method>)` and `d_eps_p_<top|mid|bottom>/d_<variable> (<method>)`.
+pub struct StepVtu<'a> {
+    dir: PathBuf,
+    case: &'a ShellCase,
+    grid: OutputGrid,
+    contact: Option<Arc<ShellContact>>,
+    variables: Vec<String>,
+    pvd: PvdCollection,
+    time: std::time::Duration,
+    written: Vec<VtuStep>,
+    error: Option<String>,
+}
+
+impl<'a> StepVtu<'a> {
+    /// The writer into `dir` for `case`'s output grid, with the hooked run's `contact` (for
+    /// the contact pressure) and the names of its design variables.
+    pub fn new(
+        dir: &Path,
+        case: &'a ShellCase,
+        contact: Option<Arc<ShellContact>>,
+        variables: Vec<String>,
+    ) -> Result<Self, String> {
+        let cq = shell_build::particle_grid(case);
+        let cq = shell_build::cell_quadrature(case, &cq).map_err(|e| e.to_string())?;
+        let grid = OutputGrid::new(&cq, case.output.subdivide).map_err(|e| e.to_string())?;
+        let steps = dir.join("steps");
+        std::fs::create_dir_all(&steps)
+            .map_err(|e| format!("cannot create {}: {e}", steps.display()))?;
+        Ok(StepVtu {
+            dir: dir.to_owned(),
+            case,
+            grid,
+            contact,
+            variables,
+            pvd: PvdCollection::new(dir.join(PVD_FILE)),
+            time: std::time::Duration::ZERO,
+            written: Vec::new(),
+            error: None,
+        })
+    }
+
+    /// Whether converged step `step` (1-based) at `load` is written: every `every`-th and the
+    /// one reaching `final_load` (as the plain run).
+    pub fn due(&self, step: usize, load: f64) -> bool {
+        let s = &self.case.steps;
+        let last = (s.final_load - load).abs() <= 1e-12 * s.final_load.abs().max(1.0);
+        self.error.is_none() && (step % self.case.output.every == 0 || last)
+    }
+
+    /// Write step `step` at `load` of `model` with the methods' committed sensitivities
+    /// (`(method name, fields)`; `None` fields: zero, the initial state). A failure is kept
+    /// ([`Self::error`]) and stops further writing.
+    pub fn write(
+        &mut self,
+        step: usize,
+        load: f64,
+        model: &ShellModel,
+        methods: &[(&str, Option<&dyn SensitivityFields>)],
+    ) {
+        if self.error.is_some() {
+            return;
+        }
+        let t = Instant::now();
+        if let Err(e) = self.write_files(step, load, model, methods) {
+            self.error = Some(e);
+        }
+        self.time += t.elapsed();
+    }
+
+    fn write_files(
+        &mut self,
+        step: usize,
+        load: f64,
+        model: &ShellModel,
+        methods: &[(&str, Option<&dyn SensitivityFields>)],
+    ) -> Result<(), String> {
+        let pressure = match &self.contact {
+            Some(c) => Some(
+                c.report(model, &vec![0.0; model.n_dofs()], load)
+                    .map_err(|e| format!("contact at step {step}: {e}"))?
+                    .pressure,
+            ),
+            None => None,
+        };
+        let n_layer_points = model.points.len() * model.thickness_rule.len();
+        let mut fields = Vec::new();
+        for (method, f) in methods {
+            for (v, name) in self.variables.iter().enumerate() {
+                let (translations, plastic_strain) = match f {
+                    Some(f) => (f.translations(model, v), f.plastic_strain(v)),
+                    None => (vec![0.0; model.n_dofs()], vec![0.0; n_layer_points]),
+                };
+                fields.push(SensitivityField {
+                    label: format!("{name} ({method})"),
+                    translations,
+                    plastic_strain,
+                });
+            }
+        }
+        let rel = format!("steps/step_{step:04}.vtu");
+        let path = self.dir.join(&rel);
+        let w = shell_vtu_with_contact(model, &self.case.surface, &self.grid, pressure.as_deref())
+            .and_then(|w| add_sensitivity_fields(w, model, &self.grid, &fields))
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        w.write(&path).map_err(|e| e.to_string())?;
+        self.pvd
+            .add_and_write(load, &rel)
+            .map_err(|e| e.to_string())?;
+        self.written.push(VtuStep {
+            step,
+            load,
+            file: rel,
+        });
+        Ok(())
+    }
+
+    /// The first error writing the files.
+    pub fn error(&self) -> Option<&str> {
+        self.error.as_deref()
+    }
 }
 
 /// The cost of the derivative methods per design variable, as fractions of the plain
@@ -374,6 +526,19 @@ pub fn run_observed(
     progress: &mut dyn FnMut(&str),
     update: &mut dyn FnMut(&DsaResult),
 ) -> Result<DsaResult, DsaError> {
+    run_with_output(case, spec, need_step, None, progress, update)
+}
+
+/// [`run_observed`], and with `out` (and `[output] vtu = true`) the VTU files of the run with
+/// the derivative methods in `out` ([`StepVtu`]; none when only finite differences run).
+pub fn run_with_output(
+    case: &ShellCase,
+    spec: &DsaSpec,
+    need_step: Option<usize>,
+    out: Option<&Path>,
+    progress: &mut dyn FnMut(&str),
+    update: &mut dyn FnMut(&DsaResult),
+) -> Result<DsaResult, DsaError> {
     let analysis = CaseAnalysis { case };
     let base = base_design(case);
     let vars: Vec<DesignVariable> = spec.design.iter().map(|d| d.variable.clone()).collect();
@@ -426,6 +591,9 @@ pub fn run_observed(
         time_dual_run: None,
         time_fd: None,
         failures: Vec::new(),
+        vtu: Vec::new(),
+        time_vtu: None,
+        vtu_error: None,
     };
     let mut schedule = RewriteSchedule::starting(Instant::now());
     let run = fd::response_observed(
@@ -500,9 +668,29 @@ pub fn run_observed(
         continuum: want_continuum,
         dual: want_dual.then_some(dual_mode),
     };
+    let method_names: Vec<&str> = [(want_continuum, "continuum"), (want_dual, "dual")]
+        .into_iter()
+        .filter_map(|(w, n)| w.then_some(n))
+        .collect();
+    let mut vtu: Option<StepVtu> = None;
+    let mut vtu_before_run = 0.0;
     let (continuum_run, dual_run) = if want_continuum || want_dual {
         let mut schedule = RewriteSchedule::starting(Instant::now());
-        let runs = method_problem(&analysis, &base).and_then(|(problem, newton)| {
+        let built = analysis.build_with_contact(&base).map_err(DsaError::from);
+        if let (Some(dir), true, Ok((problem, _, contact))) = (out, case.output.vtu, &built) {
+            let names = vars.iter().map(|v| v.name.clone()).collect();
+            match StepVtu::new(dir, case, contact.clone(), names) {
+                Ok(mut w) => {
+                    let zero: Vec<_> = method_names.iter().map(|m| (*m, None)).collect();
+                    w.write(0, 0.0, &problem.model, &zero);
+                    // Only the writes inside the hooked run leave its total.
+                    vtu_before_run = w.time.as_secs_f64();
+                    vtu = Some(w);
+                }
+                Err(e) => result.vtu_error = Some(e),
+            }
+        }
+        let runs = built.and_then(|(problem, newton, _)| {
             run_hooked(
                 problem,
                 Some(&case.surface),
@@ -512,6 +700,26 @@ pub fn run_observed(
                 analysis.solver(),
                 methods,
                 &mut |records| {
+                    if let Some(w) = vtu.as_mut() {
+                        let last = records
+                            .continuum
+                            .and_then(|r| r.last().map(|r| (r.step, r.load)))
+                            .or_else(|| {
+                                records
+                                    .dual
+                                    .and_then(|r| r.last().map(|r| (r.step, r.load)))
+                            });
+                        if let Some((step, load)) = last.filter(|&(s, l)| w.due(s + 1, l)) {
+                            let mut fields = Vec::new();
+                            if want_continuum {
+                                fields.push(("continuum", records.continuum_fields));
+                            }
+                            if want_dual {
+                                fields.push(("dual", records.dual_fields));
+                            }
+                            w.write(step + 1, load, records.model, &fields);
+                        }
+                    }
                     let mut steps = 0;
                     if let Some(recs) = records.continuum {
                         for (v, vr) in result.variables.iter_mut().enumerate() {
@@ -544,6 +752,15 @@ pub fn run_observed(
         (None, None)
     };
 
+    let vtu_time = vtu
+        .as_ref()
+        .map_or(0.0, |w| w.time.as_secs_f64() - vtu_before_run);
+    if let Some(w) = vtu {
+        result.time_vtu = Some(w.time.as_secs_f64());
+        result.vtu_error = w.error;
+        result.vtu = w.written;
+    }
+
     // (2a) The continuum DSA.
     if let Some(r) = continuum_run {
         let loads: Vec<f64> = r.records.iter().map(|s| s.load).collect();
@@ -563,7 +780,7 @@ pub fn run_observed(
                 r.records.iter().map(|s| s.values.as_slice()),
             ));
             result.time_continuum = Some(r.dsa.as_secs_f64());
-            result.time_continuum_run = Some(r.total.as_secs_f64());
+            result.time_continuum_run = Some(r.total.as_secs_f64() - vtu_time);
             result.continuum_stages = Some(r.timing);
             progress(&format!(
                 "continuum: {} variable(s), DSA {:.3} s in a run of {:.2} s",
@@ -606,7 +823,7 @@ pub fn run_observed(
                     .fold(0.0f64, f64::max),
             );
             result.time_dual = Some(r.reference.as_secs_f64());
-            result.time_dual_run = Some(r.total.as_secs_f64());
+            result.time_dual_run = Some(r.total.as_secs_f64() - vtu_time);
             progress(&format!(
                 "dual: {} variable(s), reference {:.2} s in a run of {:.2} s",
                 vars.len(),
@@ -841,7 +1058,7 @@ pub fn write_json(path: &std::path::Path, doc: &Value) -> Result<(), String> {
 }
 
 /// The notes written at the top of `sensitivity.json`.
-pub const NOTES: [&str; 5] = [
+pub const NOTES: [&str; 6] = [
     "continuum: the hand-derived continuum DSA (eqs 37-65: fictitious loads solved with the \
      converged, factorised tangent at every step); dual: the dual-number reference through \
      the same kernels; continuum_vs_dual: per variable, the largest |continuum - dual| \
@@ -864,6 +1081,12 @@ pub const NOTES: [&str; 5] = [
      continuum_own and dual_own: each method's own time in the hooked run; hooked_over_plain: \
      (hooked run - plain run) / plain run / variables, everything the methods add including \
      the tangents at converged states (with both methods, one run carries both)",
+    "vtu: the files of the run with the derivative methods (the plain run's VTU layout and \
+     arrays, plus point data uv, d_u/d_<variable> (<method>) = sum_J Psi_J du_J/dtau at the \
+     node, the derivative a displacement monitor there records, and cell data \
+     d_eps_p_<top|mid|bottom>/d_<variable> (<method>), the cell means of the layer points' \
+     deps_p/dtau with the nominal weights); timing_s.vtu: writing them, left out of the \
+     hooked run totals",
 ];
 
 /// `sensitivity.json`. Everything but `timing_s` and `dual_run_total_s` is a deterministic
@@ -983,6 +1206,7 @@ pub fn to_json(case: &ShellCase, r: &DsaResult, status: &str) -> Value {
             "continuum": r.time_continuum,
             "dual": r.time_dual,
             "fd": r.time_fd,
+            "vtu": r.time_vtu,
             "continuum_stages": r.continuum_stages.map_or(Value::Null, |t| json!({
                 "rhs": t.rhs,
                 "solve": t.solve,
@@ -997,6 +1221,11 @@ pub fn to_json(case: &ShellCase, r: &DsaResult, status: &str) -> Value {
         },
         "dual_run_total_s": r.time_dual_run,
         "continuum_run_total_s": r.time_continuum_run,
+        "vtu": {
+            "collection": (!r.vtu.is_empty()).then_some(super::shell_output::PVD_FILE),
+            "steps": r.vtu.iter().map(|v| json!({"step": v.step, "load": v.load, "file": v.file})).collect::<Vec<_>>(),
+            "error": r.vtu_error,
+        },
         "variables": variables,
     })
 }

@@ -500,6 +500,99 @@ pub fn shell_vtu_with_contact(
     Ok(w)
 }
 
+/// One design variable's sensitivity fields from one method at a committed step
+/// ([`add_sensitivity_fields`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SensitivityField {
+    /// The array names' suffix, `<variable> (<method>)`: the arrays are `d_u/d_<label>`,
+    /// `d_eps_p_top/d_<label>`, `d_eps_p_mid/d_<label>`, `d_eps_p_bottom/d_<label>`.
+    pub label: String,
+    /// `ⁿū̇_I` of the particles as a generalised vector of the model (translations set).
+    pub translations: Vec<f64>,
+    /// `ⁿė^p` of every layer point, point-major as `ShellModel::history`.
+    pub plastic_strain: Vec<f64>,
+}
+
+/// Per integration cell, the area-weighted mean (the weights of [`cell_resultants`]) of
+/// per-layer-point `values` (point-major as `ShellModel::history`) at the layers nearest
+/// `ζ = +1`, `ζ = 0` (averaged when two are equally near) and `ζ = −1`: the layout of the
+/// `eps_p_top`, `eps_p_mid`, `eps_p_bottom` cell data.
+pub fn cell_layer_means(
+    model: &ShellModel,
+    grid: &OutputGrid,
+    values: &[f64],
+    name: &str,
+) -> Result<Vec<[f64; 3]>, OutputError> {
+    grid.check_model(model)?;
+    let nl = model.thickness_rule.len();
+    if values.len() != model.points.len() * nl {
+        return Err(OutputError::Grid(format!(
+            "`{name}`: {} layer-point values, expected {} ({} points × {nl} layers)",
+            values.len(),
+            model.points.len() * nl,
+            model.points.len()
+        )));
+    }
+    let (top, mid, bottom) = layer_choice(&model.thickness_rule);
+    let nc = grid.n_cells();
+    let mut sum = vec![[0.0; 3]; nc];
+    let mut area = vec![0.0; nc];
+    for (k, &c) in grid.point_cell.iter().enumerate() {
+        let p = &model.points[k];
+        let w = p.weight * p.surface.x_a[0].cross(&p.surface.x_a[1]).norm();
+        let at = |l: usize| values[k * nl + l];
+        let m = mid.iter().map(|&l| at(l)).sum::<f64>() / mid.len().max(1) as f64;
+        for (f, v) in [at(top), m, at(bottom)].into_iter().enumerate() {
+            sum[c][f] += w * v;
+        }
+        area[c] += w;
+    }
+    sum.into_iter()
+        .zip(area)
+        .enumerate()
+        .map(|(c, (s, a))| {
+            if a <= 0.0 {
+                return Err(OutputError::Grid(format!(
+                    "integration cell {c} has no quadrature point of positive weight"
+                )));
+            }
+            Ok(s.map(|v| v / a))
+        })
+        .collect()
+}
+
+/// `w` (the VTU of `model` on `grid`, [`shell_vtu_with_contact`]) with the design
+/// sensitivities: the point data `uv` (the node's parameter coordinates, 2 components) and per
+/// field `d_u/d_<label>` (3: `Σ Ψ_J ū̇_J` at the node, by
+/// [`ShellModel::interpolate_translation`], the derivative a displacement monitor at that
+/// point records), and the cell data `d_eps_p_top/d_<label>`, `d_eps_p_mid/d_<label>`,
+/// `d_eps_p_bottom/d_<label>` ([`cell_layer_means`] of `ė^p`).
+pub fn add_sensitivity_fields(
+    mut w: VtuWriter,
+    model: &ShellModel,
+    grid: &OutputGrid,
+    fields: &[SensitivityField],
+) -> Result<VtuWriter, OutputError> {
+    let nodes = grid.nodes();
+    let uv: Vec<f64> = nodes.iter().flatten().copied().collect();
+    w = w.point_array("uv", 2, &uv);
+    let qc = grid.quad_cells();
+    for f in fields {
+        let du = nodes
+            .iter()
+            .map(|&uv| Ok(model.interpolate_translation(uv, &f.translations)?.into()))
+            .collect::<Result<Vec<[f64; 3]>, ShellError>>()?;
+        w = w.point_vector(&format!("d_u/d_{}", f.label), &du);
+        let name = format!("d_eps_p/d_{}", f.label);
+        let cells = cell_layer_means(model, grid, &f.plastic_strain, &name)?;
+        for (i, layer) in ["top", "mid", "bottom"].iter().enumerate() {
+            let per: Vec<f64> = qc.iter().map(|&c| cells[c][i]).collect();
+            w = w.cell_scalar(&format!("d_eps_p_{layer}/d_{}", f.label), &per);
+        }
+    }
+    Ok(w)
+}
+
 fn dot3(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }

@@ -140,7 +140,7 @@ pub fn response_observed(
         before: Vec::new(),
         failure: None,
     };
-    let mut tap = |r: &Recording<'_>| on_step(&r.out);
+    let mut tap = |_: &ShellProblem, r: &Recording<'_>| on_step(&r.out);
     let mut p = Observed::new(problem, Tapped::new(rec, &mut tap));
     newton
         .run(&mut p, &pattern, &mut linear, &u0)

@@ -1021,6 +1021,80 @@ pub struct HookedRecords<'a> {
     pub continuum: Option<&'a [continuum::ContinuumStepRecord]>,
     /// The dual reference's steps, when it runs.
     pub dual: Option<&'a [dual::DualStepRecord]>,
+    /// The analysis' model at the committed step.
+    pub model: &'a ShellModel,
+    /// The continuum DSA's committed sensitivities, when it runs.
+    pub continuum_fields: Option<&'a dyn SensitivityFields>,
+    /// The dual reference's committed sensitivities (derivative parts), when it runs.
+    pub dual_fields: Option<&'a dyn SensitivityFields>,
+}
+
+/// A method's committed sensitivities at the last converged step, read per design variable as
+/// f64 fields parallel to the model's state (for output: the VTU of a step).
+pub trait SensitivityFields: std::fmt::Debug {
+    /// Number of design variables.
+    fn n_variables(&self) -> usize;
+    /// `ⁿū̇_I` of the real particles for variable `v` as a generalised vector of `model`
+    /// (translations set, the other DOFs 0): with
+    /// [`ShellModel::interpolate_translation`] it gives the displacement sensitivity
+    /// `Σ Ψ_J ū̇_J` at any parameter point, the derivative a [`Monitor`] records.
+    fn translations(&self, model: &ShellModel, v: usize) -> Vec<f64>;
+    /// `ⁿė^p` of every layer point for variable `v`, point-major as `ShellModel::history`.
+    fn plastic_strain(&self, v: usize) -> Vec<f64>;
+}
+
+impl SensitivityFields for continuum::ContinuumDsa {
+    fn n_variables(&self) -> usize {
+        self.states().len()
+    }
+    fn translations(&self, model: &ShellModel, v: usize) -> Vec<f64> {
+        let mut q = vec![0.0; model.n_dofs()];
+        for (i, p) in self.states()[v].particles.iter().enumerate() {
+            for c in 0..3 {
+                q[crate::shell::point::DOFS_PER_PARTICLE * i + c] = p.u[c];
+            }
+        }
+        q
+    }
+    fn plastic_strain(&self, v: usize) -> Vec<f64> {
+        self.states()[v]
+            .history
+            .iter()
+            .map(|h| h.material.eps_p)
+            .collect()
+    }
+}
+
+impl<D: dual::DesignDual> SensitivityFields for dual::DualDsa<D> {
+    fn n_variables(&self) -> usize {
+        self.variables().len()
+    }
+    fn translations(&self, model: &ShellModel, v: usize) -> Vec<f64> {
+        let mut q = vec![0.0; model.n_dofs()];
+        if let Some(g) = self
+            .groups()
+            .iter()
+            .find(|g| (g.first..g.first + g.count).contains(&v))
+        {
+            for (i, p) in g.particles.iter().enumerate() {
+                for c in 0..3 {
+                    q[crate::shell::point::DOFS_PER_PARTICLE * i + c] = p.u[c].part(v - g.first);
+                }
+            }
+        }
+        q
+    }
+    fn plastic_strain(&self, v: usize) -> Vec<f64> {
+        self.groups()
+            .iter()
+            .find(|g| (g.first..g.first + g.count).contains(&v))
+            .map_or_else(Vec::new, |g| {
+                g.history
+                    .iter()
+                    .map(|h| h.material.eps_p.part(v - g.first))
+                    .collect()
+            })
+    }
 }
 
 /// One analysis of `problem` observed by the derivative methods of `methods`: the continuum
@@ -1070,10 +1144,14 @@ pub fn run_hooked(
             .dual
             .map(|_| dual::DualDsa::<D>::new(&problem, surface, variables, monitors))
             .transpose()?;
-        let mut tap = |o: &(Option<continuum::ContinuumDsa>, Option<dual::DualDsa<D>>)| {
+        type Methods<D> = (Option<continuum::ContinuumDsa>, Option<dual::DualDsa<D>>);
+        let mut tap = |p: &crate::shell::problem::ShellProblem, o: &Methods<D>| {
             on_step(HookedRecords {
                 continuum: o.0.as_ref().map(|c| c.records()),
                 dual: o.1.as_ref().map(|d| d.records()),
+                model: &p.model,
+                continuum_fields: o.0.as_ref().map(|c| c as &dyn SensitivityFields),
+                dual_fields: o.1.as_ref().map(|d| d as &dyn SensitivityFields),
             })
         };
         let mut obs = Observed::new(problem, Tapped::new((c, d), &mut tap));

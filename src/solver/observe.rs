@@ -100,22 +100,23 @@ impl<P: ?Sized, A: StepObserver<P>> StepObserver<P> for Option<A> {
     }
 }
 
-/// An observer and a callback that sees it after every commit, once the observer has recorded
-/// the step (e.g. to write the results so far while the run goes on).
-pub struct Tapped<'f, O> {
+/// An observer and a callback that sees the committed problem and the observer after every
+/// commit, once the observer has recorded the step (e.g. to write the results so far while the
+/// run goes on).
+pub struct Tapped<'f, P: ?Sized, O> {
     /// The observer.
     pub observer: O,
-    tap: &'f mut dyn FnMut(&O),
+    tap: &'f mut dyn FnMut(&P, &O),
 }
 
-impl<'f, O> Tapped<'f, O> {
+impl<'f, P: ?Sized, O> Tapped<'f, P, O> {
     /// `observer`, with `tap` called after each of its commits.
-    pub fn new(observer: O, tap: &'f mut dyn FnMut(&O)) -> Self {
+    pub fn new(observer: O, tap: &'f mut dyn FnMut(&P, &O)) -> Self {
         Self { observer, tap }
     }
 }
 
-impl<O: std::fmt::Debug> std::fmt::Debug for Tapped<'_, O> {
+impl<P: ?Sized, O: std::fmt::Debug> std::fmt::Debug for Tapped<'_, P, O> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Tapped")
             .field("observer", &self.observer)
@@ -123,7 +124,7 @@ impl<O: std::fmt::Debug> std::fmt::Debug for Tapped<'_, O> {
     }
 }
 
-impl<P: ?Sized, O: StepObserver<P>> StepObserver<P> for Tapped<'_, O> {
+impl<P: ?Sized, O: StepObserver<P>> StepObserver<P> for Tapped<'_, P, O> {
     fn converged_tangent(&self, problem: ConvergedTangent) -> ConvergedTangent {
         self.observer.converged_tangent(problem)
     }
@@ -135,7 +136,7 @@ impl<P: ?Sized, O: StepObserver<P>> StepObserver<P> for Tapped<'_, O> {
     }
     fn after_commit(&mut self, problem: &P, u: &[f64], load: f64) {
         self.observer.after_commit(problem, u, load);
-        (self.tap)(&self.observer);
+        (self.tap)(problem, &self.observer);
     }
     fn on_restore(&mut self) {
         self.observer.on_restore();
