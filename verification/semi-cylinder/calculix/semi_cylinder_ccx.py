@@ -17,6 +17,7 @@ import argparse
 import os
 import sys
 
+sys.dont_write_bytecode = True  # no __pycache__ beside the shared module
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..",
                                 "calculix"))
 from ccx_cylinder import CylinderMesh, parse_dat, run_ccx, write_mesh, write_nset  # noqa: E402
