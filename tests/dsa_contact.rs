@@ -747,8 +747,9 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
 }
 
 /// The forces on the tools as responses (`dsa.monitors = ["tool.<name>.<fx|fy|fz>"]`, the
-/// punch force of a forming process), a chord angle (`[[dsa.angle]]`) and the mean squared
-/// distance of points from targets (`[[dsa.distance]]`): the continuum derivative (`ShellContact::tool_force_dots`
+/// punch force of a forming process), a chord angle (`[[dsa.angle]]`), a smooth maximum of the
+/// equivalent plastic strain (`[[dsa.plastic]]`) and the mean squared distance of points from
+/// targets (`[[dsa.distance]]`): the continuum derivative (`ShellContact::tool_force_dots`
 /// with the carried sensitivities at every converged state) equals the dual one (the tool
 /// forces evaluated on the dual state), and both match central differences of complete
 /// re-runs, for the die's horizontal position, the thickness and the die's height.
@@ -778,6 +779,11 @@ plane = ["x", "z"]
 name = "from target"
 at = [[0.0, 0.0], [0.5, 0.5], [1.0, 1.0]]
 target = [[0.0, 0.0, -3.0], [15.0, 2.5, -1.0], [30.0, 5.0, 1.0]]
+[[dsa.plastic]]
+name = "peak strain"
+region = [[0.0, 0.3], [0.0, 1.0]]
+layers = "top"
+rho = 300.0
 "#;
     let c = case(0.5, design);
     let spec = dsa_run::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
@@ -792,6 +798,7 @@ target = [[0.0, 0.0, -3.0], [15.0, 2.5, -1.0], [30.0, 5.0, 1.0]]
             "tool.die.fx",
             "tool.die.fz",
             "arm angle",
+            "peak strain",
             "from target"
         ]
     );
@@ -804,7 +811,16 @@ target = [[0.0, 0.0, -3.0], [15.0, 2.5, -1.0], [30.0, 5.0, 1.0]]
     // The initial mean squared distance of the three points from their targets is
     // (9 + 1 + 1)/3; the bent sheet moves the centre towards its target z = −3.
     let first = &r.nominal.values[0];
-    assert!(first[4] < 11.0 / 3.0 && last[4] < first[4], "distance {first:?} {last:?}");
+    assert!(
+        first[5] < 11.0 / 3.0 && last[5] < first[5],
+        "distance {first:?} {last:?}"
+    );
+    // The sheet yields under the punch: a smooth maximum of ē^p above zero at the end, zero
+    // while it is elastic.
+    assert!(
+        first[4] == 0.0 && last[4] > 1e-4,
+        "peak strain {first:?} {last:?}"
+    );
     for v in 0..r.variables.len() {
         check_variable(&r, v);
     }

@@ -30,6 +30,12 @@
 //! name = "shape"                  # points from targets (least squares)
 //! at = [[0.5, 0.0], [1.0, 0.0]]   # parameter coordinates
 //! target = [[0.0, 0.0, -20.0], [30.0, 0.0, -5.0]]
+//!
+//! [[dsa.plastic]]                 # smooth maximum (1/ρ) ln((1/N) Σ exp(ρ ē^p_k)) of the
+//! name = "peak strain"            # equivalent plastic strain over the layer points of a
+//! region = [[0.0, 0.2], [0.0, 1.0]]   # parameter box [[u_min, u_max], [v_min, v_max]]
+//! layers = "top"                  # "all" (default), "top" or "bottom"
+//! rho = 500.0                     # > 0: below the maximum by at most ln(N)/ρ
 //! ```
 //!
 //! Everything is checked here, before any analysis: each wrong key is a
@@ -43,7 +49,9 @@ use super::CaseError;
 use crate::contact::RigidTool;
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
-use crate::sensitivity::{check_tools, Design, DesignKind, DesignVariable, Monitor, Quantity};
+use crate::sensitivity::{
+    check_tools, Design, DesignKind, DesignVariable, Layers, Monitor, Quantity,
+};
 use serde::Deserialize;
 use std::path::Path;
 
@@ -80,6 +88,19 @@ pub(crate) struct DsaFile {
     angle: Vec<AngleFile>,
     #[serde(default)]
     distance: Vec<DistanceFile>,
+    #[serde(default)]
+    plastic: Vec<PlasticFile>,
+}
+
+/// One `[[dsa.plastic]]` table as written: a smooth maximum of `ē^p` over a region.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct PlasticFile {
+    name: String,
+    region: [[f64; 2]; 2],
+    #[serde(default)]
+    layers: Option<String>,
+    rho: f64,
 }
 
 /// One `[[dsa.angle]]` table as written: a chord angle response.
@@ -423,7 +444,10 @@ pub(crate) fn check(
     };
     let mut sel = sel;
     let functionals = position_functionals(path, &dsa, surface)?;
-    if !functionals.is_empty() {
+    if functionals
+        .iter()
+        .any(|m| !m.quantity.functional_points().is_empty())
+    {
         if let Some((k, e)) = entries
             .iter()
             .enumerate()
@@ -457,8 +481,8 @@ pub(crate) fn check(
     }))
 }
 
-/// The `[[dsa.angle]]` and `[[dsa.distance]]` responses, checked, with their points' initial
-/// positions on `surface`.
+/// The `[[dsa.angle]]`, `[[dsa.plastic]]` and `[[dsa.distance]]` responses, checked (angles
+/// and distances with their points' initial positions on `surface`).
 fn position_functionals(
     path: &Path,
     dsa: &DsaFile,
@@ -505,6 +529,57 @@ fn position_functionals(
         out.push(
             Monitor::chord_angle(a.name.clone(), [a.from, a.to], initial, plane)
                 .map_err(|e| invalid(path, &key, format!("{:?}", a.name), e.to_string()))?,
+        );
+    }
+    for (k, pl) in dsa.plastic.iter().enumerate() {
+        let key = format!("dsa.plastic[{k}]");
+        if !super::is_name(&pl.name) {
+            return Err(invalid(
+                path,
+                format!("{key}.name"),
+                format!("{:?}", pl.name),
+                super::NAME_EXPECTED,
+            ));
+        }
+        let layers = match pl.layers.as_deref() {
+            None | Some("all") => Layers::All,
+            Some("top") => Layers::Top,
+            Some("bottom") => Layers::Bottom,
+            Some(other) => {
+                return Err(invalid(
+                    path,
+                    format!("{key}.layers"),
+                    format!("{other:?}"),
+                    "\"all\", \"top\" or \"bottom\"",
+                ))
+            }
+        };
+        for (a, r) in pl.region.iter().enumerate() {
+            let inside = r[0] <= r[1] && r[0] <= dom[a][1] && r[1] >= dom[a][0];
+            if !inside || !r.iter().all(|v| v.is_finite()) {
+                return Err(invalid(
+                    path,
+                    format!("{key}.region[{a}]"),
+                    fmt_list(r),
+                    format!(
+                        "a range [min, max] overlapping the surface's domain {:?}",
+                        dom[a]
+                    ),
+                ));
+            }
+        }
+        if !(pl.rho.is_finite() && pl.rho > 0.0) {
+            return Err(invalid(
+                path,
+                format!("{key}.rho"),
+                format!("{}", pl.rho),
+                "a finite aggregation parameter > 0 (1/strain; the smooth maximum lies below \
+                 the maximum by at most ln(N)/rho)",
+            ));
+        }
+        out.push(
+            Monitor::plastic_strain(pl.name.clone(), pl.region, layers, pl.rho)
+                .map_err(|e| invalid(path, &key, format!("{:?}", pl.name), e.to_string()))?,
         );
     }
     for (k, d) in dsa.distance.iter().enumerate() {

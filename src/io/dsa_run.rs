@@ -1113,6 +1113,14 @@ pub fn to_json(case: &ShellCase, r: &DsaResult, status: &str) -> Value {
             } => {
                 json!({"label": m.label, "quantity": "target-distance", "points": points, "targets": targets})
             }
+            Quantity::PlasticStrain {
+                region,
+                layers,
+                rho,
+            } => {
+                json!({"label": m.label, "quantity": "plastic-strain", "region": region,
+                       "layers": format!("{layers:?}").to_lowercase(), "rho": rho})
+            }
         })
         .collect();
     let variables: Vec<Value> = r

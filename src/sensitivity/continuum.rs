@@ -498,10 +498,19 @@ impl ContinuumDsa {
             })
             .collect();
         let (states, zero) = (&self.states, &self.zero);
-        let (values, derivatives) =
-            record_monitors(problem, load, &self.monitors, &udot, &mut || {
-                tool_force_dots(problem, states, zero, load).map_err(|e| e.to_string())
-            })?;
+        let (values, derivatives) = record_monitors(
+            problem,
+            load,
+            &self.monitors,
+            &udot,
+            &mut || tool_force_dots(problem, states, zero, load).map_err(|e| e.to_string()),
+            &mut || {
+                states
+                    .iter()
+                    .map(|s| s.history.iter().map(|h| h.material.eps_p).collect())
+                    .collect()
+            },
+        )?;
         self.records.push(ContinuumStepRecord {
             step: self.records.len(),
             load,

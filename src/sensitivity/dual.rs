@@ -627,10 +627,23 @@ impl<D: DesignDual> DualDsa<D> {
             }
         }
         let groups = &self.groups;
-        let (values, derivatives) =
-            super::record_monitors(problem, load, &self.monitors, &udot, &mut || {
-                dual_tool_force_dots(problem, groups, nv, load)
-            })?;
+        let (values, derivatives) = super::record_monitors(
+            problem,
+            load,
+            &self.monitors,
+            &udot,
+            &mut || dual_tool_force_dots(problem, groups, nv, load),
+            &mut || {
+                let mut out = vec![Vec::new(); nv];
+                for g in groups {
+                    for k in 0..g.count {
+                        out[g.first + k] =
+                            g.history.iter().map(|h| h.material.eps_p.part(k)).collect();
+                    }
+                }
+                out
+            },
+        )?;
         self.records.push(DualStepRecord {
             step: self.records.len(),
             load,

@@ -571,11 +571,13 @@ pub fn record_monitors(
     monitors: &[Monitor],
     udot: &[Vec<f64>],
     tool_dots: &mut dyn FnMut() -> Result<Vec<Vec<[f64; 3]>>, String>,
+    plastic_dots: &mut dyn FnMut() -> Vec<Vec<f64>>,
 ) -> Result<(Vec<f64>, Vec<Vec<f64>>), String> {
     let model = &problem.model;
     let mut values = Vec::with_capacity(monitors.len());
     let mut derivatives = vec![vec![0.0; udot.len()]; monitors.len()];
     let mut tools: Option<Vec<Vec<[f64; 3]>>> = None;
+    let mut plastic: Option<Vec<Vec<f64>>> = None;
     for (mi, m) in monitors.iter().enumerate() {
         values.push(m.value(problem, load).map_err(|e| e.to_string())?);
         match &m.quantity {
@@ -604,6 +606,27 @@ pub fn record_monitors(
                         .collect::<Result<_, ShellError>>()
                         .map_err(|e| e.to_string())?;
                     derivatives[mi][v] = position_functional(q, &seeded).map_or(0.0, |x| x.eps);
+                }
+            }
+            Quantity::PlasticStrain {
+                region,
+                layers,
+                rho,
+            } => {
+                let idx = layer_points(model, region, *layers);
+                let dots = plastic.get_or_insert_with(&mut *plastic_dots);
+                for (v, d) in derivatives[mi].iter_mut().enumerate() {
+                    let ev = dots.get(v).ok_or_else(|| {
+                        format!(
+                            "monitor `{}`: no plastic strain rates for design variable {v}",
+                            m.label
+                        )
+                    })?;
+                    let x: Vec<crate::scalar::Dual> = idx
+                        .iter()
+                        .map(|&k| crate::scalar::Dual::new(model.history[k].material.eps_p, ev[k]))
+                        .collect();
+                    *d = smooth_max(&x, *rho).eps;
                 }
             }
             Quantity::ToolForce { tool, component } => {
@@ -699,6 +722,68 @@ pub enum Quantity {
         /// Their target positions `x*`.
         targets: Vec<[f64; 3]>,
     },
+    /// A smooth maximum of the equivalent plastic strain `ē^p` over the layer points whose
+    /// quadrature point lies in the parameter box `region` (on the selected `layers`):
+    /// `(1/ρ) ln((1/N) Σ_k exp(ρ ē^p_k))` ([`smooth_max`]), between the mean (ρ → 0) and the
+    /// maximum (ρ → ∞), below the maximum by at most `ln(N)/ρ`, zero while nothing yields,
+    /// differentiable everywhere. A small box gives the strain at a point.
+    PlasticStrain {
+        /// `[[u_min, u_max], [v_min, v_max]]`.
+        region: [[f64; 2]; 2],
+        /// The layers read.
+        layers: Layers,
+        /// The aggregation parameter `ρ` (> 0, 1/strain).
+        rho: f64,
+    },
+}
+
+/// `(1/ρ) ln((1/N) Σ_k exp(ρ x_k))`, evaluated with the largest value factored out, generic
+/// over the scalar (its dual part is the softmax-weighted mean of the `x_k`'s).
+pub fn smooth_max<T: crate::scalar::Real>(x: &[T], rho: f64) -> T {
+    let m = x
+        .iter()
+        .map(|v| v.value())
+        .fold(f64::NEG_INFINITY, f64::max);
+    if x.is_empty() || !m.is_finite() {
+        return T::zero();
+    }
+    let mut sum = T::zero();
+    for v in x {
+        sum += ((*v - m) * rho).exp();
+    }
+    (sum / (x.len() as f64)).ln() / rho + m
+}
+
+/// The layer points (indices into `ShellModel::history`) a [`Quantity::PlasticStrain`] reads.
+pub fn layer_points(model: &ShellModel, region: &[[f64; 2]; 2], layers: Layers) -> Vec<usize> {
+    let nl = model.thickness_rule.len();
+    let zetas: Vec<f64> = model.thickness_rule.iter().map(|(z, _)| *z).collect();
+    let top = zetas.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let bottom = zetas.iter().copied().fold(f64::INFINITY, f64::min);
+    let keep = |l: usize| match layers {
+        Layers::All => true,
+        Layers::Top => zetas[l] == top,
+        Layers::Bottom => zetas[l] == bottom,
+    };
+    let mut out = Vec::new();
+    for (i, p) in model.points.iter().enumerate() {
+        let inside = (0..2).all(|k| p.uv[k] >= region[k][0] && p.uv[k] <= region[k][1]);
+        if inside {
+            out.extend((0..nl).filter(|l| keep(*l)).map(|l| i * nl + l));
+        }
+    }
+    out
+}
+
+/// Which layers through the thickness a [`Quantity::PlasticStrain`] reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layers {
+    /// Every layer point.
+    All,
+    /// The layer of largest `ζ` (the side the normal `n⁰` points to).
+    Top,
+    /// The layer of smallest `ζ`.
+    Bottom,
 }
 
 impl Quantity {
@@ -708,7 +793,9 @@ impl Quantity {
         match self {
             Quantity::ChordAngle { points, .. } => points,
             Quantity::TargetDistance { points, .. } => points,
-            Quantity::Displacement { .. } | Quantity::ToolForce { .. } => &[],
+            Quantity::Displacement { .. }
+            | Quantity::ToolForce { .. }
+            | Quantity::PlasticStrain { .. } => &[],
         }
     }
 }
@@ -737,7 +824,9 @@ pub fn position_functional<T: crate::scalar::Real>(q: &Quantity, u: &[Vector3<T>
             }
             Some(sum / (initial.len().max(1) as f64))
         }
-        Quantity::Displacement { .. } | Quantity::ToolForce { .. } => None,
+        Quantity::Displacement { .. }
+        | Quantity::ToolForce { .. }
+        | Quantity::PlasticStrain { .. } => None,
     }
 }
 
@@ -876,6 +965,39 @@ impl Monitor {
         })
     }
 
+    /// A plastic-strain monitor ([`Quantity::PlasticStrain`]), checked: a finite box with
+    /// `min ≤ max` on both axes, `ρ` finite and > 0.
+    pub fn plastic_strain(
+        label: impl Into<String>,
+        region: [[f64; 2]; 2],
+        layers: Layers,
+        rho: f64,
+    ) -> Result<Self, DesignError> {
+        let label = label.into();
+        let ok = region
+            .iter()
+            .all(|r| r[0].is_finite() && r[1].is_finite() && r[0] <= r[1])
+            && rho.is_finite()
+            && rho > 0.0;
+        if !ok {
+            return Err(DesignError::InvalidMonitor {
+                label,
+                detail: format!(
+                    "region {region:?}, rho = {rho}: expected finite [min, max] ranges with \
+                     min <= max and rho > 0"
+                ),
+            });
+        }
+        Ok(Monitor {
+            label,
+            quantity: Quantity::PlasticStrain {
+                region,
+                layers,
+                rho,
+            },
+        })
+    }
+
     /// Its committed value in `problem` at pseudo-time `load` (the load factor of the
     /// converged step: the tools' position along their paths).
     pub fn value(&self, problem: &ShellProblem, load: f64) -> Result<f64, ShellError> {
@@ -890,6 +1012,24 @@ impl Monitor {
                     .collect::<Result<_, _>>()?;
                 position_functional(q, &u)
                     .ok_or_else(|| ShellError::InvalidInput("not a position functional".into()))
+            }
+            Quantity::PlasticStrain {
+                region,
+                layers,
+                rho,
+            } => {
+                let x: Vec<f64> = layer_points(model, region, *layers)
+                    .into_iter()
+                    .map(|k| model.history[k].material.eps_p)
+                    .collect();
+                if x.is_empty() {
+                    return Err(ShellError::InvalidInput(format!(
+                        "monitor `{}`: no quadrature point in the region {region:?}: expected \
+                         a parameter box containing at least one",
+                        self.label
+                    )));
+                }
+                Ok(smooth_max(&x, *rho))
             }
             Quantity::ToolForce { tool, component } => {
                 let i = tool_index(problem, tool)?;
