@@ -41,7 +41,6 @@
 use super::model::ShellModel;
 use super::point::{ParticleState, DOFS_PER_PARTICLE};
 use super::ShellError;
-use crate::contact::shell::neighbour_state;
 use crate::scalar::Real;
 use nalgebra::{Matrix3x2, Vector2, Vector3};
 
@@ -209,7 +208,7 @@ impl DirectorFilter {
         f: &mut [T],
     ) -> Result<(), ShellError> {
         self.check(model, Some(particles.len()), q.len(), f.len())?;
-        let blocks = self.blocks_of(model, |j| neighbour_state(model, j, particles));
+        let blocks = self.blocks_of(model, |j| model.particle_state_in(j, particles));
         apply(&blocks, kappa, q, f);
         Ok(())
     }
@@ -234,7 +233,7 @@ impl DirectorFilter {
                 Vec::with_capacity(row.len());
             for &(j, c) in row {
                 let st = model.particle_state(j);
-                let sd = neighbour_state(model, j, particles_dot);
+                let sd = model.particle_state_in(j, particles_dot);
                 let (src, det) = model.dof_source(j);
                 let k = c * det;
                 let b =
