@@ -480,15 +480,6 @@ pub fn validate(case: &ShellCase, methods: &[DsaMethod]) -> Result<DsaSpec, DsaE
         .ok_or_else(|| DsaError::NoDesign(case.path.display().to_string()))?;
     spec.methods = methods.to_vec();
     check_load_control(case)?;
-    if case.integration.director_stabilisation > 0.0 {
-        return Err(DsaError::Unsupported {
-            path: case.path.display().to_string(),
-            key: "integration.director_stabilisation",
-            value: case.integration.director_stabilisation.to_string(),
-            why: "the design derivatives of the director-filter stabilisation are not \
-                  implemented in the sensitivity methods yet: remove the key (or set 0) for `dsa`",
-        });
-    }
     check_tool_names(&case.path, &case.tools, &spec)?;
     if methods.contains(&DsaMethod::Dual) || methods.contains(&DsaMethod::Continuum) {
         // Shape variables with contact are carried by both methods: the slave sites take the

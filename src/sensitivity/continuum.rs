@@ -29,9 +29,10 @@
 //! **Term groups** (the `--terms` breakdown): the fictitious load splits, by linearity, into
 //! [`TermGroup::History`] (the committed state's sensitivities), [`TermGroup::Design`] (the
 //! explicit dependence on the thickness and the design velocity of the geometry),
-//! [`TermGroup::Material`] (the material parameters) and [`TermGroup::Load`] (the loads'
-//! explicit design dependence). Each can be compared with the dual-number reference seeded with
-//! that group only ([`super::terms`]).
+//! [`TermGroup::Material`] (the material parameters), [`TermGroup::Load`] (the loads'
+//! explicit design dependence), [`TermGroup::Tool`] (the tools' design velocity) and
+//! [`TermGroup::Filter`] (the director-filter stabilisation's whole derivative). Each can be
+//! compared with the dual-number reference seeded with that group only ([`super::terms`]).
 
 use super::dual::SensitivityError;
 use super::shape::ShapeVelocity;
@@ -69,16 +70,22 @@ pub enum TermGroup {
     Load,
     /// The rigid tools' design velocity `V^c` in the contact force (`b'_N`, eqs 76–83).
     Tool,
+    /// The director-filter stabilisation's derivative at fixed `Δu` (`docs/stability.md` §3):
+    /// through its stiffness `κ(E, ν, t)` and the committed directors and lamina vectors
+    /// `ⁿd_J, ⁿe_J` (all seeds; its coefficients live on the parameter domain). The other
+    /// groups leave it out.
+    Filter,
 }
 
 impl TermGroup {
     /// All groups, in output order.
-    pub const ALL: [TermGroup; 5] = [
+    pub const ALL: [TermGroup; 6] = [
         TermGroup::History,
         TermGroup::Design,
         TermGroup::Material,
         TermGroup::Load,
         TermGroup::Tool,
+        TermGroup::Filter,
     ];
     /// Name in tables and JSON.
     pub fn name(self) -> &'static str {
@@ -88,6 +95,7 @@ impl TermGroup {
             TermGroup::Material => "material",
             TermGroup::Load => "load",
             TermGroup::Tool => "tool",
+            TermGroup::Filter => "filter",
         }
     }
 }
@@ -646,6 +654,9 @@ fn tool_force_dots(
 ///   initial tangents `x̄⁰,α` (`Pressure::add_design_derivative`, group `load`);
 /// - gravity per unit initial area: the area element's shape derivative (group `load`);
 /// - a constant load: the inner load at factor 1;
+/// - the director filter (group `filter` alone, with all seeds):
+///   `−κ̇ Bᵀ B α − κ (Ḃᵀ B α + Bᵀ Ḃ α)` with `κ̇` from `Ė, ν̇, ṫ` and `Ḃ` from the committed
+///   `ⁿḋ, ⁿė` (`DirectorFilter::add_design_derivative`);
 /// - the contact: [`contact_dots`], for all variables at once.
 fn add_load_dot(
     model: &ShellModel,
@@ -693,8 +704,18 @@ fn add_load_dot(
                 ),
             ))
         }
+        Load::DirectorFilter(l) => {
+            if on(TermGroup::Filter) {
+                let mp = &model.material;
+                let kappa_dot = l.kappa_dot(
+                    [mp.young, mp.poisson, model.thickness],
+                    [s.material.young, s.material.poisson, s.thickness],
+                );
+                l.add_design_derivative(model, &s.particles, kappa_dot, dq, f)?;
+            }
+        }
         // Refused before the analysis (`check_method_inputs`).
-        Load::Moment(_) | Load::EdgeForce(_) | Load::DirectorFilter(_) => {
+        Load::Moment(_) | Load::EdgeForce(_) => {
             return Err(SensitivityError::Shell(
                 crate::shell::ShellError::InvalidInput(format!(
                     "continuum sensitivity: a {} load is not carried",

@@ -38,8 +38,11 @@
 //! depends on the committed displacement `ⁿū`, which carries a sensitivity: it is evaluated with
 //! the increment's derivative part set to `ⁿū̇` (it depends on `ⁿū` and `Δū` only through their
 //! sum, `docs/loads.md`), which gives `∂f_ext/∂ⁿū · ⁿū̇` exactly. A load held constant is its
-//! inner load at factor 1. Edge moments, edge forces and the director filter are refused
-//! (`Load::takes_state`).
+//! inner load at factor 1. The director-filter stabilisation (`docs/stability.md` §3) is
+//! evaluated on the group's committed dual directors and lamina vectors with its stiffness
+//! `κ(E, ν, t)` in `D` ([`crate::shell::stabilisation::DirectorFilter::force_with`]); its
+//! coefficients `δ_IJ − Ψ_J(ξ_I)` live on the parameter domain and carry no design
+//! derivative. Edge moments and edge forces are refused (`Load::takes_state`).
 //!
 //! **Contact** (`Load::Contact`, eqs 68–70). The penalty force of the slave points
 //! against the rigid tools is evaluated in `D` by [`crate::contact::ShellContact::force_with`] with the
@@ -84,7 +87,7 @@ use super::{
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
 use crate::scalar::Real;
-use crate::shell::load::{ContactLoad, LoadState};
+use crate::shell::load::{ContactLoad, Load, LoadState};
 use crate::shell::model::commit_particle;
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
 use crate::shell::problem::ShellProblem;
@@ -181,6 +184,7 @@ impl<D: DesignDual> DualState<D> {
             positions: self.positions.as_deref(),
             thickness: self.thickness,
             young: self.material.young,
+            poisson: self.material.poisson,
             tool_offsets: &self.tool_offsets,
             tool_rotations: &self.tool_rotations,
         }
@@ -235,7 +239,8 @@ pub enum SensitivityError {
     /// ([`crate::shell::load::Load::takes_state`]).
     #[error(
         "load {index} of the problem ({kind}): not carried by the design sensitivity methods \
-         (expected point forces, gravity, pressure or contact, any of them held constant)"
+         (expected point forces, gravity, pressure, contact or the director filter, any of \
+         them held constant)"
     )]
     UnsupportedLoad {
         /// Position in [`ShellProblem::loads`].
@@ -456,9 +461,34 @@ impl<D: DesignDual> DualDsa<D> {
         dq: &[D],
         load: f64,
     ) -> Result<Vec<D>, ShellError> {
+        self.dual_loads(problem, g, dq, load, |_| true)
+    }
+
+    /// The share of the director filter in [`Self::dual_external`].
+    pub(crate) fn dual_filter(
+        &self,
+        problem: &ShellProblem,
+        g: &DualState<D>,
+        dq: &[D],
+        load: f64,
+    ) -> Result<Vec<D>, ShellError> {
+        self.dual_loads(problem, g, dq, load, |l| {
+            matches!(l, Load::DirectorFilter(_))
+        })
+    }
+
+    /// The loads of the problem for which `which` holds, on the group's state.
+    fn dual_loads(
+        &self,
+        problem: &ShellProblem,
+        g: &DualState<D>,
+        dq: &[D],
+        load: f64,
+        which: impl Fn(&Load) -> bool,
+    ) -> Result<Vec<D>, ShellError> {
         let state = g.load_state();
         let mut f_ext = vec![D::zero(); problem.n_generalised()];
-        for l in problem.loads() {
+        for l in problem.loads().iter().filter(|l| which(l)) {
             l.force(&problem.model, Some(&state), dq, load, &mut f_ext)?;
         }
         Ok(f_ext)

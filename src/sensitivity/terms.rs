@@ -10,7 +10,8 @@
 //! - the continuum fictitious load of the group ([`fictitious_loads`], the hand-derived point
 //!   kernel, eqs 49–64) with the derivative part of the dual residual seeded with that group
 //!   only (the other derivative parts set to zero), row by row (the worst row names its
-//!   particle and DOF);
+//!   particle and DOF). The director filter is a group of its own ([`TermGroup::Filter`]): its
+//!   dual force with all derivative parts, taken out of the other groups' dual residuals;
 //! - and, after the step, the continuum history update (eqs 44–51: `ⁿ⁺¹(σ̇, α̇, ė^p, Q̇)`,
 //!   from its own solve of eq 65 with the same factorised tangent) with the dual reference's
 //!   committed dual histories, field by field (the worst integration point names its in-plane
@@ -307,12 +308,18 @@ impl Breakdown {
             let cont = fictitious_loads(problem, &states, &zero, at, group)?;
             for (v, g) in dp.groups().iter().enumerate() {
                 let gm = match group {
+                    Some(TermGroup::Filter) | None => g.clone(),
                     Some(t) => masked(g, t),
-                    None => g.clone(),
                 };
                 // The geometry seeds (Design) act on the internal force and on the loads; the
                 // loads' share is the Load group: split R = f_int − f_ext.
-                let d: Vec<f64> = match group {
+                let mut d: Vec<f64> = match group {
+                    // The filter's force with every seed (R = … − f_ext).
+                    Some(TermGroup::Filter) => dp
+                        .dual_filter(problem, &gm, &dq, step.load)?
+                        .iter()
+                        .map(|x| -x.eps)
+                        .collect(),
                     Some(TermGroup::Design) | Some(TermGroup::Load) => {
                         let r = dp.dual_residual(problem, &gm, &dq, step.u, step.load)?;
                         let f = dp.dual_external(problem, &gm, &dq, step.load)?;
@@ -336,6 +343,22 @@ impl Breakdown {
                         .map(|x| x.eps)
                         .collect(),
                 };
+                // The filter's share of f_ext is its own group: out of the other groups'
+                // residuals (Design is f_int alone).
+                if matches!(
+                    group,
+                    Some(
+                        TermGroup::History
+                            | TermGroup::Material
+                            | TermGroup::Load
+                            | TermGroup::Tool
+                    )
+                ) {
+                    let fl = dp.dual_filter(problem, &gm, &dq, step.load)?;
+                    for (di, fi) in d.iter_mut().zip(&fl) {
+                        *di += fi.eps;
+                    }
+                }
                 per_var[v].push(compare_rows(group, &cont[v], &d, n_q));
             }
         }

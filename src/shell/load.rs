@@ -136,7 +136,8 @@ impl ContactLoad {
 /// A committed state and design other than the model's own, in scalar `T`, for
 /// [`Load::force`]: the dual-number reference's state of a group of design variables, whose
 /// derivative parts are the carried sensitivities (committed displacements, directors and
-/// lamina vectors, initial geometry, thickness, Young's modulus, tool positions).
+/// lamina vectors, initial geometry, thickness, Young's modulus and Poisson's ratio, tool
+/// positions).
 #[derive(Clone, Copy, Debug)]
 pub struct LoadState<'a, T> {
     /// Committed states of the real particles (as `ShellModel::particles`).
@@ -148,8 +149,10 @@ pub struct LoadState<'a, T> {
     pub positions: Option<&'a [V3<T>]>,
     /// Shell thickness.
     pub thickness: T,
-    /// Young's modulus (of a penalty `ω = c E / t`).
+    /// Young's modulus (of a penalty `ω = c E / t`, of the director filter's `κ`).
     pub young: T,
+    /// Poisson's ratio (of the director filter's `κ`).
+    pub poisson: T,
     /// Per tool of the contact: a translation added to its path.
     pub tool_offsets: &'a [V3<T>],
     /// Per tool of the contact: a rotation vector of the tool as built about its pivot.
@@ -203,11 +206,10 @@ impl Load {
     }
 
     /// Whether [`Load::force`] takes a [`LoadState`]: every kind but the edge moment and edge
-    /// force (their design derivative through the edge's length element is not carried) and
-    /// the director filter (its blocks are built on the model's committed directors).
+    /// force (their design derivative through the edge's length element is not carried).
     pub fn takes_state(&self) -> bool {
         match self {
-            Load::Moment(_) | Load::EdgeForce(_) | Load::DirectorFilter(_) => false,
+            Load::Moment(_) | Load::EdgeForce(_) => false,
             Load::Constant(inner) => inner.takes_state(),
             _ => true,
         }
@@ -255,13 +257,18 @@ impl Load {
             (Load::Moment(l), None) => l.force(model, q, factor, f),
             (Load::EdgeForce(l), None) => l.force(model, q, factor, f),
             (Load::DirectorFilter(l), None) => l.force(model, q, f),
+            // On the state's committed directors and lamina vectors, with κ(E, ν, t).
+            (Load::DirectorFilter(l), Some(s)) => {
+                let kappa = l.kappa_of(s.young, s.poisson, s.thickness);
+                l.force_with(model, s.particles, kappa, q, f)
+            }
             (Load::Contact(c), None) => c.contact.force_generic(model, q, factor, f),
             (Load::Contact(c), Some(s)) => c.contact.force_with(model, &c.inputs(s), q, factor, f),
             (Load::Constant(inner), s) => inner.force(model, s, q, 1.0, f),
-            (l @ (Load::Moment(_) | Load::EdgeForce(_) | Load::DirectorFilter(_)), Some(_)) => {
+            (l @ (Load::Moment(_) | Load::EdgeForce(_)), Some(_)) => {
                 Err(ShellError::InvalidInput(format!(
                     "{} load on a given committed state and design: not implemented \
-                     (expected point forces, gravity, pressure or contact)",
+                     (expected point forces, gravity, pressure, contact or the director filter)",
                     l.kind()
                 )))
             }

@@ -482,6 +482,30 @@ impl ShellModel {
         }
     }
 
+    /// The state of shape-function particle `j` from the real particles' `particles` (another
+    /// committed state, in scalar `T`): a real particle's own, or for an image the map `Q` of
+    /// its source's, as [`ShellModel::particle_state`].
+    pub fn particle_state_in<T: Real>(
+        &self,
+        j: usize,
+        particles: &[ParticleState<T>],
+    ) -> ParticleState<T> {
+        let m = self.dof_map(j);
+        let p = particles[m.source];
+        match m.map {
+            None => p,
+            Some((q, _)) => {
+                let q = q.map(T::cst);
+                ParticleState {
+                    u: q * p.u,
+                    d: q * p.d,
+                    d0: q * p.d0,
+                    e: [q * p.e[0], q * p.e[1]],
+                }
+            }
+        }
+    }
+
     /// The RK shape functions (real and image particles) at parameter coordinates `uv`.
     pub fn shape_values(&self, uv: [f64; 2]) -> Result<ShapeValues, ShellError> {
         let mut sv = ShapeValues::new();
