@@ -3,9 +3,10 @@
 //! the value and the expectation, and a run with a tool that never touches the sheet completes
 //! with a warning in results.json.
 
-use shelldsa::contact::{ContactFaces, Side, DEFAULT_PENALTY_FACTOR};
+use shelldsa::contact::Side;
 use shelldsa::io::shell_case::{parse_shell_case, LoadScalingSpec, PenaltySpec, ShellCase};
 use shelldsa::io::CaseError;
+use shelldsa::shell::contact::{ContactFaces, DEFAULT_PENALTY_FACTOR};
 use std::path::{Path, PathBuf};
 
 /// A 4 × 1 elastic plate on z = 0 (u along x, v along y), a cylinder punch above it and a flat

@@ -1,4 +1,4 @@
-//! Shell–tool contact (`contact::ShellContact`): the hand-derived contact stiffness against the
+//! Shell–tool contact (`shell::contact::ShellContact`): the hand-derived contact stiffness against the
 //! dual Jacobian of the generic force and central differences, the report, the error checks,
 //! and full solves with `ShellProblem` (contact patch test with a penalty study; a rigid cylinder
 //! pressed into a clamped plate with the tool force balancing the support reactions).
@@ -6,13 +6,12 @@
 mod common;
 
 use nalgebra::{DMatrix, Vector3};
-use shelldsa::contact::{
-    ContactError, ContactFaces, PathKey, RigidTool, ShellContact, Side, ToolPath,
-};
+use shelldsa::contact::{ContactError, PathKey, RigidTool, Side, ToolPath};
 use shelldsa::geometry::{CylinderSector, Rectangle, SphereZone, Surface};
 use shelldsa::meshfree::Edge;
 use shelldsa::scalar::Real;
 use shelldsa::shell::constraints::{edge_constraints, EdgeCondition, LinearConstraint};
+use shelldsa::shell::contact::{ContactFaces, ShellContact};
 use shelldsa::shell::load::{ContactLoad, Gravity, Load, LoadScaling};
 use shelldsa::shell::model::ShellModel;
 use shelldsa::shell::problem::ShellProblem;

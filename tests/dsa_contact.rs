@@ -22,14 +22,14 @@
 mod small_bending;
 use nalgebra::Vector3;
 use num_dual::Dual64;
-use shelldsa::contact::sensitivity::ToolRate;
-use shelldsa::contact::{
-    ContactFaces, ContactInputs, ContactSeeds, PathKey, RigidTool, ShellContact, ToolPath,
-};
+use shelldsa::contact::{PathKey, RigidTool, ToolPath};
 use shelldsa::io::dsa_case::DsaMethod;
 use shelldsa::io::dsa_run;
 use shelldsa::io::shell_build;
 use shelldsa::io::shell_case::parse_shell_case;
+use shelldsa::shell::contact::{ContactFaces, ContactInputs, ShellContact};
+use shelldsa::shell::contact_sensitivity::ContactSeeds;
+use shelldsa::shell::contact_sensitivity::ToolRate;
 use shelldsa::shell::model::ShellModel;
 use shelldsa::shell::point::ParticleState;
 use shelldsa::solver::{LinearSolver, Method, SolverOptions};
@@ -476,7 +476,7 @@ fn force_rotated_tools(
 }
 
 /// Tool rotations (`tool.<name>.<rx|ry|rz>`): `force_dot` with rotation rates `φ̇` (module
-/// documentation of `contact::sensitivity`: `V^c = ȧ + Ω (x^c − p)`, eq 80's `g n·(Ω x^c,α)`,
+/// documentation of `shell::contact_sensitivity`: `V^c = ȧ + Ω (x^c − p)`, eq 80's `g n·(Ω x^c,α)`,
 /// `ṅ = Ω n + n,β ξ̇_β`) against the `Dual64` evaluation of `force_with` (the dual `R(φ)`
 /// composed into the motion) and central differences of the force with the tools rotated as a
 /// re-run rotates them. Both tools have pivots off the origin on their axes and paths that

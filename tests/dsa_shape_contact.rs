@@ -2,7 +2,7 @@
 //! contact's slave points sit on the initial mid-surface, `x = x̄⁰ + Σ Ψ (ū + Δū) + ζ t/2 d`,
 //! `d = n⁰ + Σ Ψ (d_J − d⁰_J)`, weighed by the initial face areas `w |x⁰,1 × x⁰,2|`, so a
 //! shape variable moves them by `V⁰ + ζ t/2 ṅ⁰` and changes the areas
-//! (`contact::shell::InitialGeometry`, `ContactInputs::initial`, `ContactSeeds::initial`).
+//! (`shell::contact::InitialGeometry`, `ContactInputs::initial`, `ContactSeeds::initial`).
 //!
 //! 1. Kernel: the hand-derived `ShellContact::force_dot` seeded with a shape variable's design
 //!    velocity (`ShapeVelocity`: `V⁰`, `ẋ⁰,α, ṅ⁰, ṅ⁰,α` and the particles' `ḋ = ḋ⁰ = ṅ(ξ_I)`,
@@ -23,15 +23,16 @@
 mod small_bending;
 use nalgebra::Vector3;
 use num_dual::Dual64;
-use shelldsa::contact::sensitivity::ToolRate;
-use shelldsa::contact::shell::InitialGeometry;
-use shelldsa::contact::{ContactFaces, ContactInputs, ContactSeeds, ShellContact};
 use shelldsa::geometry::Surface;
 use shelldsa::io::dsa_case::DsaMethod;
 use shelldsa::io::dsa_run;
 use shelldsa::io::shell_build;
 use shelldsa::io::shell_case::parse_shell_case;
 use shelldsa::sensitivity::shape::{dual_geometry, ShapeVelocity};
+use shelldsa::shell::contact::InitialGeometry;
+use shelldsa::shell::contact::{ContactFaces, ContactInputs, ShellContact};
+use shelldsa::shell::contact_sensitivity::ContactSeeds;
+use shelldsa::shell::contact_sensitivity::ToolRate;
 use shelldsa::shell::model::ShellModel;
 use shelldsa::shell::point::{ParticleState, SurfacePoint};
 use shelldsa::solver::{LinearSolver, Method, SolverOptions};

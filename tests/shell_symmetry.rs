@@ -17,6 +17,7 @@ mod common;
 
 use nalgebra::{Matrix3, Vector3};
 use shelldsa::geometry::{CylinderSector, Rectangle, SphereZone, Surface};
+use shelldsa::kinematics::rotation::rotate_director;
 use shelldsa::material::MaterialParams;
 use shelldsa::meshfree::Edge;
 use shelldsa::meshfree::{regular_grid, Basis, ParamBox, XorShift64};
@@ -25,7 +26,6 @@ use shelldsa::shell::constraints::{edge_constraints, EdgeCondition};
 use shelldsa::shell::load::{PointForce, Pressure};
 use shelldsa::shell::model::{Discretisation, ShellModel};
 use shelldsa::shell::problem::{ProblemOptions, ShellProblem, SymmetryTreatment};
-use shelldsa::shell::rotation::rotate_director;
 use shelldsa::shell::symmetry::{SymmetryError, SymmetryPlane};
 use shelldsa::shell::ShellError;
 use shelldsa::solver::{LinearSolver, LoadStepping, Method, NewtonSolver, SolverOptions};

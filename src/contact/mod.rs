@@ -1,5 +1,5 @@
-//! Frictionless penalty contact between the shell and rigid parametric tools (the paper's §4.1,
-//! eqs 66–72; what the design sensitivity of §4.2, eqs 73–83, needs is exposed generically).
+//! Rigid parametric tools and the point-level frictionless penalty contact with them (the paper's
+//! §4.1, eqs 66–72; what the design sensitivity of §4.2, eqs 73–83, needs is exposed generically).
 //!
 //! - [`tool`]: rigid tools ([`RigidTool`]): a [`crate::geometry::Surface`] (die, punch, blank
 //!   holder) moved rigidly along a [`ToolPath`] driven by the pseudo-time `t` (the solver's load
@@ -10,33 +10,22 @@
 //!   carries the exact implicit derivative `ξ̇ = A⁻¹(…)` (eq 80) into the gap and the normal.
 //! - [`penalty`]: the penalty force of one slave point (eqs 69–70) and its hand-derived
 //!   consistent 3×3 tangent (eq 72, with the curvature term of the normal's rotation).
-//! - [`shell`]: [`ShellContact`], the coupling to the shell model as an external (follower) load:
-//!   slave points on the top and/or bottom faces at the in-plane quadrature points; its
-//!   [`ShellContact::force_with`] evaluates the force with the design-dependent inputs (state,
-//!   thickness, penalty, tool offsets) in a dual scalar for the dual-number reference.
-//! - [`sensitivity`]: the hand-derived contact-force sensitivity [`ShellContact::force_dot`]
-//!   (eqs 78–83: the projection sensitivity of eq 80 and the fictitious load `b'_N` of eq 83,
-//!   with the history terms of the committed state).
+//!
+//! The sheet's side of the contact (slave points on its faces, the generalised force and
+//! stiffness, their design derivative) is in the shell module: `crate::shell::contact` and
+//! `crate::shell::contact_sensitivity`.
 //!
 //! Formulas, conventions and the measured checks: `docs/contact.md`.
 
 pub mod penalty;
 pub mod projection;
-pub mod sensitivity;
-pub mod shell;
 pub mod tool;
 
 pub use penalty::{penalty_force, penalty_tangent};
 pub use projection::{closest_point, nearest_tool, Bound, ContactPoint};
-pub use sensitivity::ContactSeeds;
-pub use shell::{
-    ContactFaces, ContactInputs, ContactReport, ShellContact, SlaveReport, ToolReport,
-    DEFAULT_PENALTY_FACTOR,
-};
 pub use tool::{CoarseGrid, PathKey, RigidMotion, RigidTool, Side, ToolPath};
 
 use crate::geometry::GeometryError;
-use crate::shell::ShellError;
 use thiserror::Error;
 
 /// Errors of the contact module, naming the field or the point, the value found and what was
@@ -109,28 +98,12 @@ pub enum ContactError {
         thickness: f64,
     },
     /// Tools that had no active slave point in any evaluation since the tracking started
-    /// ([`ShellContact::check_engaged`]).
+    /// ([`crate::shell::contact::ShellContact::check_engaged`]).
     #[error("tools {tools:?} never touched the sheet: expected every tool to make contact")]
     ToolsNeverTouched {
         /// Tool names.
         tools: Vec<String>,
     },
-    /// An error of the shell model (sizes, shape functions).
-    #[error(transparent)]
-    Shell(#[from] ShellError),
-}
-
-impl From<ContactError> for ShellError {
-    fn from(e: ContactError) -> Self {
-        match e {
-            ContactError::Shell(s) => s,
-            e @ (ContactError::PathCrossesSheet { .. }
-            | ContactError::ProjectionNotConverged { .. }) => {
-                ShellError::StepTooLarge(format!("contact: {e}"))
-            }
-            other => ShellError::InvalidInput(format!("contact: {other}")),
-        }
-    }
 }
 
 /// `InvalidInput` with a formatted value.

@@ -15,8 +15,8 @@
 
 use super::{invalid, ContactError};
 use crate::geometry::{GeometryError, Surface, SurfaceDerivs};
+use crate::kinematics::rotation::rodrigues_coefficients;
 use crate::scalar::Real;
-use crate::shell::rotation::rodrigues_coefficients;
 use nalgebra::{Matrix3, Vector3};
 
 type V3<T> = Vector3<T>;
@@ -225,7 +225,7 @@ impl ToolPath {
 
     /// The rotation `R(θ(t))` of the path alone (without the orientation): the frame in which a
     /// design rotation `φ̇` of the tool as built acts at `t` (`Ω = [R(θ(t)) φ̇]×`,
-    /// `crate::contact::sensitivity`).
+    /// `crate::shell::contact_sensitivity`).
     pub fn path_rotation(&self, t: f64) -> Matrix3<f64> {
         let (_, theta) = self.position(t);
         RigidMotion::new(V3::zeros(), V3::from(theta), V3::zeros()).rotation

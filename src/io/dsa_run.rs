@@ -22,7 +22,6 @@ use super::shell_output::{
 use super::vtu::PvdCollection;
 use super::CaseError;
 use super::RewriteSchedule;
-use crate::contact::ShellContact;
 use crate::sensitivity::dual::{DualMode, SensitivityError};
 use crate::sensitivity::fd::{self, fit_rate, Analysis, RunResponse, TaylorFit, TaylorRow};
 use crate::sensitivity::terms::{breakdown, TermBreakdown};
@@ -30,6 +29,7 @@ use crate::sensitivity::{
     run_hooked, validate_design_on, Design, DesignVariable, HookedMethods, Quantity,
     SensitivityFields,
 };
+use crate::shell::contact::ShellContact;
 use crate::shell::model::ShellModel;
 use crate::shell::problem::ShellProblem;
 use crate::shell::ShellError;
@@ -483,7 +483,7 @@ pub fn validate(case: &ShellCase, methods: &[DsaMethod]) -> Result<DsaSpec, DsaE
     check_tool_names(&case.path, &case.tools, &spec)?;
     if methods.contains(&DsaMethod::Dual) || methods.contains(&DsaMethod::Continuum) {
         // Shape variables with contact are carried by both methods: the slave sites take the
-        // design velocity of the initial geometry (`contact::shell::InitialGeometry`).
+        // design velocity of the initial geometry (`shell::contact::InitialGeometry`).
         check_dsa_loads(case)?;
     }
     Ok(spec)

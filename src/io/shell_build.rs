@@ -18,7 +18,6 @@ use super::shell_case::{
     PenaltySpec, PredictorKind, ShellCase,
 };
 use super::shell_output::{OutputError, OutputGrid, Separation, ShellOutput, StepSummary};
-use crate::contact::ShellContact;
 use crate::meshfree::quadrature::{CellQuadrature, QuadratureError};
 use crate::meshfree::vci::VciOrder;
 use crate::meshfree::Edge;
@@ -27,6 +26,7 @@ use crate::shell::constraints::{
     assemble, edge_constraints, ConstraintError, ConstraintSet, EdgeCondition, LinearConstraint,
     RowKind, SymmetryRows,
 };
+use crate::shell::contact::ShellContact;
 use crate::shell::integration::{apply_vci, boundary_rule};
 use crate::shell::load;
 use crate::shell::model::{Discretisation, ShellModel};
@@ -749,7 +749,7 @@ pub fn run(
             let report = match &contact {
                 Some(c) => Some(
                     c.report(model, &vec![0.0; model.n_dofs()], rec.load)
-                        .map_err(|e| OutputError::Model(e.into()))?,
+                        .map_err(OutputError::Model)?,
                 ),
                 None => None,
             };

@@ -10,13 +10,14 @@
 //! Nothing here builds the model: [`crate::io::shell_build`] does that from a [`ShellCase`].
 
 use super::{exact, exact_opt, material_from_spec, CaseError, MaterialSpec};
-use crate::contact::{ContactFaces, PathKey, RigidTool, Side, ToolPath, DEFAULT_PENALTY_FACTOR};
+use crate::contact::{PathKey, RigidTool, Side, ToolPath};
 use crate::geometry::{Surface, SurfaceSpec};
 use crate::material::MaterialParams;
 use crate::meshfree::quadrature::{ThicknessRule, MAX_GAUSS_POINTS, MAX_LOBATTO_POINTS};
 use crate::meshfree::vci::VciOrder;
 use crate::meshfree::Edge;
 use crate::meshfree::{Basis, ParamBox};
+use crate::shell::contact::{ContactFaces, DEFAULT_PENALTY_FACTOR};
 use nalgebra::Vector3;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -615,7 +616,7 @@ pub enum LoadScalingSpec {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum PenaltySpec {
     /// `penalty_factor = c`: `ω = c E / t` (default `c` =
-    /// [`crate::contact::DEFAULT_PENALTY_FACTOR`]).
+    /// [`crate::shell::contact::DEFAULT_PENALTY_FACTOR`]).
     Factor(f64),
     /// `penalty = ω` (force per length³).
     Value(f64),

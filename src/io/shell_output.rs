@@ -60,12 +60,12 @@
 
 use super::shell_case::{Monitor, OutputSpec};
 use super::vtu::{replace_file, PvdCollection, VtuError, VtuMesh, VtuWriter};
-use crate::contact::{ContactReport, ToolReport};
 use crate::geometry::Surface;
 use crate::kinematics::{global_stress, local_stress, stress_from_vec5};
 use crate::material::von_mises;
 use crate::meshfree::quadrature::CellQuadrature;
 use crate::meshfree::ParamBox;
+use crate::shell::contact::{ContactReport, ToolReport};
 use crate::shell::model::ShellModel;
 use crate::shell::ShellError;
 use crate::solver::{FactorisedAt, StepRecord, StepTiming};

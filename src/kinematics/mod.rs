@@ -37,6 +37,7 @@
 mod frames;
 mod hughes_winget;
 mod midstep;
+pub mod rotation;
 mod voigt;
 
 pub use frames::{

@@ -37,9 +37,9 @@
 use super::dual::SensitivityError;
 use super::shape::ShapeVelocity;
 use super::{record_monitors, DesignError, DesignKind, DesignVariable, Monitor};
-use crate::contact::ContactSeeds;
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
+use crate::shell::contact_sensitivity::ContactSeeds;
 use crate::shell::load::Load;
 use crate::shell::model::ShellModel;
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
@@ -120,7 +120,7 @@ pub struct SensitivityState {
     pub material: MaterialParams<f64>,
     /// Per tool of the contact (its order; empty without contact): the rates of its
     /// translation and rotation (`V^c`, eq 76), a unit vector for a tool variable.
-    pub tools: Vec<crate::contact::sensitivity::ToolRate>,
+    pub tools: Vec<crate::shell::contact_sensitivity::ToolRate>,
 }
 
 /// A zero particle-state sensitivity.
@@ -617,7 +617,7 @@ fn contact_seeds<'a>(
                 increment,
                 initial: match (on(TermGroup::Load), &s.surface, &s.position) {
                     (true, Some(surfaces), Some(positions)) => {
-                        Some(crate::contact::shell::InitialGeometry {
+                        Some(crate::shell::contact::InitialGeometry {
                             positions,
                             surfaces,
                         })
@@ -631,7 +631,7 @@ fn contact_seeds<'a>(
 
 /// The total derivatives of the forces on the tools at the committed state of `problem`
 /// (pseudo-time `load`, increment zero) for the carried sensitivities `states`
-/// ([`crate::contact::ShellContact::tool_force_dots`]): `[variable][tool]`.
+/// ([`crate::shell::contact::ShellContact::tool_force_dots`]): `[variable][tool]`.
 fn tool_force_dots(
     problem: &ShellProblem,
     states: &[SensitivityState],

@@ -45,7 +45,7 @@
 //! derivative. Edge moments and edge forces are refused (`Load::takes_state`).
 //!
 //! **Contact** (`Load::Contact`, eqs 68–70). The penalty force of the slave points
-//! against the rigid tools is evaluated in `D` by [`crate::contact::ShellContact::force_with`] with the
+//! against the rigid tools is evaluated in `D` by [`crate::shell::contact::ShellContact::force_with`] with the
 //! group's committed dual particle states (`ū, d, e`: the slave point `x̄ + ζ t/2 d` and the
 //! rotated director depend on them, so the history dependence of the contact force is carried
 //! exactly, as for the pressure), the converged increment (constant), the dual thickness, the
@@ -71,7 +71,7 @@
 //! functions and quadrature weights live on the parameter domain and do not move. With
 //! contact, the group's dual mid-surface points `x̄⁰` ([`DualState::positions`]) and its
 //! surfaces are the initial geometry of the slave points
-//! ([`crate::contact::shell::InitialGeometry`] in [`crate::contact::ContactInputs::initial`]): the slave
+//! ([`crate::shell::contact::InitialGeometry`] in [`crate::shell::contact::ContactInputs::initial`]): the slave
 //! point `x̄⁰ + Σ Ψ (ū + Δū) + ζ t/2 (n⁰ + Σ Ψ (d − d⁰))` and the initial face areas carry
 //! the design velocity (eq 74's `V⁰` in eqs 78–83).
 //!
@@ -164,7 +164,7 @@ pub struct DualState<D> {
     /// The mid-surface position `x̄⁰` per quadrature point, seeded with the group's shape
     /// design variables (`None` without any: the contact's slave sites as built). With
     /// [`Self::surfaces`] it is the initial geometry of the contact's slave points
-    /// ([`crate::contact::shell::InitialGeometry`]).
+    /// ([`crate::shell::contact::InitialGeometry`]).
     pub positions: Option<Vec<Vector3<D>>>,
     /// Per tool of the contact load (empty without one): the translation added to its path,
     /// value 0 (the problem's tools are at the design's position), seeded for tool variables.

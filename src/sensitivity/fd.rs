@@ -19,7 +19,7 @@
 
 use super::dual::SensitivityError;
 use super::{Design, DesignVariable, Monitor};
-use crate::contact::ShellContact;
+use crate::shell::contact::ShellContact;
 use crate::shell::problem::ShellProblem;
 use crate::solver::observe::{Observed, StepObserver, Tapped};
 use crate::solver::{LinearSolver, Method, NewtonSolver, SolverOptions};
@@ -73,8 +73,7 @@ impl StepObserver<ShellProblem> for Recording<'_> {
             None => Ok(Vec::new()),
             Some(c) => c
                 .report(model, &vec![0.0; model.n_dofs()], load)
-                .map(|r| r.slaves.iter().map(|s| s.pressure > 0.0).collect())
-                .map_err(crate::shell::ShellError::from),
+                .map(|r| r.slaves.iter().map(|s| s.pressure > 0.0).collect()),
         };
         match values.and_then(|v| contact.map(|c| (v, c))) {
             Ok((v, c)) => {

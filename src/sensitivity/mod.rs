@@ -5,7 +5,7 @@
 //! `E, ν, k, σ0, H, β` (eqs 9–13), and the **tool placements** ([`DesignKind::Tool`], the
 //! translation of a rigid tool's whole path, and [`DesignKind::ToolRotation`], a rotation of
 //! the tool as built about its pivot, which enter through the contact force only:
-//! `b'_N` of eq 83, `crate::contact::sensitivity`). The first ones enter the
+//! `b'_N` of eq 83, `crate::shell::contact_sensitivity`). The first ones enter the
 //! residual (eq 32) only through the point kernel's `PointInput::thickness` and
 //! `PointInput::material`; the design velocity of eqs 37–43 is zero for them (the geometry does
 //! not move), so the structural fictitious load `a'_V` of eq (64) reduces to the material and
@@ -690,7 +690,7 @@ pub enum Quantity {
         component: usize,
     },
     /// A component (0, 1, 2: x, y, z) of the force the sheet exerts on the named tool
-    /// ([`crate::contact::ShellContact::tool_forces_with`], eq 70 summed over the tool's
+    /// ([`crate::shell::contact::ShellContact::tool_forces_with`], eq 70 summed over the tool's
     /// active slave points): the punch or die force of a forming process.
     ToolForce {
         /// The tool's name.
@@ -1038,10 +1038,7 @@ impl Monitor {
                     .iter()
                     .find_map(|l| l.contact())
                     .ok_or_else(|| ShellError::InvalidInput("no contact".into()))?;
-                let report = c
-                    .contact
-                    .report(model, &vec![0.0; model.n_dofs()], load)
-                    .map_err(ShellError::from)?;
+                let report = c.contact.report(model, &vec![0.0; model.n_dofs()], load)?;
                 Ok(report.tools[i].force[*component])
             }
         }

@@ -15,7 +15,7 @@
 //!   from it ([`lamina_vectors_dot`]);
 //! - per point and layer, the initial lamina frame ([`SurfacePoint::initial_frame_dot`]);
 //! - per quadrature point, the mid-surface point's own velocity `V⁰ = ẋ̄⁰`, where the
-//!   contact's slave points sit (`contact::shell::InitialGeometry`; eq 74's `V⁰` in the
+//!   contact's slave points sit (`shell::contact::InitialGeometry`; eq 74's `V⁰` in the
 //!   contact terms of eqs 78–83).
 //!
 //! Everything here is `f64` code with the derivatives written out; `tests/dsa_shape.rs`
@@ -111,7 +111,7 @@ pub struct ShapeVelocity {
     /// Per quadrature point (as `ShellModel::points`): `ẋ⁰,α`, `ṅ⁰`, `ṅ⁰,α`.
     pub points: Vec<SurfacePoint<f64>>,
     /// Per quadrature point: `V⁰ = ẋ̄⁰`, the design velocity of the mid-surface point itself
-    /// (the contact's slave points sit there, `contact::shell::InitialGeometry`).
+    /// (the contact's slave points sit there, `shell::contact::InitialGeometry`).
     pub positions: Vec<V3>,
     /// Per real particle (as `ShellModel::particles`): `u̇ = 0`, `ḋ⁰ = ḋ = ṅ(ξ_I)`, `ė1, ė2`.
     pub particles: Vec<ParticleState<f64>>,

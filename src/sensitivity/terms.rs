@@ -20,9 +20,9 @@
 use super::continuum::{fictitious_loads, SensitivityState, StepState, TermGroup};
 use super::dual::{DualDsa, DualState, SensitivityError};
 use super::DesignVariable;
-use crate::contact::sensitivity::ToolRate;
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
+use crate::shell::contact_sensitivity::ToolRate;
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
 use crate::shell::point_sensitivity::{commit_particle_dot, ModelSeeds};
 use crate::shell::problem::ShellProblem;

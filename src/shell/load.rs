@@ -16,7 +16,7 @@
 //!   rotation of the interpolated director, `δW = ∫ m · (d × δd)/|d|² ds`;
 //! - [`EdgeForce`]: a dead force per unit initial length on a parametric edge,
 //!   `f_I = ∫ Ψ_I p ds⁰`;
-//! - the contact with rigid tools ([`ContactLoad`], `crate::contact::shell`), the director
+//! - the contact with rigid tools ([`ContactLoad`], `crate::shell::contact`), the director
 //!   filter ([`DirectorFilter`]) and any of them held constant.
 //!
 //! [`Load`] is the one closed type of them all, which the problem owns and the design
@@ -33,16 +33,16 @@
 use super::gather::GatherMap;
 use super::model::ShellModel;
 use super::point::{director_first_derivatives, ParticleState, SurfacePoint, DOFS_PER_PARTICLE};
-use super::rotation::{director_derivatives, rotate_director};
 use super::stabilisation::DirectorFilter;
 use super::ShellError;
-use crate::contact::shell::{ContactInputs, InitialGeometry};
-use crate::contact::ShellContact;
 use crate::geometry::Surface;
+use crate::kinematics::rotation::{director_derivatives, rotate_director};
 use crate::meshfree::quadrature::gauss_legendre;
 use crate::meshfree::Edge;
 use crate::meshfree::{ParamBox, ShapeValues};
 use crate::scalar::Real;
+use crate::shell::contact::ShellContact;
+use crate::shell::contact::{ContactInputs, InitialGeometry};
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use std::sync::Arc;
 

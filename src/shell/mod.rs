@@ -2,11 +2,17 @@
 //! translations, 2 director rotations), finite rotations, updated Lagrangian with the
 //! Hughes–Winget update (paper §2.3–2.4; plan in docs/shell-formulation.md).
 //!
-//! So far: the assembled model ([`model`]), the point kernel ([`point`]): kinematics, stress update and internal force at one
-//! quadrature point, generic over the scalar, and its consistent tangent from hand-derived
-//! directional derivatives; the director rotation ([`rotation`]).
+//! The point kernel ([`point`]: kinematics, stress update and internal force at one
+//! quadrature point, generic over the scalar) and its consistent tangent ([`tangent`]) and
+//! design derivative ([`point_sensitivity`]); the assembled model ([`model`]) with symmetry
+//! images ([`symmetry`]), exact linear constraints ([`constraints`]) and the loads ([`load`]),
+//! among them the director stabilisation ([`stabilisation`]) and the contact with rigid tools
+//! ([`contact`], its design derivative [`contact_sensitivity`]); the nonlinear problem the
+//! solver drives ([`problem`]). The director rotation is `crate::kinematics::rotation`.
 
 pub mod constraints;
+pub mod contact;
+pub mod contact_sensitivity;
 pub mod gather;
 pub mod integration;
 pub mod load;
@@ -14,7 +20,6 @@ pub mod model;
 pub mod point;
 pub mod point_sensitivity;
 pub mod problem;
-pub mod rotation;
 pub mod stabilisation;
 pub mod symmetry;
 pub mod tangent;

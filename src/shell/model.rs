@@ -16,11 +16,11 @@ use super::point::{
     point_residual_with, ParticleState, PointHistory, PointIncrement, PointInput, ShapeData,
     SurfacePoint, DOFS_PER_PARTICLE,
 };
-use super::rotation::{director_derivatives, rotate_director, DirectorDerivatives};
 use super::symmetry::{SymmetryLayout, SymmetryPlane};
 use super::tangent::{CellSlot, ThicknessTangent};
 use super::ShellError;
 use crate::geometry::{GeometryError, Surface};
+use crate::kinematics::rotation::{director_derivatives, rotate_director, DirectorDerivatives};
 use crate::material::{MaterialParams, MaterialState};
 use crate::meshfree::{Basis, MeshfreeError, ShapeFunctions, ShapeValues};
 use crate::scalar::Real;

@@ -12,8 +12,8 @@
 //! `P = det(J) σᵍ J⁻ᵀ`; so for particle I, `f_I = Ψ_I,1 P:1 + Ψ_I,2 P:2` (translations) and
 //! `r_Iβ = ∂d_I/∂α_β · m_I`, `m_I = ζt/2 (Ψ_I,1 P:1 + Ψ_I,2 P:2) + t/2 Ψ_I P:3` (rotations).
 
-use super::rotation::{director_derivatives, rodrigues_coefficients};
 use super::ShellError;
+use crate::kinematics::rotation::{director_derivatives, rodrigues_coefficients};
 use crate::kinematics::HwIncrement;
 use crate::kinematics::{
     frame_update, frame_update_dot, global_stress, global_stress_dot, hughes_winget,
@@ -382,14 +382,14 @@ pub fn point_residual_with<T: Real>(
 }
 
 /// `∂d/∂α_β` of Rodrigues' formula, generic (same formula as
-/// [`super::rotation::director_derivatives`], written over `T` so the residual is generic).
+/// [`crate::kinematics::rotation::director_derivatives`], written over `T` so the residual is generic).
 pub(crate) fn director_first_derivatives<T: Real>(
     p: &ParticleState<T>,
     alpha: [T; 2],
 ) -> [V3<T>; 2] {
     let theta = p.e[0] * alpha[0] + p.e[1] * alpha[1];
     let x = theta.dot(&theta);
-    let (f1, f2, f1p, f2p) = super::rotation::rodrigues_with_first_derivatives(x);
+    let (f1, f2, f1p, f2p) = crate::kinematics::rotation::rodrigues_with_first_derivatives(x);
     let c = theta.cross(&p.d);
     let tc = theta.cross(&c);
     std::array::from_fn(|b| {

@@ -43,8 +43,8 @@ use super::point::{
     ParticleState, PointHistory, PointIncrement, PointInput, PointKinematics, PointResult,
     ShapeData, SurfacePoint, DOFS_PER_PARTICLE,
 };
-use super::rotation::rodrigues_coefficient_derivatives;
 use super::ShellError;
+use crate::kinematics::rotation::rodrigues_coefficient_derivatives;
 use crate::kinematics::{
     frame_update, global_stress, hughes_winget, local_strain_increment, mid_step_gradient,
     strain_to_vec5, stress_from_vec5, M3,
@@ -123,7 +123,7 @@ fn rodrigues_increment_dot(v: &V3, v_dot: &V3, theta: &V3, theta_dot: &V3, k: &C
     c_dot * k.f1[0] + c * (k.f1[1] * x_dot) + tc_dot * k.f2[0] + tc * (k.f2[1] * x_dot)
 }
 
-/// `d/dτ ∂d/∂α_β` of Rodrigues' formula ([`super::rotation::director_derivatives`]): with
+/// `d/dτ ∂d/∂α_β` of Rodrigues' formula ([`crate::kinematics::rotation::director_derivatives`]): with
 /// `c = θ×d`, `x_β = 2θ·e_β`, `c_β = e_β×d`, `w_β = e_β×c + θ×c_β`,
 /// `∂d/∂α_β = f1' x_β c + f1 c_β + f2' x_β θ×c + f2 w_β`, differentiated by the product rule in
 /// `θ, d, e_β` (the second derivatives `f''` enter through `ẋ`).

@@ -29,8 +29,8 @@
 use super::point::{
     ParticleState, PointInput, PointKinematics, PointResult, ShapeData, DOFS_PER_PARTICLE,
 };
-use super::rotation::{director_derivatives, DirectorDerivatives};
 use super::ShellError;
+use crate::kinematics::rotation::{director_derivatives, DirectorDerivatives};
 use crate::kinematics::{skew, strain_to_vec5, stress_from_vec5, sym, M3};
 use crate::material::consistent_tangent;
 use nalgebra::DMatrix;
@@ -182,7 +182,7 @@ impl<'a> ThicknessTangent<'a> {
     }
 
     /// As [`ThicknessTangent::new`] with the director derivatives of the neighbours given
-    /// (`super::rotation::director_derivatives` of each neighbour's state and rotation DOFs,
+    /// (`crate::kinematics::rotation::director_derivatives` of each neighbour's state and rotation DOFs,
     /// e.g. from a per-particle cache).
     pub fn with_directors(
         shape: &'a [ShapeData],

@@ -8,7 +8,7 @@
 //!   `x^c,α` and curvatures do not change);
 //! - the **tool rotations** `φ̇_i` (a tool-rotation design variable turns the tool as built
 //!   about its pivot `c` before its motion, `x^c = c + R(t) R_φ (X − c) + a(t)`,
-//!   [`super::ToolPath::rotated`]): at `φ = 0`, `d(R(t) R_φ)/dτ = R(t) [φ̇]× = Ω R(t)` with
+//!   [`crate::contact::ToolPath::rotated`]): at `φ = 0`, `d(R(t) R_φ)/dτ = R(t) [φ̇]× = Ω R(t)` with
 //!   `Ω = [R(t) φ̇]×` (`R(t) = R(θ(t))`, the path's rotation), so with the moved pivot
 //!   `p = c + a(t)` the design velocity of the tool point is `V^c = ȧ + Ω (x^c − p)` (eq 76),
 //!   and the tangents, second derivatives and normal move with the tool:
@@ -66,11 +66,11 @@
 //! Verified against the dual-number evaluation [`ShellContact::force_with`] and central
 //! differences (`tests/dsa_contact.rs`).
 
-use super::shell::{neighbour_state, InitialGeometry, ShellContact, SiteEval};
+use super::contact::{neighbour_state, InitialGeometry, ShellContact, SiteEval};
+use crate::kinematics::rotation::rodrigues_coefficient_derivatives;
+use crate::kinematics::rotation::rotate_director;
 use crate::shell::model::ShellModel;
 use crate::shell::point::{director_first_derivatives, ParticleState, DOFS_PER_PARTICLE};
-use crate::shell::rotation::rodrigues_coefficient_derivatives;
-use crate::shell::rotation::rotate_director;
 use crate::shell::ShellError;
 use nalgebra::{Vector2, Vector3};
 
@@ -111,7 +111,7 @@ pub struct ContactSeeds<'a> {
     pub initial: Option<InitialGeometry<'a, f64>>,
 }
 
-/// Rodrigues' rotated director `d(α)` of [`crate::shell::rotation::rotate_director`]: its
+/// Rodrigues' rotated director `d(α)` of [`crate::kinematics::rotation::rotate_director`]: its
 /// directional derivative for the state dots `sd` and `α̇`, and the directional derivatives of
 /// its first derivatives `∂d/∂α_β` (module documentation).
 fn director_dots(

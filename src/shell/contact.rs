@@ -13,9 +13,9 @@
 //!
 //! **Force** on the generalised DOFs (the variation `δx = Σ_J Ψ_J (δū_J + ζ t/2 ∂d_J/∂α_β δα_Jβ)`
 //! of eq 70): `f_J = Ψ_J f`, `m_Jβ = Ψ_J ζ t/2 (∂d_J/∂α_β)·f`, with `f` the point's penalty force
-//! ([`super::penalty_force`]) against the nearest tool. **Stiffness** (eq 72, hand-derived):
+//! ([`crate::contact::penalty_force`]) against the nearest tool. **Stiffness** (eq 72, hand-derived):
 //! with `v_a = ∂x/∂q_a` (`Ψ_J e_c` for a translation, `Ψ_J ζ t/2 ∂d_J/∂α_β` for a rotation) and
-//! `K = ∂f/∂x` ([`super::penalty_tangent`]),
+//! `K = ∂f/∂x` ([`crate::contact::penalty_tangent`]),
 //! `∂f_a/∂q_b = v_a·K v_b + δ_JK Ψ_J ζ t/2 (∂²d_J/∂α_β∂α_γ)·f` (the second term for two
 //! rotations of the same particle).
 //!
@@ -32,23 +32,35 @@
 //! (not an error at the point level). Both reset with [`ShellContact::reset_tracking`] (call it
 //! after building a `ShellProblem`, whose set-up evaluates the loads at `t = 1`).
 
-use super::penalty::{penalty_force, penalty_tangent};
-use super::projection::{closest_point, ContactPoint};
-use super::tool::RigidTool;
-use super::{invalid, ContactError};
+use crate::contact::penalty::{penalty_force, penalty_tangent};
+use crate::contact::projection::{closest_point, ContactPoint};
+use crate::contact::tool::RigidTool;
+use crate::contact::{invalid, ContactError};
 use crate::geometry::Surface;
+use crate::kinematics::rotation::{director_derivatives, rotate_director};
 use crate::scalar::Real;
 use crate::shell::gather::GatherMap;
 use crate::shell::model::ShellModel;
 use crate::shell::point::{
     director_first_derivatives, ParticleState, SurfacePoint, DOFS_PER_PARTICLE,
 };
-use crate::shell::rotation::{director_derivatives, rotate_director};
 use crate::shell::ShellError;
 use nalgebra::{DMatrix, Vector3};
 use std::sync::Mutex;
 
 type V3<T> = Vector3<T>;
+
+impl From<ContactError> for ShellError {
+    fn from(e: ContactError) -> Self {
+        match e {
+            e @ (ContactError::PathCrossesSheet { .. }
+            | ContactError::ProjectionNotConverged { .. }) => {
+                ShellError::StepTooLarge(format!("contact: {e}"))
+            }
+            other => ShellError::InvalidInput(format!("contact: {other}")),
+        }
+    }
+}
 
 /// Default penalty factor `c` of `ω = c E / t` ([`ShellContact::default_penalty`]), from the
 /// penalty study of `tests/contact_shell.rs` (`docs/contact.md` §5): the penetration is
@@ -180,7 +192,7 @@ pub struct ContactInputs<'a, T> {
 }
 
 /// The initial geometry of a model's in-plane points as the contact's slave sites use it, in
-/// scalar `T` ([`ContactInputs::initial`]); for [`super::ContactSeeds::initial`] its design
+/// scalar `T` ([`ContactInputs::initial`]); for [`super::contact_sensitivity::ContactSeeds::initial`] its design
 /// derivatives (`V⁰ = ∂x̄⁰/∂τ` and the [`SurfacePoint`] dots of
 /// [`crate::sensitivity::shape::ShapeVelocity`]).
 ///
@@ -703,7 +715,7 @@ impl ShellContact {
         model: &ShellModel,
         q: &[f64],
         t: f64,
-    ) -> Result<ContactReport, ContactError> {
+    ) -> Result<ContactReport, ShellError> {
         self.check_model(model, q.len(), None)?;
         let surfaces: Vec<Surface<f64>> = self.tools.iter().map(|tl| tl.surface.clone()).collect();
         let evals = self.evaluate(model, q, t, &surfaces)?;
