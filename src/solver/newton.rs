@@ -1442,12 +1442,12 @@ impl fmt::Display for CriticalPoint {
     }
 }
 
-/// The result of an arc-length run: the steps and the limit points passed.
+/// The result of an arc-length run: the steps and the critical points passed.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ArcLengthReport {
     /// Converged state and every attempt (`load` of a record is its converged λ).
     pub report: NewtonReport,
-    /// Limit points detected, in path order.
+    /// Limit points and bifurcations detected, in path order.
     pub critical: Vec<CriticalPoint>,
 }
 
@@ -1463,8 +1463,10 @@ impl NewtonSolver {
     /// [`NewtonSolver::run`]. A step failing (no real root, divergence, too many iterations, a
     /// recoverable problem error, a singular tangent) is retried with `cut_factor · Δs`; easy
     /// steps grow `Δs` by `grow_factor` up to `max_length`. At every converged step the tangent
-    /// there is factorised and `q·K⁻¹q` evaluated: a sign change is reported as a
-    /// [`CriticalPoint`] through `on_critical` (the essential conditions must not depend on λ).
+    /// there is factorised and `q·K⁻¹q` and the sign of `det K`
+    /// ([`LinearSolver::determinant_sign`]) evaluated: a sign change of `q·K⁻¹q` is reported
+    /// as a limit point, one of `det K` alone as a bifurcation ([`CriticalPoint`]), through
+    /// `on_critical` (the essential conditions must not depend on λ).
     pub fn run_arc_length<P: NonlinearProblem, F: FnMut(&CriticalPoint)>(
         &self,
         problem: &mut P,
