@@ -345,9 +345,7 @@ fn cholesky_gives_plus_one_and_the_sparse_lu_gives_no_sign() {
     dense.factorize(&values).unwrap();
     assert_eq!(dense.determinant_sign(), Some(1.0));
     let mut singular = values.clone();
-    for q in cp[0]..cp[1] {
-        singular[q] = 0.0;
-    }
+    singular[cp[0]..cp[1]].fill(0.0);
     assert!(dense.factorize(&singular).is_err());
     assert_eq!(dense.determinant_sign(), None);
 }
