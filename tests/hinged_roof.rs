@@ -5,7 +5,9 @@
 
 use shelldsa::io::shell_build;
 use shelldsa::io::shell_case::parse_shell_case;
-use shelldsa::solver::{ArcLength, CriticalPoint, FailureReason, LinearSolver, Method};
+use shelldsa::solver::{
+    ArcLength, CriticalKind, CriticalPoint, FailureReason, LinearSolver, Method,
+};
 use shelldsa::solver::{NonlinearProblem, SolverOptions};
 use std::path::Path;
 
@@ -130,7 +132,7 @@ fn arc_length_passes_the_limit_point_under_the_point_load_and_reports_it() {
     println!("{seen:?}\n{loads:?}");
     assert_eq!(seen.len(), 1, "{seen:?}");
     let c = &seen[0];
-    assert_eq!(c.kind, "maximum");
+    assert_eq!(c.kind, CriticalKind::LoadMaximum);
     // Both steps around the sign change carry loads within 1 % of Sze's limit load (the
     // displacement-controlled limit of the same model is 0.27 % below it).
     for l in c.loads {

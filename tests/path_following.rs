@@ -75,8 +75,8 @@ fn arc_length_passes_a_load_maximum_and_minimum_and_reports_both() {
     assert_eq!(out.critical.len(), 2, "{:?}", out.critical);
     let (u1, u2) = ((3.0 - 1.8f64.sqrt()) / 3.6, (3.0 + 1.8f64.sqrt()) / 3.6);
     let (max, min) = (&out.critical[0], &out.critical[1]);
-    assert_eq!(max.kind, "maximum");
-    assert_eq!(min.kind, "minimum");
+    assert_eq!(max.kind, CriticalKind::LoadMaximum);
+    assert_eq!(min.kind, CriticalKind::LoadMinimum);
     // Each bracket lies within one step of the extremum: a step moves u by at most Δs = 0.05,
     // and f is within f″·Δs²/2 ≤ 0.0045 of its extremum there (|f″| ≤ 1.8 near u₁, u₂).
     for (c, ue) in [(max, u1), (min, u2)] {

@@ -762,11 +762,17 @@ pub fn run(
     let mut obs = Observed::new(&mut built.problem, hook);
     let mut critical = Vec::new();
     let result = match case.steps.arc_length {
-        None => {
-            built
-                .newton
-                .run_with_progress(&mut obs, &pattern, &mut solver, &vec![0.0; n], |_| {})
-        }
+        None => built.newton.run_with_callbacks(
+            &mut obs,
+            &pattern,
+            &mut solver,
+            &vec![0.0; n],
+            |_| {},
+            |cp| {
+                println!("{cp}");
+                critical.push(cp.clone());
+            },
+        ),
         Some([initial, min, max]) => {
             let s = &case.steps;
             let arc = ArcLength {
@@ -795,20 +801,19 @@ pub fn run(
         Ok(report) => (RunStatus::Complete, report.attempts),
         Err(f) => (RunStatus::Failed(f.to_string()), f.report.attempts.clone()),
     };
-    if case.steps.arc_length.is_some() {
-        let cps: Vec<serde_json::Value> = critical
-            .iter()
-            .map(|c| {
-                json!({
-                    "kind": format!("limit point (load {})", c.kind),
-                    "between_steps": [c.before_step + 1, c.after_step + 1],
-                    "load_factors": c.loads,
-                    "stiffness_parameter": c.stiffness,
-                })
+    let cps: Vec<serde_json::Value> = critical
+        .iter()
+        .map(|c| {
+            json!({
+                "kind": c.kind.label(),
+                "between_steps": [c.before_step + 1, c.after_step + 1],
+                "load_factors": c.loads,
+                "stiffness_parameter": c.stiffness,
+                "determinant_sign": c.determinant_sign,
             })
-            .collect();
-        output.set_info("critical_points", json!(cps));
-    }
+        })
+        .collect();
+    output.set_info("critical_points", json!(cps));
     let model = problem_model(&built.problem);
     if let Some(e) = hook_error {
         // Writing a step's results failed and stopped the run: that is the error to report.

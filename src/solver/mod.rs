@@ -32,9 +32,10 @@ pub use assembly::{
 pub use dirichlet::EssentialBc;
 pub use linear::{LinearSolver, Method, Parallelism, SolverOptions};
 pub use newton::{
-    Acceptance, ArcLength, ArcLengthReport, ConvergedStep, ConvergedTangent, CriticalPoint,
-    FactorisedAt, FailureReason, LinearUpdates, LoadStepping, NewtonFailure, NewtonOptions,
-    NewtonReport, NewtonSolver, NonlinearProblem, Predictor, ProblemError, StepRecord, StepTiming,
+    Acceptance, ArcLength, ArcLengthReport, ConvergedStep, ConvergedTangent, CriticalKind,
+    CriticalPoint, FactorisedAt, FailureReason, LinearUpdates, LoadStepping, NewtonFailure,
+    NewtonOptions, NewtonReport, NewtonSolver, NonlinearProblem, Predictor, ProblemError,
+    StepRecord, StepTiming,
 };
 pub use pattern::SparsityPattern;
 pub use supernodal::FillOrdering;

@@ -677,8 +677,34 @@ impl NewtonSolver {
         pattern: &SparsityPattern,
         solver: &mut LinearSolver,
         u0: &[f64],
-        mut progress: F,
+        progress: F,
     ) -> Result<NewtonReport, Box<NewtonFailure>> {
+        self.run_with_callbacks(problem, pattern, solver, u0, progress, |_| {})
+    }
+
+    /// [`NewtonSolver::run_with_progress`], also reporting every [`CriticalPoint`] passed
+    /// through `on_critical` (after the `progress` of the step that revealed it): the sign of
+    /// the determinant of the tangent factorised in a converged step
+    /// ([`LinearSolver::determinant_sign`], the last factorisation of the step's successful
+    /// attempt, at or next to the converged state) differs from that of the last converged
+    /// step that factorised. The load factor only rises here, so the tangent became singular on
+    /// a rising path: a [`CriticalKind::Bifurcation`]. Steps that did not factorise (Krylov
+    /// updates with a held factorisation) or whose method gives no sign are skipped: the
+    /// bracket then spans them.
+    pub fn run_with_callbacks<P, F, C>(
+        &self,
+        problem: &mut P,
+        pattern: &SparsityPattern,
+        solver: &mut LinearSolver,
+        u0: &[f64],
+        mut progress: F,
+        mut on_critical: C,
+    ) -> Result<NewtonReport, Box<NewtonFailure>>
+    where
+        P: NonlinearProblem,
+        F: FnMut(&StepRecord),
+        C: FnMut(&CriticalPoint),
+    {
         let st = &self.stepping;
         let n = problem.n_dofs();
         let mut report = NewtonReport {
@@ -744,6 +770,9 @@ impl NewtonSolver {
         let mut last: Option<(Vec<f64>, f64)> = None;
         let mut before_last: Option<(Vec<f64>, f64)> = None;
         let scale = st.end.abs().max(st.start.abs()).max(1.0);
+        // Converged step, load factor and determinant sign of the last converged step that
+        // factorised a tangent with a known sign.
+        let mut last_sign: Option<(usize, f64, f64)> = None;
         while st.end - report.load > 1e-12 * scale {
             if report.attempts.len() >= st.max_attempts {
                 let reason = FailureReason::TooManyAttempts(st.max_attempts);
@@ -804,6 +833,7 @@ impl NewtonSolver {
                 krylov: Vec::new(),
                 failure: None,
             };
+            let factorisations = solver.n_factorizations();
             let outcome = self.attempt(
                 problem, pattern, solver, &report.u, &mut u, target, &mut rec, &mut work,
             );
@@ -833,12 +863,28 @@ impl NewtonSolver {
                         return Err(fail(report, target, dl, reason, res));
                     }
                     problem.commit(&u, target);
+                    let sign = (solver.n_factorizations() > factorisations)
+                        .then(|| solver.determinant_sign())
+                        .flatten();
                     n_converged += 1;
                     let du = u.iter().zip(&report.u).map(|(a, b)| a - b).collect();
                     before_last = last.replace((du, dl));
                     report.u = u;
                     report.load = target;
                     progress(&rec);
+                    if let Some(d) = sign.filter(|d| *d != 0.0) {
+                        if let Some((step0, load0, d0)) = last_sign.filter(|l| l.2 != d) {
+                            on_critical(&CriticalPoint {
+                                before_step: step0,
+                                after_step: n_converged - 1,
+                                loads: [load0, target],
+                                stiffness: None,
+                                determinant_sign: [Some(d0), Some(d)],
+                                kind: CriticalKind::Bifurcation,
+                            });
+                        }
+                        last_sign = Some((n_converged - 1, target, d));
+                    }
                     // A clipped step keeps the unclipped size for the next one.
                     if !clipped && rec.iterations <= st.easy_iterations {
                         step = (step * st.grow_factor).min(st.max_step);
@@ -1313,9 +1359,41 @@ impl Default for ArcLength {
     }
 }
 
-/// A limit point of the load factor found on an arc-length path: the current stiffness
-/// parameter `q·K⁻¹q` (`q = −∂r/∂λ`) changed sign between two converged steps, i.e. the
-/// tangent's determinant passed through zero with the load factor at an extremum.
+/// What kind of point a [`CriticalPoint`] is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CriticalKind {
+    /// A limit point with the load factor at a maximum (it rose, then fell).
+    LoadMaximum,
+    /// A limit point with the load factor at a minimum.
+    LoadMinimum,
+    /// The tangent became singular while the load factor kept its direction: the
+    /// determinant's sign changed, the current stiffness parameter's did not.
+    Bifurcation,
+}
+
+impl CriticalKind {
+    /// The name written to results.json and printed: `"limit point (load maximum)"`,
+    /// `"limit point (load minimum)"` or `"bifurcation"`.
+    pub fn label(self) -> &'static str {
+        match self {
+            CriticalKind::LoadMaximum => "limit point (load maximum)",
+            CriticalKind::LoadMinimum => "limit point (load minimum)",
+            CriticalKind::Bifurcation => "bifurcation",
+        }
+    }
+}
+
+/// A critical point passed between two converged steps, where the tangent `K` became singular:
+/// - a **limit point** of the load factor (arc-length paths): the current stiffness parameter
+///   `q·K⁻¹q` (`q = −∂r/∂λ`) changed sign, i.e. `det K` passed through zero with the load
+///   factor at an extremum;
+/// - a **bifurcation**: the sign of `det K` ([`LinearSolver::determinant_sign`]) changed and
+///   that of `q·K⁻¹q` did not (arc length), or changed at all under load or displacement
+///   control (the load factor only rises there).
+///
+/// The determinant is that of the factorised tangent with the essential conditions eliminated
+/// (unit diagonal) and the constraint multipliers' rows included: the `m` multiplier rows of
+/// the saddle point contribute the constant factor `(−1)^m`, so only changes are meaningful.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CriticalPoint {
     /// The converged step (0-based) before the sign change.
@@ -1324,35 +1402,52 @@ pub struct CriticalPoint {
     pub after_step: usize,
     /// Load factors of the two steps.
     pub loads: [f64; 2],
-    /// `q·K⁻¹q` at the two steps.
-    pub stiffness: [f64; 2],
-    /// `"maximum"` (the load factor rose then fell) or `"minimum"`.
-    pub kind: &'static str,
+    /// `q·K⁻¹q` at the two steps (arc-length runs; `None` under load or displacement control).
+    pub stiffness: Option<[f64; 2]>,
+    /// Sign of `det K` at the two steps (`None` where the factorisation gives none).
+    pub determinant_sign: [Option<f64>; 2],
+    /// Limit point (load maximum or minimum) or bifurcation.
+    pub kind: CriticalKind,
 }
 
 impl fmt::Display for CriticalPoint {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let sign = |d: Option<f64>| match d {
+            Some(d) if d > 0.0 => "+",
+            Some(d) if d < 0.0 => "−",
+            Some(_) => "0",
+            None => "?",
+        };
         write!(
             f,
-            "limit point (load {}) between converged steps {} and {}: λ = {:.6e} → {:.6e}, \
-             q·K⁻¹q = {:.3e} → {:.3e}",
-            self.kind,
+            "{} between converged steps {} and {}: λ = {:.6e} → {:.6e}",
+            self.kind.label(),
             self.before_step + 1,
             self.after_step + 1,
             self.loads[0],
             self.loads[1],
-            self.stiffness[0],
-            self.stiffness[1]
-        )
+        )?;
+        if let Some([a, b]) = self.stiffness {
+            write!(f, ", q·K⁻¹q = {a:.3e} → {b:.3e}")?;
+        }
+        if self.determinant_sign.iter().any(Option::is_some) {
+            write!(
+                f,
+                ", sign det K = {} → {}",
+                sign(self.determinant_sign[0]),
+                sign(self.determinant_sign[1])
+            )?;
+        }
+        Ok(())
     }
 }
 
-/// The result of an arc-length run: the steps and the limit points passed.
+/// The result of an arc-length run: the steps and the critical points passed.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ArcLengthReport {
     /// Converged state and every attempt (`load` of a record is its converged λ).
     pub report: NewtonReport,
-    /// Limit points detected, in path order.
+    /// Limit points and bifurcations detected, in path order.
     pub critical: Vec<CriticalPoint>,
 }
 
@@ -1368,8 +1463,10 @@ impl NewtonSolver {
     /// [`NewtonSolver::run`]. A step failing (no real root, divergence, too many iterations, a
     /// recoverable problem error, a singular tangent) is retried with `cut_factor · Δs`; easy
     /// steps grow `Δs` by `grow_factor` up to `max_length`. At every converged step the tangent
-    /// there is factorised and `q·K⁻¹q` evaluated: a sign change is reported as a
-    /// [`CriticalPoint`] through `on_critical` (the essential conditions must not depend on λ).
+    /// there is factorised and `q·K⁻¹q` and the sign of `det K`
+    /// ([`LinearSolver::determinant_sign`]) evaluated: a sign change of `q·K⁻¹q` is reported
+    /// as a limit point, one of `det K` alone as a bifurcation ([`CriticalPoint`]), through
+    /// `on_critical` (the essential conditions must not depend on λ).
     pub fn run_arc_length<P: NonlinearProblem, F: FnMut(&CriticalPoint)>(
         &self,
         problem: &mut P,
@@ -1442,6 +1539,8 @@ impl NewtonSolver {
         let mut prev: Option<Vec<f64>> = None;
         // q·K⁻¹q at the last converged state (or the start).
         let mut last_stiffness: Option<f64> = None;
+        // Determinant sign of the tangent at the last converged state.
+        let mut last_sign: Option<f64> = None;
         let mut n_converged = 0;
         while out.report.load < arc.end {
             if out.report.attempts.len() >= arc.max_attempts {
@@ -1507,19 +1606,34 @@ impl NewtonSolver {
                         return Err(fail(out, load, ds, reason, res));
                     }
                     problem.commit(&u, load);
+                    // The solver holds the tangent at the converged state (`arc_tangent` of
+                    // the accepted iterate).
+                    let sign = solver.determinant_sign().filter(|d| *d != 0.0);
                     let before = last_stiffness.unwrap_or(start_stiffness);
-                    if before.signum() != stiffness.signum() && n_converged > 0 {
+                    let sign_changed = matches!((last_sign, sign), (Some(a), Some(b)) if a != b);
+                    let kind = if before.signum() != stiffness.signum() {
+                        Some(if before > 0.0 {
+                            CriticalKind::LoadMaximum
+                        } else {
+                            CriticalKind::LoadMinimum
+                        })
+                    } else {
+                        sign_changed.then_some(CriticalKind::Bifurcation)
+                    };
+                    if let (Some(kind), true) = (kind, n_converged > 0) {
                         let cp = CriticalPoint {
                             before_step: n_converged - 1,
                             after_step: n_converged,
                             loads: [l_n, load],
-                            stiffness: [before, stiffness],
-                            kind: if before > 0.0 { "maximum" } else { "minimum" },
+                            stiffness: Some([before, stiffness]),
+                            determinant_sign: [last_sign, sign],
+                            kind,
                         };
                         on_critical(&cp);
                         out.critical.push(cp);
                     }
                     last_stiffness = Some(stiffness);
+                    last_sign = sign;
                     n_converged += 1;
                     prev = Some(u[..np].iter().zip(&u_n[..np]).map(|(a, b)| a - b).collect());
                     if rec.iterations <= arc.easy_iterations {
