@@ -178,6 +178,77 @@ fn design_errors_name_the_key() {
             "not selected before",
         ),
         ("[dsa]\nmethods = [\"dual\"]\n".into(), "dsa", "[[design]]"),
+        // Responses: a tool force of a tool the case lacks; chord angles, plastic strains
+        // and target distances with bad values.
+        (
+            format!("{t}[dsa]\nmonitors = [\"tool.punch.fz\"]\n"),
+            "dsa.monitors",
+            "the force on a tool",
+        ),
+        (
+            format!(
+                "{t}[[dsa.angle]]\nname = \"a\"\nfrom = [0.5, 0.5]\nto = [1.0, 0.5]\n\
+                 plane = [\"x\", \"x\"]\n"
+            ),
+            "dsa.angle[0]",
+            "two different axes",
+        ),
+        (
+            format!(
+                "{t}[[dsa.angle]]\nname = \"a\"\nfrom = [0.5, 1.5]\nto = [1.0, 0.5]\n\
+                 plane = [\"x\", \"z\"]\n"
+            ),
+            "dsa.angle[0].from",
+            "in the surface's domain",
+        ),
+        (
+            format!(
+                "{t}[[dsa.angle]]\nname = \"a\"\nfrom = [0.5, 0.5]\nto = [1.0, 0.5]\n\
+                 plane = [\"x\", \"w\"]\n"
+            ),
+            "dsa.angle[0].plane[1]",
+            "\"x\", \"y\" or \"z\"",
+        ),
+        (
+            format!(
+                "{t}[[dsa.plastic]]\nname = \"p\"\nregion = [[0.0, 0.2], [0.0, 1.0]]\n\
+                 layers = \"middle\"\nrho = 100.0\n"
+            ),
+            "dsa.plastic[0].layers",
+            "\"all\", \"top\" or \"bottom\"",
+        ),
+        (
+            format!(
+                "{t}[[dsa.plastic]]\nname = \"p\"\nregion = [[0.0, 0.2], [0.0, 1.0]]\n\
+                 rho = 0.0\n"
+            ),
+            "dsa.plastic[0].rho",
+            "> 0",
+        ),
+        (
+            format!(
+                "{t}[[dsa.plastic]]\nname = \"p\"\nregion = [[0.5, 0.2], [0.0, 1.0]]\n\
+                 rho = 100.0\n"
+            ),
+            "dsa.plastic[0].region[0]",
+            "[min, max]",
+        ),
+        (
+            format!(
+                "{t}[[dsa.distance]]\nname = \"d\"\nat = [[0.5, 0.5], [1.0, 0.5]]\n\
+                 target = [[0.0, 0.0, 0.0]]\n"
+            ),
+            "dsa.distance[0]",
+            "one target per point",
+        ),
+        (
+            format!(
+                "{t}[[dsa.angle]]\nname = \"\"\nfrom = [0.5, 0.5]\nto = [1.0, 0.5]\n\
+                 plane = [\"x\", \"z\"]\n"
+            ),
+            "dsa.angle[0].name",
+            "a non-empty name",
+        ),
     ];
     for (text, key, expected) in cases {
         let (k, msg) = invalid_key(&with_design(text));

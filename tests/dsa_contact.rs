@@ -76,14 +76,16 @@ fn shifted(model: &ShellModel, seed: &Seed, s: f64) -> Vec<ParticleState<f64>> {
         .collect()
 }
 
-fn force_f64(
+/// The contact's inputs with every input shifted by `s` times the seed, in f64, and the
+/// shifted increment, handed to `f`.
+fn with_inputs_f64<R>(
     model: &ShellModel,
     contact: &ShellContact,
     q: &[f64],
-    t: f64,
     seed: &Seed,
     s: f64,
-) -> Vec<f64> {
+    f: impl FnOnce(&ContactInputs<'_, f64>, &[f64]) -> R,
+) -> R {
     let particles = shifted(model, seed, s);
     let offsets: Vec<Vector3<f64>> = seed
         .tools
@@ -108,18 +110,18 @@ fn force_f64(
         .zip(&seed.increment)
         .map(|(a, b)| a + s * b)
         .collect();
-    let mut f = vec![0.0; q.len()];
-    contact.force_with(model, &inputs, &qs, t, &mut f).unwrap();
-    f
+    f(&inputs, &qs)
 }
 
-fn force_dual(
+/// The contact's inputs as `Dual64` numbers seeded by `seed`, and the seeded increment, handed
+/// to `f`.
+fn with_inputs_dual<R>(
     model: &ShellModel,
     contact: &ShellContact,
     q: &[f64],
-    t: f64,
     seed: &Seed,
-) -> Vec<f64> {
+    f: impl FnOnce(&ContactInputs<'_, Dual64>, &[Dual64]) -> R,
+) -> R {
     let dv = |a: &Vector3<f64>, b: &Vector3<f64>| a.zip_map(b, Dual64::new);
     let particles: Vec<ParticleState<Dual64>> = model
         .particles
@@ -148,9 +150,36 @@ fn force_dual(
         .zip(&seed.increment)
         .map(|(a, b)| Dual64::new(*a, *b))
         .collect();
-    let mut f = vec![Dual64::from(0.0); q.len()];
-    contact.force_with(model, &inputs, &qd, t, &mut f).unwrap();
-    f.iter().map(|v| v.eps).collect()
+    f(&inputs, &qd)
+}
+
+fn force_f64(
+    model: &ShellModel,
+    contact: &ShellContact,
+    q: &[f64],
+    t: f64,
+    seed: &Seed,
+    s: f64,
+) -> Vec<f64> {
+    with_inputs_f64(model, contact, q, seed, s, |inputs, qs| {
+        let mut f = vec![0.0; q.len()];
+        contact.force_with(model, inputs, qs, t, &mut f).unwrap();
+        f
+    })
+}
+
+fn force_dual(
+    model: &ShellModel,
+    contact: &ShellContact,
+    q: &[f64],
+    t: f64,
+    seed: &Seed,
+) -> Vec<f64> {
+    with_inputs_dual(model, contact, q, seed, |inputs, qd| {
+        let mut f = vec![Dual64::from(0.0); q.len()];
+        contact.force_with(model, inputs, qd, t, &mut f).unwrap();
+        f.iter().map(|v| v.eps).collect()
+    })
 }
 
 /// A translation rate `ȧ`.
@@ -349,32 +378,10 @@ fn tool_forces_f64(
     seed: &Seed,
     s: f64,
 ) -> Vec<f64> {
-    let particles = shifted(model, seed, s);
-    let offsets: Vec<Vector3<f64>> = seed
-        .tools
-        .iter()
-        .map(|a| Vector3::from(a.translation) * s)
-        .collect();
-    let rotations: Vec<Vector3<f64>> = seed
-        .tools
-        .iter()
-        .map(|a| Vector3::from(a.rotation) * s)
-        .collect();
-    let inputs = ContactInputs {
-        particles: &particles,
-        thickness: model.thickness + s * seed.thickness,
-        penalty: contact.penalty() + s * seed.penalty,
-        offsets: &offsets,
-        rotations: &rotations,
-        initial: None,
-    };
-    let qs: Vec<f64> = q
-        .iter()
-        .zip(&seed.increment)
-        .map(|(a, b)| a + s * b)
-        .collect();
-    let f = contact.tool_forces_with(model, &inputs, &qs, t).unwrap();
-    f.iter().flat_map(|v| [v[0], v[1], v[2]]).collect()
+    with_inputs_f64(model, contact, q, seed, s, |inputs, qs| {
+        let f = contact.tool_forces_with(model, inputs, qs, t).unwrap();
+        f.iter().flat_map(|v| [v[0], v[1], v[2]]).collect()
+    })
 }
 
 /// The derivative parts of the forces on the tools evaluated with dual inputs seeded by `seed`.
@@ -385,38 +392,12 @@ fn tool_forces_dual(
     t: f64,
     seed: &Seed,
 ) -> Vec<f64> {
-    let dv = |a: &Vector3<f64>, b: &Vector3<f64>| a.zip_map(b, Dual64::new);
-    let particles: Vec<ParticleState<Dual64>> = model
-        .particles
-        .iter()
-        .zip(&seed.particles)
-        .map(|(p, d)| ParticleState {
-            u: dv(&p.u, &d.u),
-            d: dv(&p.d, &d.d),
-            d0: dv(&p.d0, &d.d0),
-            e: [dv(&p.e[0], &d.e[0]), dv(&p.e[1], &d.e[1])],
-        })
-        .collect();
-    let seeded = |v: [f64; 3]| Vector3::from(v).map(|x| Dual64::new(0.0, x));
-    let offsets: Vec<Vector3<Dual64>> = seed.tools.iter().map(|a| seeded(a.translation)).collect();
-    let rotations: Vec<Vector3<Dual64>> = seed.tools.iter().map(|a| seeded(a.rotation)).collect();
-    let inputs = ContactInputs {
-        particles: &particles,
-        thickness: Dual64::new(model.thickness, seed.thickness),
-        penalty: Dual64::new(contact.penalty(), seed.penalty),
-        offsets: &offsets,
-        rotations: &rotations,
-        initial: None,
-    };
-    let qd: Vec<Dual64> = q
-        .iter()
-        .zip(&seed.increment)
-        .map(|(a, b)| Dual64::new(*a, *b))
-        .collect();
-    let f = contact.tool_forces_with(model, &inputs, &qd, t).unwrap();
-    f.iter()
-        .flat_map(|v| [v[0].eps, v[1].eps, v[2].eps])
-        .collect()
+    with_inputs_dual(model, contact, q, seed, |inputs, qd| {
+        let f = contact.tool_forces_with(model, inputs, qd, t).unwrap();
+        f.iter()
+            .flat_map(|v| [v[0].eps, v[1].eps, v[2].eps])
+            .collect()
+    })
 }
 
 /// The contact of `model` with `contact`'s tools on new paths (`path(i, tool)`), on both faces

@@ -489,6 +489,18 @@ fn position_functionals(
     surface: &Surface<f64>,
 ) -> Result<Vec<Monitor>, CaseError> {
     let dom = surface.domain();
+    let named = |key: &str, name: &str| -> Result<(), CaseError> {
+        if super::is_name(name) {
+            Ok(())
+        } else {
+            Err(invalid(
+                path,
+                format!("{key}.name"),
+                format!("{name:?}"),
+                super::NAME_EXPECTED,
+            ))
+        }
+    };
     let at = |key: &str, uv: [f64; 2]| -> Result<[f64; 3], CaseError> {
         let inside = (0..2).all(|k| uv[k] >= dom[k][0] && uv[k] <= dom[k][1]);
         if !inside {
@@ -510,14 +522,7 @@ fn position_functionals(
     let mut out = Vec::new();
     for (k, a) in dsa.angle.iter().enumerate() {
         let key = format!("dsa.angle[{k}]");
-        if !super::is_name(&a.name) {
-            return Err(invalid(
-                path,
-                format!("{key}.name"),
-                format!("{:?}", a.name),
-                super::NAME_EXPECTED,
-            ));
-        }
+        named(&key, &a.name)?;
         let initial = [
             at(&format!("{key}.from"), a.from)?,
             at(&format!("{key}.to"), a.to)?,
@@ -533,14 +538,7 @@ fn position_functionals(
     }
     for (k, pl) in dsa.plastic.iter().enumerate() {
         let key = format!("dsa.plastic[{k}]");
-        if !super::is_name(&pl.name) {
-            return Err(invalid(
-                path,
-                format!("{key}.name"),
-                format!("{:?}", pl.name),
-                super::NAME_EXPECTED,
-            ));
-        }
+        named(&key, &pl.name)?;
         let layers = match pl.layers.as_deref() {
             None | Some("all") => Layers::All,
             Some("top") => Layers::Top,
@@ -584,14 +582,7 @@ fn position_functionals(
     }
     for (k, d) in dsa.distance.iter().enumerate() {
         let key = format!("dsa.distance[{k}]");
-        if !super::is_name(&d.name) {
-            return Err(invalid(
-                path,
-                format!("{key}.name"),
-                format!("{:?}", d.name),
-                super::NAME_EXPECTED,
-            ));
-        }
+        named(&key, &d.name)?;
         let initial =
             d.at.iter()
                 .enumerate()
