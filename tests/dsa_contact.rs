@@ -286,14 +286,7 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
         let h = 1e-6;
         let fp = force_f64(&model, &contact, &q, t, seed, h);
         let fm = force_f64(&model, &contact, &q, t, seed, -h);
-        let cd: Vec<f64> = fp
-            .iter()
-            .zip(&fm)
-            .map(|(a, b)| (a - b) / (2.0 * h))
-            .collect();
-        let scale = max_abs(&dual);
-        let e_dual = max_diff(&hand, &dual) / scale;
-        let e_cd = max_diff(&hand, &cd) / scale;
+        let (scale, e_dual, e_cd) = three_way(&hand, &dual, &fp, &fm, h);
         println!(
             "{:<20} max|ḟ| {scale:.4e}  |hand − dual| {e_dual:.2e}  |hand − central| {e_cd:.2e}",
             seed.name
@@ -322,14 +315,7 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
         let dual = tool_forces_dual(&model, &contact, &q, t, seed);
         let fp = tool_forces_f64(&model, &contact, &q, t, seed, h);
         let fm = tool_forces_f64(&model, &contact, &q, t, seed, -h);
-        let cd: Vec<f64> = fp
-            .iter()
-            .zip(&fm)
-            .map(|(a, b)| (a - b) / (2.0 * h))
-            .collect();
-        let scale = max_abs(&dual);
-        let e_dual = max_diff(&hand, &dual) / scale;
-        let e_cd = max_diff(&hand, &cd) / scale;
+        let (scale, e_dual, e_cd) = three_way(&hand, &dual, &fp, &fm, h);
         println!(
             "{:<20} tool forces: max|Ḟ| {scale:.4e}  |hand − dual| {e_dual:.2e}  \
              |hand − central| {e_cd:.2e}",
@@ -366,6 +352,22 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
     let reported: Vec<f64> = report.tools.iter().flat_map(|r| r.force).collect();
     // The same sum in the same order: bit-identical up to the order of one addition.
     assert!(max_diff(&generic, &reported) <= 1e-12 * max_abs(&reported));
+}
+
+/// The largest dual value and the hand-derived derivative's largest differences from the
+/// dual one and from the central difference `(f(+h) − f(−h))/2h`, relative to it.
+fn three_way(hand: &[f64], dual: &[f64], fp: &[f64], fm: &[f64], h: f64) -> (f64, f64, f64) {
+    let cd: Vec<f64> = fp
+        .iter()
+        .zip(fm)
+        .map(|(a, b)| (a - b) / (2.0 * h))
+        .collect();
+    let scale = max_abs(dual);
+    (
+        scale,
+        max_diff(hand, dual) / scale,
+        max_diff(hand, &cd) / scale,
+    )
 }
 
 /// The forces on the tools, flattened `[tool][component]`, with every input shifted by
