@@ -10,6 +10,10 @@ use shelldsa::io::shell_case::parse_shell_case;
 use shelldsa::io::CaseError;
 use std::path::{Path, PathBuf};
 
+#[path = "common/cli.rs"]
+mod cli;
+use cli::cli;
+
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
@@ -303,14 +307,6 @@ fn loads_the_reference_cannot_carry_are_rejected() {
     assert!(!dir.join("m/sensitivity.json").exists());
     // ...but finite differences alone can run it (checked here up to the validation only).
     assert!(shelldsa::io::dsa_run::validate(&c, &[DsaMethod::Fd]).is_ok());
-}
-
-fn cli(args: &[&str]) -> i32 {
-    shelldsa::cli::main_with_args(
-        std::iter::once("shelldsa")
-            .chain(args.iter().copied())
-            .map(String::from),
-    )
 }
 
 #[test]

@@ -61,6 +61,20 @@ struct Seed {
     increment: Vec<f64>,
 }
 
+impl Seed {
+    /// No input moves (`np` particles, `n` generalised DOFs, the two tools).
+    fn none(np: usize, n: usize) -> Self {
+        Seed {
+            name: "none",
+            tools: vec![ToolRate::default(); 2],
+            thickness: 0.0,
+            penalty: 0.0,
+            particles: vec![zero_state(); np],
+            increment: vec![0.0; n],
+        }
+    }
+}
+
 /// `x + s ẋ` for every input.
 fn shifted(model: &ShellModel, seed: &Seed, s: f64) -> Vec<ParticleState<f64>> {
     model
@@ -340,14 +354,7 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
         );
     }
     // The generic tool forces in f64 are the contact report's.
-    let none = Seed {
-        name: "none",
-        tools: vec![ToolRate::default(); 2],
-        thickness: 0.0,
-        penalty: 0.0,
-        particles: vec![zero_state(); np],
-        increment: vec![0.0; n],
-    };
+    let none = Seed::none(np, n);
     let generic = tool_forces_f64(&model, &contact, &q, t, &none, 0.0);
     let reported: Vec<f64> = report.tools.iter().flat_map(|r| r.force).collect();
     // The same sum in the same order: bit-identical up to the order of one addition.
@@ -489,14 +496,7 @@ fn tool_rotation_sensitivity_matches_dual_and_central_differences() {
     let t = 0.505;
     // The rotating paths give the bent case's geometry (each cylinder turned about its own
     // axis): the same force to round-off of positions ~30 mm (ε·30·ω·w ≪ 1e-9 max|f|).
-    let zero = Seed {
-        name: "none",
-        tools: vec![ToolRate::default(); 2],
-        thickness: 0.0,
-        penalty: 0.0,
-        particles: vec![zero_state(); np],
-        increment: vec![0.0; n],
-    };
+    let zero = Seed::none(np, n);
     let f_base = force_f64(&model, &base, &q, t, &zero, 0.0);
     let f_rot = force_f64(&model, &contact, &q, t, &zero, 0.0);
     let e_geom = max_diff(&f_base, &f_rot) / max_abs(&f_base);

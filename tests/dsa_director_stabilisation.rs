@@ -28,6 +28,10 @@ use shelldsa::shell::problem::ShellProblem;
 use shelldsa::shell::stabilisation::DirectorFilter;
 use std::path::{Path, PathBuf};
 
+#[path = "common/cli.rs"]
+mod cli;
+use cli::cli;
+
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
@@ -343,14 +347,6 @@ fn load_stiffness_is_the_jacobian_of_the_force() {
     assert!(scale > 0.0);
     // Linear in q: the same products in another order, round-off.
     assert!(worst <= 1e-13 * scale);
-}
-
-fn cli(args: &[&str]) -> i32 {
-    shelldsa::cli::main_with_args(
-        std::iter::once("shelldsa")
-            .chain(args.iter().copied())
-            .map(String::from),
-    )
 }
 
 /// The reduced plastic hemisphere (9 × 9, 14 steps to P = 35, first yield in step 11) with

@@ -20,6 +20,10 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+#[path = "common/meshio.rs"]
+mod meshio;
+use meshio::{meshio_dump, num};
+
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
@@ -64,32 +68,6 @@ fn shelldsa(args: &[&str]) {
         String::from_utf8_lossy(&out.stdout),
         String::from_utf8_lossy(&out.stderr)
     );
-}
-
-/// meshio's view of the files (see tests/read_vtu.py `--dump`), keyed by path.
-fn meshio_dump(paths: &[PathBuf]) -> Value {
-    let script = root().join("tests/read_vtu.py");
-    let out = Command::new("python3")
-        .arg(&script)
-        .arg("--dump")
-        .args(paths)
-        .output()
-        .expect("cannot run python3");
-    assert!(
-        out.status.success(),
-        "tests/read_vtu.py --dump failed (is meshio installed? `pip install meshio`):\n{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
-}
-
-/// A float written by read_vtu.py (a repr string: parsed exactly).
-fn num(v: &Value) -> f64 {
-    v.as_str()
-        .unwrap_or_else(|| panic!("expected a float string, got {v}"))
-        .parse()
-        .unwrap()
 }
 
 /// One VTU as read by meshio: named point and cell arrays, one row per point or cell.

@@ -11,6 +11,10 @@ use shelldsa::io::shell_build::check_boundary;
 use shelldsa::io::shell_case::parse_shell_case;
 use std::path::{Path, PathBuf};
 
+#[path = "common/cli.rs"]
+mod cli;
+use cli::cli;
+
 /// A plate case with the given `[[boundary]]` tables, on `[0, side]²` (a quarter plate has
 /// side 0.5), monitoring the point `centre` (parameter coordinates).
 fn plate(boundary: &str, side: f64, centre: [f64; 2]) -> String {
@@ -87,14 +91,6 @@ fn write_case(name: &str, text: &str) -> (PathBuf, PathBuf) {
     let case = dir.join("case.toml");
     std::fs::write(&case, text).unwrap();
     (case, out)
-}
-
-fn cli(args: &[&str]) -> i32 {
-    shelldsa::cli::main_with_args(
-        std::iter::once("shelldsa")
-            .chain(args.iter().copied())
-            .map(String::from),
-    )
 }
 
 /// The centre deflection `−u_z` of the last converged step of `out/results.json`.

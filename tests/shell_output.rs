@@ -22,9 +22,12 @@ use shelldsa::meshfree::quadrature::CellQuadrature;
 use shelldsa::shell::model::ShellModel;
 use shelldsa::solver::{FailureReason, StepRecord};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
+
+#[path = "common/meshio.rs"]
+mod meshio;
+use meshio::{meshio_dump, num};
 
 fn unique_dir(tag: &str) -> PathBuf {
     static COUNTER: AtomicUsize = AtomicUsize::new(0);
@@ -48,32 +51,6 @@ fn cleanup(dir: &Path) {
     } else {
         let _ = std::fs::remove_dir_all(dir);
     }
-}
-
-/// meshio's view of the files (see tests/read_vtu.py `--dump`), keyed by path.
-fn meshio_dump(paths: &[PathBuf]) -> Value {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/read_vtu.py");
-    let out = Command::new("python3")
-        .arg(&script)
-        .arg("--dump")
-        .args(paths)
-        .output()
-        .expect("cannot run python3");
-    assert!(
-        out.status.success(),
-        "tests/read_vtu.py --dump failed (is meshio installed? `pip install meshio`):\n{}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
-}
-
-/// A float written by read_vtu.py (a repr string: parsed exactly).
-fn num(v: &Value) -> f64 {
-    v.as_str()
-        .unwrap_or_else(|| panic!("expected a float string, got {v}"))
-        .parse()
-        .unwrap()
 }
 
 fn table(v: &Value) -> Vec<Vec<f64>> {

@@ -64,11 +64,7 @@ impl StepObserver<ShellProblem> for Recording<'_> {
             .zip(&model.history)
             .map(|(a, h)| h.material.eps_p > *a)
             .collect();
-        let values: Result<Vec<f64>, _> = self
-            .monitors
-            .iter()
-            .map(|m| m.value(problem, load))
-            .collect();
+        let values = super::monitor_values(problem, load, self.monitors);
         let contact = match &self.contact {
             None => Ok(Vec::new()),
             Some(c) => c

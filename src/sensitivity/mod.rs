@@ -578,8 +578,12 @@ pub fn record_monitors(
     let mut derivatives = vec![vec![0.0; udot.len()]; monitors.len()];
     let mut tools: Option<Vec<Vec<[f64; 3]>>> = None;
     let mut plastic: Option<Vec<Vec<f64>>> = None;
+    let mut forces = None;
     for (mi, m) in monitors.iter().enumerate() {
-        values.push(m.value(problem, load).map_err(|e| e.to_string())?);
+        values.push(
+            m.value_with(problem, load, &mut forces)
+                .map_err(|e| e.to_string())?,
+        );
         match &m.quantity {
             Quantity::Displacement { uv, component } => {
                 for (v, ud) in udot.iter().enumerate() {
@@ -999,8 +1003,20 @@ impl Monitor {
     }
 
     /// Its committed value in `problem` at pseudo-time `load` (the load factor of the
-    /// converged step: the tools' position along their paths).
+    /// converged step: the tools' position along their paths). Several monitors:
+    /// [`monitor_values`], which evaluates the contact once for all tool forces.
     pub fn value(&self, problem: &ShellProblem, load: f64) -> Result<f64, ShellError> {
+        self.value_with(problem, load, &mut None)
+    }
+
+    /// [`Self::value`], with the forces on the tools (`[tool][component]`) computed into
+    /// `tools` when first needed and reused after.
+    fn value_with(
+        &self,
+        problem: &ShellProblem,
+        load: f64,
+        tools: &mut Option<Vec<[f64; 3]>>,
+    ) -> Result<f64, ShellError> {
         let model = &problem.model;
         match &self.quantity {
             Quantity::Displacement { uv, component } => Ok(model.displacement_at(*uv)?[*component]),
@@ -1033,15 +1049,42 @@ impl Monitor {
             }
             Quantity::ToolForce { tool, component } => {
                 let i = tool_index(problem, tool)?;
-                let c = problem
-                    .loads()
-                    .iter()
-                    .find_map(|l| l.contact())
-                    .ok_or_else(|| ShellError::InvalidInput("no contact".into()))?;
-                let report = c.contact.report(model, &vec![0.0; model.n_dofs()], load)?;
-                Ok(report.tools[i].force[*component])
+                if tools.is_none() {
+                    *tools = Some(tool_forces(problem, load)?);
+                }
+                Ok(tools.as_deref().unwrap_or_default()[i][*component])
             }
         }
+    }
+}
+
+/// The committed values of `monitors` in `problem` at pseudo-time `load` (the contact
+/// evaluated once for all tool-force monitors).
+pub fn monitor_values(
+    problem: &ShellProblem,
+    load: f64,
+    monitors: &[Monitor],
+) -> Result<Vec<f64>, ShellError> {
+    let mut tools = None;
+    monitors
+        .iter()
+        .map(|m| m.value_with(problem, load, &mut tools))
+        .collect()
+}
+
+/// The forces the sheet exerts on the tools of the problem's contact at its committed state
+/// and pseudo-time `load` (`[tool][component]`, empty without contact).
+fn tool_forces(problem: &ShellProblem, load: f64) -> Result<Vec<[f64; 3]>, ShellError> {
+    let model = &problem.model;
+    match problem.loads().iter().find_map(|l| l.contact()) {
+        None => Ok(Vec::new()),
+        Some(c) => Ok(c
+            .contact
+            .report(model, &vec![0.0; model.n_dofs()], load)?
+            .tools
+            .iter()
+            .map(|t| t.force)
+            .collect()),
     }
 }
 
