@@ -70,9 +70,9 @@ enum Command {
     /// Design sensitivities of a shell case with `[[design]]` tables, three ways: the
     /// hand-derived continuum DSA, the dual-number reference and central differences of
     /// complete re-runs, for the monitored responses (displacements, tool forces, chord
-    /// angles, plastic strain, distance from a target: `[dsa]`); a table per design variable in
-    /// the format of the paper's Tables 1–2, plots, and DIR/sensitivity.json (rewritten after
-    /// each converged step and run, with a `status` and the `failures`).
+    /// angles, plastic strain, thinning, distance from a target: `[dsa]`); a table per design
+    /// variable in the format of the paper's Tables 1–2, plots, and DIR/sensitivity.json
+    /// (rewritten after each converged step and run, with a `status` and the `failures`).
     #[command(after_help = EXIT_STATUS_HELP)]
     Dsa {
         /// Case file (TOML) with at least one [[design]] table.

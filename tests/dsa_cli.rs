@@ -239,6 +239,30 @@ fn design_errors_name_the_key() {
         ),
         (
             format!(
+                "{t}[[dsa.thinning]]\nname = \"th\"\nregion = [[0.0, 0.2], [0.0, 1.0]]\n\
+                 rho = -1.0\n"
+            ),
+            "dsa.thinning[0].rho",
+            "> 0",
+        ),
+        (
+            format!(
+                "{t}[[dsa.thinning]]\nname = \"th\"\nregion = [[0.0, 0.2], [2.0, 3.0]]\n\
+                 rho = 100.0\n"
+            ),
+            "dsa.thinning[0].region[1]",
+            "overlapping the surface's domain",
+        ),
+        (
+            // The thinning reads the initial tangents, which a shape variable moves.
+            "[[design]]\nname = \"R\"\nkind = \"shape.radius\"\n[[dsa.thinning]]\n\
+             name = \"th\"\nregion = [[0.0, 0.2], [0.0, 1.0]]\nrho = 100.0\n"
+                .into(),
+            "design[0].kind",
+            "[[dsa.thinning]]",
+        ),
+        (
+            format!(
                 "{t}[[dsa.distance]]\nname = \"d\"\nat = [[0.5, 0.5], [1.0, 0.5]]\n\
                  target = [[0.0, 0.0, 0.0]]\n"
             ),

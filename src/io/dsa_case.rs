@@ -36,6 +36,11 @@
 //! region = [[0.0, 0.2], [0.0, 1.0]]   # parameter box [[u_min, u_max], [v_min, v_max]]
 //! layers = "top"                  # "all" (default), "top" or "bottom"
 //! rho = 500.0                     # > 0: below the maximum by at most ln(N)/ρ
+//!
+//! [[dsa.thinning]]                # smooth maximum of the thinning strain ln(da/dA) of the
+//! name = "peak thinning"          # mid-surface (the negative thickness strain under plastic
+//! region = [[0.0, 0.2], [0.0, 1.0]]   # incompressibility) over the quadrature points of a box
+//! rho = 500.0
 //! ```
 //!
 //! Everything is checked here, before any analysis: each wrong key is a
@@ -90,6 +95,18 @@ pub(crate) struct DsaFile {
     distance: Vec<DistanceFile>,
     #[serde(default)]
     plastic: Vec<PlasticFile>,
+    #[serde(default)]
+    thinning: Vec<ThinningFile>,
+}
+
+/// One `[[dsa.thinning]]` table as written: a smooth maximum of the thinning strain over a
+/// region.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct ThinningFile {
+    name: String,
+    region: [[f64; 2]; 2],
+    rho: f64,
 }
 
 /// One `[[dsa.plastic]]` table as written: a smooth maximum of `ē^p` over a region.
@@ -446,7 +463,7 @@ pub(crate) fn check(
     let functionals = position_functionals(path, &dsa, surface)?;
     if functionals
         .iter()
-        .any(|m| !m.quantity.functional_points().is_empty())
+        .any(|m| m.quantity.reads_initial_geometry())
     {
         if let Some((k, e)) = entries
             .iter()
@@ -457,9 +474,9 @@ pub(crate) fn check(
                 path,
                 format!("design[{k}].kind"),
                 format!("{:?}", super::dsa_run::kind_name(&e.variable)),
-                "a thickness, material or tool variable with [[dsa.angle]] or [[dsa.distance]] \
-                 responses (their initial points would move with a shape variable, whose \
-                 design velocity these responses do not carry)",
+                "a thickness, material or tool variable with [[dsa.angle]], [[dsa.distance]] or \
+                 [[dsa.thinning]] responses (the initial geometry they read would move with a \
+                 shape variable, whose design velocity these responses do not carry)",
             ));
         }
     }
@@ -481,8 +498,9 @@ pub(crate) fn check(
     }))
 }
 
-/// The `[[dsa.angle]]`, `[[dsa.plastic]]` and `[[dsa.distance]]` responses, checked (angles
-/// and distances with their points' initial positions on `surface`).
+/// The `[[dsa.angle]]`, `[[dsa.plastic]]`, `[[dsa.thinning]]` and `[[dsa.distance]]`
+/// responses, checked (angles and distances with their points' initial positions on
+/// `surface`).
 fn position_functionals(
     path: &Path,
     dsa: &DsaFile,
@@ -519,6 +537,32 @@ fn position_functionals(
             .position(|n| *n == a)
             .ok_or_else(|| invalid(path, key, format!("{a:?}"), "\"x\", \"y\" or \"z\""))
     };
+    let aggregate = |key: &str, region: [[f64; 2]; 2], rho: f64| -> Result<(), CaseError> {
+        for (a, r) in region.iter().enumerate() {
+            let inside = r[0] <= r[1] && r[0] <= dom[a][1] && r[1] >= dom[a][0];
+            if !inside || !r.iter().all(|v| v.is_finite()) {
+                return Err(invalid(
+                    path,
+                    format!("{key}.region[{a}]"),
+                    fmt_list(r),
+                    format!(
+                        "a range [min, max] overlapping the surface's domain {:?}",
+                        dom[a]
+                    ),
+                ));
+            }
+        }
+        if !(rho.is_finite() && rho > 0.0) {
+            return Err(invalid(
+                path,
+                format!("{key}.rho"),
+                format!("{rho}"),
+                "a finite aggregation parameter > 0 (1/strain; the smooth maximum lies below \
+                 the maximum by at most ln(N)/rho)",
+            ));
+        }
+        Ok(())
+    };
     let mut out = Vec::new();
     for (k, a) in dsa.angle.iter().enumerate() {
         let key = format!("dsa.angle[{k}]");
@@ -552,32 +596,19 @@ fn position_functionals(
                 ))
             }
         };
-        for (a, r) in pl.region.iter().enumerate() {
-            let inside = r[0] <= r[1] && r[0] <= dom[a][1] && r[1] >= dom[a][0];
-            if !inside || !r.iter().all(|v| v.is_finite()) {
-                return Err(invalid(
-                    path,
-                    format!("{key}.region[{a}]"),
-                    fmt_list(r),
-                    format!(
-                        "a range [min, max] overlapping the surface's domain {:?}",
-                        dom[a]
-                    ),
-                ));
-            }
-        }
-        if !(pl.rho.is_finite() && pl.rho > 0.0) {
-            return Err(invalid(
-                path,
-                format!("{key}.rho"),
-                format!("{}", pl.rho),
-                "a finite aggregation parameter > 0 (1/strain; the smooth maximum lies below \
-                 the maximum by at most ln(N)/rho)",
-            ));
-        }
+        aggregate(&key, pl.region, pl.rho)?;
         out.push(
             Monitor::plastic_strain(pl.name.clone(), pl.region, layers, pl.rho)
                 .map_err(|e| invalid(path, &key, format!("{:?}", pl.name), e.to_string()))?,
+        );
+    }
+    for (k, th) in dsa.thinning.iter().enumerate() {
+        let key = format!("dsa.thinning[{k}]");
+        named(&key, &th.name)?;
+        aggregate(&key, th.region, th.rho)?;
+        out.push(
+            Monitor::thinning(th.name.clone(), th.region, th.rho)
+                .map_err(|e| invalid(path, &key, format!("{:?}", th.name), e.to_string()))?,
         );
     }
     for (k, d) in dsa.distance.iter().enumerate() {

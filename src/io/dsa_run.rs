@@ -1112,6 +1112,9 @@ pub fn to_json(case: &ShellCase, r: &DsaResult, status: &str) -> Value {
                 json!({"label": m.label, "quantity": "plastic-strain", "region": region,
                        "layers": format!("{layers:?}").to_lowercase(), "rho": rho})
             }
+            Quantity::Thinning { region, rho } => {
+                json!({"label": m.label, "quantity": "thinning-strain", "region": region, "rho": rho})
+            }
         })
         .collect();
     let variables: Vec<Value> = r

@@ -633,6 +633,21 @@ pub fn record_monitors(
                     *d = smooth_max(&x, *rho).eps;
                 }
             }
+            Quantity::Thinning { region, rho } => {
+                let idx = m.region_points(model, region).map_err(|e| e.to_string())?;
+                for (v, ud) in udot.iter().enumerate() {
+                    let x: Vec<crate::scalar::Dual> = idx
+                        .iter()
+                        .map(|&i| {
+                            thinning_strain(model, i, |j| {
+                                let u = model.particle_state(j).u;
+                                u.zip_map(&model.translation_in(j, ud), crate::scalar::Dual::new)
+                            })
+                        })
+                        .collect();
+                    derivatives[mi][v] = smooth_max(&x, *rho).eps;
+                }
+            }
             Quantity::ToolForce { tool, component } => {
                 let i = tool_index(problem, tool).map_err(|e| e.to_string())?;
                 if tools.is_none() {
@@ -739,6 +754,50 @@ pub enum Quantity {
         /// The aggregation parameter `ρ` (> 0, 1/strain).
         rho: f64,
     },
+    /// The thinning strain of the mid-surface, `ln(da/dA) = ln(|x,1 × x,2| / |X,1 × X,2|)`
+    /// with `x,α = X,α + Σ_J Ψ_J,α ū_J` ([`thinning_strain`]), at the quadrature points in a
+    /// parameter box, aggregated by the smooth maximum `(1/ρ) ln((1/N) Σ_k exp(ρ x_k))`
+    /// ([`smooth_max`]): the peak thinning of a formed sheet. Under plastic incompressibility
+    /// with the elastic volume change neglected (the sheet-forming convention), `t/t⁰ = dA/da`,
+    /// so the thinning strain is the negative thickness strain `−ln(t/t⁰)`; positive where
+    /// the sheet thins. It reads the initial geometry `X,α`, which a shape variable moves.
+    Thinning {
+        /// Parameter box `[[u_min, u_max], [v_min, v_max]]`.
+        region: [[f64; 2]; 2],
+        /// Aggregation parameter `ρ > 0`.
+        rho: f64,
+    },
+}
+
+/// The quadrature points (indices into `ShellModel::points`) in a parameter box.
+pub fn region_points(model: &ShellModel, region: &[[f64; 2]; 2]) -> Vec<usize> {
+    (0..model.points.len())
+        .filter(|&i| {
+            let uv = model.points[i].uv;
+            (0..2).all(|k| uv[k] >= region[k][0] && uv[k] <= region[k][1])
+        })
+        .collect()
+}
+
+/// The thinning strain `ln(|x,1 × x,2| / |X,1 × X,2|)` of the mid-surface at quadrature point
+/// `i` ([`Quantity::Thinning`]), with `x,α = X,α + Σ_J Ψ_J,α ū_J` from the translations
+/// `u(J)` of its shape-function particles, generic over the scalar: f64 committed
+/// translations give the value, `Dual64` ones `ū + ε ū̇` its derivative.
+pub fn thinning_strain<T: crate::scalar::Real>(
+    model: &ShellModel,
+    i: usize,
+    u: impl Fn(usize) -> Vector3<T>,
+) -> T {
+    let p = &model.points[i];
+    let mut xa = p.surface.x_a.map(|x| x.map(T::cst));
+    for (&j, s) in p.neighbours.iter().zip(&p.shape) {
+        let uj = u(j);
+        for (a, x) in xa.iter_mut().enumerate() {
+            *x += uj * T::cst(s.dpsi[a]);
+        }
+    }
+    let da0 = p.surface.x_a[0].cross(&p.surface.x_a[1]).norm();
+    (xa[0].cross(&xa[1]).norm() / da0).ln()
 }
 
 /// `(1/ρ) ln((1/N) Σ_k exp(ρ x_k))`, evaluated with the largest value factored out, generic
@@ -769,14 +828,10 @@ pub fn layer_points(model: &ShellModel, region: &[[f64; 2]; 2], layers: Layers) 
         Layers::Top => zetas[l] == top,
         Layers::Bottom => zetas[l] == bottom,
     };
-    let mut out = Vec::new();
-    for (i, p) in model.points.iter().enumerate() {
-        let inside = (0..2).all(|k| p.uv[k] >= region[k][0] && p.uv[k] <= region[k][1]);
-        if inside {
-            out.extend((0..nl).filter(|l| keep(*l)).map(|l| i * nl + l));
-        }
-    }
-    out
+    region_points(model, region)
+        .into_iter()
+        .flat_map(|i| (0..nl).filter(|l| keep(*l)).map(move |l| i * nl + l))
+        .collect()
 }
 
 /// Which layers through the thickness a [`Quantity::PlasticStrain`] reads.
@@ -799,8 +854,21 @@ impl Quantity {
             Quantity::TargetDistance { points, .. } => points,
             Quantity::Displacement { .. }
             | Quantity::ToolForce { .. }
-            | Quantity::PlasticStrain { .. } => &[],
+            | Quantity::PlasticStrain { .. }
+            | Quantity::Thinning { .. } => &[],
         }
+    }
+
+    /// Whether the response reads the initial geometry (the initial positions of a position
+    /// functional, the initial tangents of the thinning strain), which a shape design variable
+    /// moves and whose design velocity these responses do not carry.
+    pub fn reads_initial_geometry(&self) -> bool {
+        matches!(
+            self,
+            Quantity::ChordAngle { .. }
+                | Quantity::TargetDistance { .. }
+                | Quantity::Thinning { .. }
+        )
     }
 }
 
@@ -830,7 +898,8 @@ pub fn position_functional<T: crate::scalar::Real>(q: &Quantity, u: &[Vector3<T>
         }
         Quantity::Displacement { .. }
         | Quantity::ToolForce { .. }
-        | Quantity::PlasticStrain { .. } => None,
+        | Quantity::PlasticStrain { .. }
+        | Quantity::Thinning { .. } => None,
     }
 }
 
@@ -977,7 +1046,41 @@ impl Monitor {
         layers: Layers,
         rho: f64,
     ) -> Result<Self, DesignError> {
-        let label = label.into();
+        Self::aggregate(
+            label.into(),
+            region,
+            rho,
+            Quantity::PlasticStrain {
+                region,
+                layers,
+                rho,
+            },
+        )
+    }
+
+    /// A thinning-strain monitor ([`Quantity::Thinning`]), checked as
+    /// [`Monitor::plastic_strain`].
+    pub fn thinning(
+        label: impl Into<String>,
+        region: [[f64; 2]; 2],
+        rho: f64,
+    ) -> Result<Self, DesignError> {
+        Self::aggregate(
+            label.into(),
+            region,
+            rho,
+            Quantity::Thinning { region, rho },
+        )
+    }
+
+    /// A smooth maximum over a parameter box, checked: a finite box with `min ≤ max` on both
+    /// axes, `ρ` finite and > 0.
+    fn aggregate(
+        label: String,
+        region: [[f64; 2]; 2],
+        rho: f64,
+        quantity: Quantity,
+    ) -> Result<Self, DesignError> {
         let ok = region
             .iter()
             .all(|r| r[0].is_finite() && r[1].is_finite() && r[0] <= r[1])
@@ -992,14 +1095,29 @@ impl Monitor {
                 ),
             });
         }
-        Ok(Monitor {
-            label,
-            quantity: Quantity::PlasticStrain {
-                region,
-                layers,
-                rho,
-            },
-        })
+        Ok(Monitor { label, quantity })
+    }
+
+    /// The quadrature points in `region` ([`region_points`]), or [`Monitor::empty_region`].
+    fn region_points(
+        &self,
+        model: &ShellModel,
+        region: &[[f64; 2]; 2],
+    ) -> Result<Vec<usize>, ShellError> {
+        let idx = region_points(model, region);
+        if idx.is_empty() {
+            return Err(self.empty_region(region));
+        }
+        Ok(idx)
+    }
+
+    /// The error of a region without quadrature points.
+    fn empty_region(&self, region: &[[f64; 2]; 2]) -> ShellError {
+        ShellError::InvalidInput(format!(
+            "monitor `{}`: no quadrature point in the region {region:?}: expected a parameter \
+             box containing at least one",
+            self.label
+        ))
     }
 
     /// Its committed value in `problem` at pseudo-time `load` (the load factor of the
@@ -1039,12 +1157,16 @@ impl Monitor {
                     .map(|k| model.history[k].material.eps_p)
                     .collect();
                 if x.is_empty() {
-                    return Err(ShellError::InvalidInput(format!(
-                        "monitor `{}`: no quadrature point in the region {region:?}: expected \
-                         a parameter box containing at least one",
-                        self.label
-                    )));
+                    return Err(self.empty_region(region));
                 }
+                Ok(smooth_max(&x, *rho))
+            }
+            Quantity::Thinning { region, rho } => {
+                let x: Vec<f64> = self
+                    .region_points(model, region)?
+                    .into_iter()
+                    .map(|i| thinning_strain(model, i, |j| model.particle_state(j).u))
+                    .collect();
                 Ok(smooth_max(&x, *rho))
             }
             Quantity::ToolForce { tool, component } => {

@@ -559,6 +559,15 @@ impl ShellModel {
         })
     }
 
+    /// The translation of shape-function particle `j` (real, or an image mapped from its
+    /// source) in the DOF vector `q` (`n_dofs` long, e.g. a displacement sensitivity).
+    pub fn translation_in(&self, j: usize, q: &[f64]) -> Vector3<f64> {
+        let m = self.dof_map(j);
+        let b = DOFS_PER_PARTICLE * m.source;
+        let v = Vector3::new(q[b], q[b + 1], q[b + 2]);
+        m.map.map_or(v, |(qm, _)| qm * v)
+    }
+
     /// The RK interpolation `Σ Ψ_J (T_J q)_ū` at `uv` of the translational part of a generalised
     /// vector `q` (an increment, a Newton correction, a design sensitivity), images mapped from
     /// their sources.
@@ -575,14 +584,9 @@ impl ShellModel {
         }
         let mut sv = ShapeValues::new();
         self.shape_functions.evaluate(uv, &mut sv).map_err(mf)?;
-        let mut u = Vector3::zeros();
-        for (j, psi, _) in sv.iter() {
-            let m = self.dof_map(j);
-            let b = DOFS_PER_PARTICLE * m.source;
-            let v = Vector3::new(q[b], q[b + 1], q[b + 2]);
-            u += m.map.map_or(v, |(qm, _)| qm * v) * psi;
-        }
-        Ok(u)
+        Ok(sv.iter().fold(Vector3::zeros(), |u, (j, psi, _)| {
+            u + self.translation_in(j, q) * psi
+        }))
     }
 
     /// Add the 5 local components `local` of shape-function particle `j` (an index into
