@@ -237,9 +237,18 @@ pub fn parse_methods(
     Ok(out)
 }
 
+/// The case's geometry the design variables refer to: the sheet's surface (`shape.<…>`) and
+/// the tools (`tool.<name>.<…>`), both already checked.
+pub(crate) struct CaseGeometry<'a> {
+    /// The sheet's mid-surface.
+    pub surface: &'a Surface<f64>,
+    /// The rigid tools.
+    pub tools: &'a [RigidTool],
+}
+
 /// Check the `[[design]]` and `[dsa]` tables of a case (`None` when there are no `[[design]]`
-/// tables; a `[dsa]` table without them is an error). `thickness`, `material` and `monitors`
-/// are the case's, already checked.
+/// tables; a `[dsa]` table without them is an error). `thickness`, `material`, `monitors` and
+/// `geometry` are the case's, already checked.
 pub(crate) fn check(
     path: &Path,
     design: Vec<DesignFile>,
@@ -247,9 +256,9 @@ pub(crate) fn check(
     thickness: f64,
     material: &MaterialParams<f64>,
     monitors: &[CaseMonitor],
-    surface: &Surface<f64>,
-    tools: &[RigidTool],
+    geometry: &CaseGeometry<'_>,
 ) -> Result<Option<DsaSpec>, CaseError> {
+    let (surface, tools) = (geometry.surface, geometry.tools);
     if design.is_empty() {
         return match dsa {
             Some(_) => Err(invalid(
