@@ -73,6 +73,10 @@ enum Command {
     /// angles, plastic strain, thinning, distance from a target: `[dsa]`); a table per design
     /// variable in the format of the paper's Tables 1–2, plots, and DIR/sensitivity.json
     /// (rewritten after each converged step and run, with a `status` and the `failures`).
+    /// Design variables (`[[design]] kind`): `thickness`, `material.<parameter>`,
+    /// `shape.<surface parameter>`, `tool.<name>.<x|y|z|rx|ry|rz>` (a tool's position) and
+    /// `tool.<name>.shape.<tool surface parameter>` (a tool's shape: a die's `radius`, a NURBS
+    /// die's `cp[i][j].x|y|z` or `weight[i][j]`).
     #[command(after_help = EXIT_STATUS_HELP)]
     Dsa {
         /// Case file (TOML) with at least one [[design]] table.

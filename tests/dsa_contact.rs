@@ -15,6 +15,12 @@
 //!    (`ToolPath::rotated`), with pivots off the origin and paths that rotate (`R(t) ≠ I`);
 //!    whole runs (continuum = dual, central differences of re-runs, Taylor rates) for the
 //!    die and the punch turned about z; and `die.ry` = a translation of the die over a run.
+//! 4. Tool **shapes** (`tool.<name>.shape.<parameter>`): `force_dot` with the rate of a tool
+//!    surface's design parameter (cylinder radius and axis point; the die as a NURBS patch of
+//!    the same cylinder: control-point coordinates and a weight) against the dual evaluation on
+//!    the seeded surface and central differences; whole runs for the radii of both tools and
+//!    a NURBS control point and weight of the die (continuum = dual, re-runs on the rebuilt
+//!    tool, Taylor rates); the variables' parsing and errors.
 //!
 //! Run: `cargo test --release --test dsa_contact -- --nocapture`.
 
@@ -23,6 +29,7 @@ mod small_bending;
 use nalgebra::Vector3;
 use num_dual::Dual64;
 use shelldsa::contact::{PathKey, RigidTool, ToolPath};
+use shelldsa::geometry::Surface;
 use shelldsa::io::dsa_case::DsaMethod;
 use shelldsa::io::dsa_run;
 use shelldsa::io::shell_build;
@@ -111,12 +118,26 @@ fn with_inputs_f64<R>(
         .iter()
         .map(|a| Vector3::from(a.rotation) * s)
         .collect();
+    // A tool-shape rate moves the surface's design parameter by s ṗ.
+    let surfaces: Vec<Surface<f64>> = contact
+        .tools()
+        .iter()
+        .zip(&seed.tools)
+        .map(|(tl, rate)| {
+            let mut p = tl.surface.parameter_values();
+            if let Some((k, r)) = rate.shape {
+                p[k] += s * r;
+            }
+            tl.surface.with_design_parameters::<f64>(&p).unwrap()
+        })
+        .collect();
     let inputs = ContactInputs {
         particles: &particles,
         thickness: model.thickness + s * seed.thickness,
         penalty: contact.penalty() + s * seed.penalty,
         offsets: &offsets,
         rotations: &rotations,
+        surfaces: Some(&surfaces),
         initial: None,
     };
     let qs: Vec<f64> = q
@@ -151,12 +172,31 @@ fn with_inputs_dual<R>(
     let seeded = |v: [f64; 3]| Vector3::from(v).map(|x| Dual64::new(0.0, x));
     let offsets: Vec<Vector3<Dual64>> = seed.tools.iter().map(|a| seeded(a.translation)).collect();
     let rotations: Vec<Vector3<Dual64>> = seed.tools.iter().map(|a| seeded(a.rotation)).collect();
+    // A tool-shape rate seeds the surface's design parameter with ṗ.
+    let surfaces: Vec<Surface<Dual64>> = contact
+        .tools()
+        .iter()
+        .zip(&seed.tools)
+        .map(|(tl, rate)| {
+            let mut p: Vec<Dual64> = tl
+                .surface
+                .parameter_values()
+                .iter()
+                .map(|&v| Dual64::from(v))
+                .collect();
+            if let Some((k, r)) = rate.shape {
+                p[k].eps = r;
+            }
+            tl.surface.with_design_parameters::<Dual64>(&p).unwrap()
+        })
+        .collect();
     let inputs = ContactInputs {
         particles: &particles,
         thickness: Dual64::new(model.thickness, seed.thickness),
         penalty: Dual64::new(contact.penalty(), seed.penalty),
         offsets: &offsets,
         rotations: &rotations,
+        surfaces: Some(&surfaces),
         initial: None,
     };
     let qd: Vec<Dual64> = q
@@ -200,15 +240,15 @@ fn force_dual(
 fn translation(a: [f64; 3]) -> ToolRate {
     ToolRate {
         translation: a,
-        rotation: [0.0; 3],
+        ..Default::default()
     }
 }
 
 /// A rotation rate `φ̇`.
 fn rotation(phi: [f64; 3]) -> ToolRate {
     ToolRate {
-        translation: [0.0; 3],
         rotation: phi,
+        ..Default::default()
     }
 }
 
@@ -539,10 +579,12 @@ fn tool_rotation_sensitivity_matches_dual_and_central_differences() {
                 ToolRate {
                     translation: [0.1, -0.2, 0.3],
                     rotation: [0.4, 0.1, -0.3],
+                    shape: None,
                 },
                 ToolRate {
                     translation: [0.3, 0.0, -0.2],
                     rotation: [0.2, -0.5, 0.7],
+                    shape: None,
                 },
             ],
         ),
@@ -1211,4 +1253,406 @@ monitors = ["center.uz"]
     for g in ["design", "material", "load"] {
         assert_eq!(group(&bs[2], g), 0.0, "die.rz in {g}");
     }
+}
+
+/// The small case's die (R = 10, axis along y through (22, ·, −10.49)) as a NURBS surface:
+/// two rational quadratic arcs, 0°–80° and 80°–180° (angle 0 towards the punch, 90° the top;
+/// knot 0.45 between them, off the top where the sheet rests at the start: the design
+/// velocity of a control point is only C⁰ across a knot), linear along y over [−5, 10]: the
+/// same cylinder, parametrised differently. `x_u × x_v` points out of the die
+/// (`side = "positive"`).
+const NURBS_DIE: &str = r#"type = "nurbs"
+degree_u = 2
+degree_v = 1
+knots_u = [0.0, 0.0, 0.0, 0.45, 0.45, 1.0, 1.0, 1.0]
+knots_v = [0.0, 0.0, 1.0, 1.0]
+control_points = [
+    [[12.0, -5.0, -10.49, 1.0], [12.0, 10.0, -10.49, 1.0]],
+    [[12.0, -5.0, -2.099003688227201, 0.766044443118978], [12.0, 10.0, -2.099003688227201, 0.766044443118978]],
+    [[20.263518223330696, -5.0, -0.6419224698779207, 1.0], [20.263518223330696, 10.0, -0.6419224698779207, 1.0]],
+    [[32.0, -5.0, 1.4275359259420988, 0.6427876096865394], [32.0, 10.0, 1.4275359259420988, 0.6427876096865394]],
+    [[32.0, -5.0, -10.489999999999998, 1.0], [32.0, 10.0, -10.489999999999998, 1.0]],
+]"#;
+
+/// The small case's text with the die's cylinder replaced by [`NURBS_DIE`].
+fn nurbs_die_case_text(final_load: f64, design: &str) -> String {
+    let cylinder = r#"type = "cylinder-sector"
+origin = [22.0, -5.0, -10.49]
+axis = [0.0, 1.0, 0.0]
+reference = [-1.0, 0.0, 0.0]
+radius = 10.0
+angle_deg = [-30.0, 150.0]
+length = [0.0, 15.0]"#;
+    let text = CASE
+        .replace("{final}", &format!("{final_load:?}"))
+        .replace("{design}", design);
+    assert_eq!(text.matches(cylinder).count(), 1);
+    text.replace(cylinder, NURBS_DIE)
+}
+
+/// A tool-shape rate: surface parameter `name` of `tool` at unit rate.
+fn shape_rate(tool: &RigidTool, name: &str) -> ToolRate {
+    ToolRate {
+        shape: Some((tool.surface.parameter_index(name).unwrap(), 1.0)),
+        ..Default::default()
+    }
+}
+
+/// Tool shapes (`tool.<name>.shape.<parameter>`): `force_dot` with the rate of a tool
+/// surface's design parameter (`V^c = R ∂X/∂p`, `V^c,α = R ∂X,α/∂p` at fixed `ξ`, the normal's
+/// turn `(I − n nᵀ) ċ/(n·c)`; `shell::contact_sensitivity`) against the `Dual64` evaluation of
+/// `force_with` on the tool surface rebuilt with the seeded parameter and against central
+/// differences, for the cylinders' radii and axis points and, with the die as a NURBS patch of
+/// the same cylinder, control-point coordinates and a weight. The forces with the tool
+/// rebuilt as a re-run rebuilds it (`RigidTool::reshaped`) equal those with the perturbed
+/// surface passed as input.
+#[test]
+fn tool_shape_sensitivity_matches_dual_and_central_differences() {
+    let (model, contact) = bent_state();
+    let n = model.n_dofs();
+    let np = model.particles.len();
+    let surface = case(0.5, "").surface;
+    let nurbs_case = parse_shell_case(
+        &nurbs_die_case_text(0.5, ""),
+        Path::new("tests/dsa_contact.rs"),
+    )
+    .unwrap();
+    let nurbs = ShellContact::new(
+        &model,
+        &surface,
+        nurbs_case.tools.clone(),
+        ContactFaces::Both,
+        contact.penalty(),
+    )
+    .unwrap();
+    let mut rng = Lcg(0x7001_5ba9e);
+    let q: Vec<f64> = (0..n).map(|_| rng.next() * 0.02).collect();
+    let t = 0.505;
+    // The NURBS die is the cylinder: the same force to round-off of the projection
+    // (positions ~30 mm, Newton to ~1e-14 in ξ): 1e-9 of max|f|.
+    let zero = Seed::none(np, n);
+    let f_cyl = force_f64(&model, &contact, &q, t, &zero, 0.0);
+    let f_nurbs = force_f64(&model, &nurbs, &q, t, &zero, 0.0);
+    let e_geom = max_diff(&f_cyl, &f_nurbs) / max_abs(&f_cyl);
+    println!("NURBS die vs cylinder die: force differs by {e_geom:.1e} of max|f|");
+    assert!(e_geom < 1e-9, "NURBS die vs cylinder: {e_geom:e}");
+
+    let none = ToolRate::default();
+    let seed = |name, tools| Seed {
+        name,
+        tools,
+        thickness: 0.0,
+        penalty: 0.0,
+        particles: vec![zero_state(); np],
+        increment: vec![0.0; n],
+    };
+    let (punch, die) = (&contact.tools()[0], &contact.tools()[1]);
+    let ndie = &nurbs.tools()[1];
+    let cases: Vec<(&ShellContact, Seed)> = vec![
+        (
+            &contact,
+            seed("die radius", vec![none, shape_rate(die, "radius")]),
+        ),
+        (
+            &contact,
+            seed("die origin.z", vec![none, shape_rate(die, "origin.z")]),
+        ),
+        (
+            &contact,
+            seed("punch radius", vec![shape_rate(punch, "radius"), none]),
+        ),
+        (
+            &contact,
+            seed(
+                "both radii",
+                vec![shape_rate(punch, "radius"), shape_rate(die, "radius")],
+            ),
+        ),
+        (
+            &nurbs,
+            seed(
+                "nurbs cp[2][0].z",
+                vec![none, shape_rate(ndie, "cp[2][0].z")],
+            ),
+        ),
+        (
+            &nurbs,
+            seed(
+                "nurbs cp[3][0].x",
+                vec![none, shape_rate(ndie, "cp[3][0].x")],
+            ),
+        ),
+        (
+            &nurbs,
+            seed(
+                "nurbs cp[3][1].z",
+                vec![none, shape_rate(ndie, "cp[3][1].z")],
+            ),
+        ),
+        (
+            &nurbs,
+            seed(
+                "nurbs weight[3][0]",
+                vec![none, shape_rate(ndie, "weight[3][0]")],
+            ),
+        ),
+    ];
+    for (contact, seed) in &cases {
+        let cs = ContactSeeds {
+            tools: &seed.tools,
+            thickness: 0.0,
+            penalty: 0.0,
+            particles: &seed.particles,
+            increment: &seed.increment,
+            initial: None,
+        };
+        let hand = contact.force_dot(&model, &q, t, &cs).unwrap();
+        let dual = force_dual(&model, contact, &q, t, seed);
+        let h = 1e-4;
+        let fp = force_f64(&model, contact, &q, t, seed, h);
+        let fm = force_f64(&model, contact, &q, t, seed, -h);
+        let (scale, e_dual, e_cd) = three_way(&hand, &dual, &fp, &fm, h);
+        // The tool rebuilt as a re-run rebuilds it (RigidTool::reshaped): the same surface,
+        // so the same force to round-off (1e-12 of max|f|).
+        let tools: Vec<RigidTool> = contact
+            .tools()
+            .iter()
+            .zip(&seed.tools)
+            .map(|(tl, r)| match r.shape {
+                Some((k, rate)) => tl.reshaped(&[(k, h * rate)]).unwrap(),
+                None => tl.clone(),
+            })
+            .collect();
+        let rebuilt = ShellContact::new(
+            &model,
+            &surface,
+            tools,
+            ContactFaces::Both,
+            contact.penalty(),
+        )
+        .unwrap();
+        let fr = force_f64(&model, &rebuilt, &q, t, &zero, 0.0);
+        let e_rebuilt = max_diff(&fr, &fp) / max_abs(&fp);
+        println!(
+            "{:<20} max|ḟ| {scale:.4e}  |hand − dual| {e_dual:.2e}  |hand − central| {e_cd:.2e}  \
+             rebuilt tool vs inputs {e_rebuilt:.1e}",
+            seed.name
+        );
+        assert!(scale > 0.0, "{}: the seed must move the force", seed.name);
+        assert!(
+            e_rebuilt < 1e-12,
+            "{}: rebuilt tool vs inputs {e_rebuilt:e}",
+            seed.name
+        );
+        // As for the translations: the same formulas two ways, round-off.
+        assert!(e_dual < 1e-10, "{}: hand vs dual {e_dual:e}", seed.name);
+        // Central differences with h = 1e-4 (parameters of size 0.6…30): the projection's
+        // convergence noise in the force (~1e-13 of max|f| ~ 1e3) over h dominates smaller
+        // steps for the seeds that move the force little (a control point off the die's top,
+        // max|ḟ| ~ 2: measured 1.9e-7, 3.4e-8, 2.3e-9 at h = 1e-6, 1e-5, 1e-4), while the
+        // truncation ~h²|f'''| stays below 2e-8 (the weight): 1e-7 of max|ḟ|.
+        assert!(
+            e_cd < 1e-7,
+            "{}: hand vs central differences {e_cd:e}",
+            seed.name
+        );
+
+        // The forces on the tools, the same three ways.
+        let hand = contact
+            .tool_force_dots(&model, &q, t, std::slice::from_ref(&cs))
+            .unwrap()
+            .pop()
+            .unwrap();
+        let hand: Vec<f64> = hand.iter().flatten().copied().collect();
+        let dual = tool_forces_dual(&model, contact, &q, t, seed);
+        let fp = tool_forces_f64(&model, contact, &q, t, seed, h);
+        let fm = tool_forces_f64(&model, contact, &q, t, seed, -h);
+        let (scale, e_dual, e_cd) = three_way(&hand, &dual, &fp, &fm, h);
+        assert!(scale > 0.0, "{}: tool forces", seed.name);
+        assert!(
+            e_dual < 1e-10,
+            "{}: tool forces vs dual {e_dual:e}",
+            seed.name
+        );
+        assert!(
+            e_cd < 1e-7,
+            "{}: tool forces vs central {e_cd:e}",
+            seed.name
+        );
+    }
+    // A cylinder's radius with its axis fixed moves every tool point along its normal by one
+    // (V^c = n, V^c,α = x^c,α / R). The die's contact points lie within a few degrees of its
+    // top, where n ≈ e_z, so the force rate is nearly that of raising the die (die.z: V^c =
+    // e_z, V^c,α = 0): a check independent of the dual (measured cosine 1.0000; 0.99 allows
+    // the points off the top).
+    let fr = contact
+        .force_dot(
+            &model,
+            &q,
+            t,
+            &ContactSeeds {
+                tools: &[none, shape_rate(die, "radius")],
+                thickness: 0.0,
+                penalty: 0.0,
+                particles: &zero.particles,
+                increment: &zero.increment,
+                initial: None,
+            },
+        )
+        .unwrap();
+    let fz = contact
+        .force_dot(
+            &model,
+            &q,
+            t,
+            &ContactSeeds {
+                tools: &[none, translation([0.0, 0.0, 1.0])],
+                thickness: 0.0,
+                penalty: 0.0,
+                particles: &zero.particles,
+                increment: &zero.increment,
+                initial: None,
+            },
+        )
+        .unwrap();
+    let dot: f64 = fr.iter().zip(&fz).map(|(a, b)| a * b).sum();
+    let cos = dot
+        / (fr.iter().map(|a| a * a).sum::<f64>() * fz.iter().map(|a| a * a).sum::<f64>()).sqrt();
+    println!("die radius vs die z force rates: cosine {cos:.4}");
+    assert!(cos > 0.99, "die radius vs die z: cosine {cos}");
+}
+
+/// Whole runs for tool shapes on the small bending case: the radii of the die and the punch
+/// (axes fixed: the die's top rises with its radius) and, with the die as a NURBS patch of
+/// the same cylinder ([`NURBS_DIE`]), the horizontal position of the middle control point of
+/// the arc that holds the die's top (`cp[3][0].x`, one end of the die) and that arc's weight:
+/// continuum = dual, central differences of complete re-runs with the tools rebuilt
+/// (`RigidTool::reshaped`), Taylor rates 2.
+#[test]
+fn tool_shape_derivatives_match_dual_and_re_runs() {
+    let design = r#"
+[[design]]
+name = "die.radius"
+kind = "tool.die.shape.radius"
+fd_steps = [4e-3, 2e-3, 1e-3, 5e-4]
+[[design]]
+name = "punch.radius"
+kind = "tool.punch.shape.radius"
+fd_steps = [4e-3, 2e-3, 1e-3, 5e-4]
+[dsa]
+monitors = ["center.uz", "edge.ux", "edge.uz", "tool.punch.fz"]
+"#;
+    let c = case(0.5, design);
+    let spec = dsa_run::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
+    let t0 = std::time::Instant::now();
+    let r = dsa_run::run(&c, &spec, &mut |_| {}).unwrap();
+    println!(
+        "radii: {} steps, total {:.1} s",
+        r.nominal.loads.len(),
+        t0.elapsed().as_secs_f64()
+    );
+    assert!(r.dual_state_mismatch.unwrap() < 1e-10);
+    for v in 0..r.variables.len() {
+        check_variable(&r, v);
+    }
+
+    let design = r#"
+[[design]]
+name = "die.cp.x"
+kind = "tool.die.shape.cp[3][0].x"
+fd_steps = [4e-3, 2e-3, 1e-3, 5e-4]
+[[design]]
+name = "die.w"
+kind = "tool.die.shape.weight[3][0]"
+fd_steps = [4e-3, 2e-3, 1e-3, 5e-4]
+[dsa]
+monitors = ["center.uz", "edge.ux", "edge.uz", "tool.punch.fz"]
+"#;
+    let c = parse_shell_case(
+        &nurbs_die_case_text(0.5, design),
+        Path::new("tests/dsa_contact.rs"),
+    )
+    .unwrap();
+    let spec = dsa_run::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
+    let t0 = std::time::Instant::now();
+    let r = dsa_run::run(&c, &spec, &mut |_| {}).unwrap();
+    println!(
+        "NURBS die: {} steps, total {:.1} s",
+        r.nominal.loads.len(),
+        t0.elapsed().as_secs_f64()
+    );
+    assert!(r.dual_state_mismatch.unwrap() < 1e-10);
+    for v in 0..r.variables.len() {
+        check_variable(&r, v);
+    }
+}
+
+/// `tool.<name>.shape.<parameter>`: parsed on the case's tools; an unknown parameter lists
+/// the valid ones, an unknown tool the case's tools; a step that makes the tool invalid (a
+/// radius ≤ 0) is an error naming the key, before any analysis.
+#[test]
+fn tool_shape_design_variables_are_checked() {
+    use shelldsa::sensitivity::{DesignError, DesignKind};
+    let c = case(0.5, "");
+    let kind = DesignKind::parse_with_tools("tool.die.shape.radius", &c.surface, &c.tools).unwrap();
+    let DesignKind::ToolShape {
+        tool,
+        parameter,
+        name,
+    } = &kind
+    else {
+        panic!("{kind:?}");
+    };
+    assert_eq!((tool.as_str(), name.as_str()), ("die", "radius"));
+    assert_eq!(c.tools[1].surface.parameter_names()[*parameter], "radius");
+    // Without the tools the key is refused with a message naming what it needs.
+    let e = DesignKind::parse("tool.die.shape.radius").unwrap_err();
+    assert!(matches!(e, DesignError::ToolShapeWithoutTool { .. }), "{e}");
+    // Unknown parameter: the valid names are listed.
+    let e = DesignKind::parse_with_tools("tool.die.shape.raduis", &c.surface, &c.tools)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("raduis") && e.contains("radius") && e.contains("origin.x"),
+        "{e}"
+    );
+    // Unknown tool: the case's tools are listed.
+    let e = DesignKind::parse_with_tools("tool.blank.shape.radius", &c.surface, &c.tools)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("blank") && e.contains("die") && e.contains("punch"),
+        "{e}"
+    );
+    // A reshaped tool that is no valid tool: an error naming the parameter.
+    let e = c.tools[1]
+        .reshaped(&[(*parameter, -20.0)])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("die") && e.contains("radius"), "{e}");
+    // In a case file: the step that would make the radius negative is refused at its key.
+    let design = r#"
+[[design]]
+name = "die.radius"
+kind = "tool.die.shape.radius"
+fd_steps = [1e-3, 20.0]
+"#;
+    let text = CASE.replace("{final}", "0.5").replace("{design}", design);
+    let e = parse_shell_case(&text, Path::new("tests/dsa_contact.rs"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("design[0].fd_steps[1]") && e.contains("radius"),
+        "{e}"
+    );
+    let design = r#"
+[[design]]
+name = "die.r"
+kind = "tool.die.shape.r"
+"#;
+    let text = CASE.replace("{final}", "0.5").replace("{design}", design);
+    let e = parse_shell_case(&text, Path::new("tests/dsa_contact.rs"))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("design[0].kind") && e.contains("radius"), "{e}");
 }

@@ -233,6 +233,7 @@ fn design_derivative_three_ways() {
             poisson: Dual64::new(nu, s.poisson),
             tool_offsets: &[],
             tool_rotations: &[],
+            tool_surfaces: None,
         };
         let qd: Vec<Dual64> = q.iter().map(|&x| Dual64::from(x)).collect();
         let mut fd = vec![Dual64::from(0.0); q.len()];

@@ -178,6 +178,7 @@ fn dual(
         penalty: Dual64::from(contact.penalty()),
         offsets: &zeros,
         rotations: &zeros,
+        surfaces: None,
         initial: Some(InitialGeometry {
             positions: &g.positions,
             surfaces: &g.points,
@@ -211,6 +212,7 @@ fn check_initial_path(
         penalty: contact.penalty(),
         offsets: &zeros,
         rotations: &zeros,
+        surfaces: None,
         initial: Some(InitialGeometry {
             positions: &positions,
             surfaces: &surfaces,

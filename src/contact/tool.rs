@@ -430,6 +430,80 @@ impl RigidTool {
         self.path.motion(t)
     }
 
+    /// The same tool (name, side, path) with design parameters of its surface moved:
+    /// `offsets` lists `(index in Surface::design_parameters, offset added)`. The surface is
+    /// rebuilt and validated and the coarse grid recomputed ([`RigidTool::new`]), so a
+    /// perturbed tool that is not a valid tool is an error naming the parameter, never a
+    /// panic: the tool-shape design variable of `crate::sensitivity::DesignKind::ToolShape`.
+    pub fn reshaped(&self, offsets: &[(usize, f64)]) -> Result<Self, ContactError> {
+        let mut p = self.surface.parameter_values();
+        let names = self.surface.parameter_names();
+        let key = |k: usize| {
+            format!(
+                "tool `{}`.shape.{}",
+                self.name,
+                names.get(k).map_or("?", |n| n.as_str())
+            )
+        };
+        for &(k, delta) in offsets {
+            let count = p.len();
+            let Some(slot) = p.get_mut(k) else {
+                return Err(invalid(
+                    format!("tool `{}` surface parameter index", self.name),
+                    k,
+                    &format!(
+                        "an index below {count} (the {} surface's parameters: {})",
+                        self.surface.kind(),
+                        names.join(", ")
+                    ),
+                ));
+            };
+            if !delta.is_finite() {
+                return Err(invalid(key(k), delta, "a finite offset"));
+            }
+            *slot += delta;
+        }
+        let described = || {
+            offsets
+                .iter()
+                .map(|&(k, d)| format!("{} + {d:e}", key(k)))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        let surface = self
+            .surface
+            .with_design_parameters::<f64>(&p)
+            .map_err(|e| {
+                invalid(
+                    described(),
+                    e.to_string(),
+                    "a valid tool surface after the design change",
+                )
+            })?;
+        RigidTool::new(self.name.clone(), surface, self.side, self.path.clone()).map_err(|e| {
+            invalid(
+                described(),
+                e.to_string(),
+                "a valid tool after the design change",
+            )
+        })
+    }
+
+    /// The design velocity of the tool's surface parameter `parameter` at the surface point
+    /// `ξ` and pseudo-time `t`, moved with the tool: `V^c = R ∂X/∂p` and
+    /// `V^c,α = R ∂X,α/∂p` at fixed `ξ` (eq 76; `R` the motion's rotation,
+    /// [`crate::geometry::Surface::design_velocity`]).
+    pub fn shape_velocity(
+        &self,
+        parameter: usize,
+        xi: [f64; 2],
+        t: f64,
+    ) -> Result<(V3<f64>, [V3<f64>; 2]), GeometryError> {
+        let d = self.surface.design_velocity(parameter, xi[0], xi[1])?;
+        let r = self.motion(t).rotation;
+        Ok((r * d.x, [r * d.xu, r * d.xv]))
+    }
+
     /// The moved surface point and its derivatives at `ξ` and pseudo-time `t`:
     /// `x^c = c + R (X − c) + a`, `x^c,α = R X,α`, `x^c,αβ = R X,αβ`.
     pub fn moved(&self, xi: [f64; 2], t: f64) -> SurfaceDerivs<f64> {

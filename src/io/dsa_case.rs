@@ -55,7 +55,7 @@ use crate::contact::RigidTool;
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
 use crate::sensitivity::{
-    check_tools, Design, DesignKind, DesignVariable, Layers, Monitor, Quantity,
+    check_tool_shapes, check_tools, Design, DesignKind, DesignVariable, Layers, Monitor, Quantity,
 };
 use serde::Deserialize;
 use std::path::Path;
@@ -254,9 +254,18 @@ pub fn parse_methods(
     Ok(out)
 }
 
+/// The case's geometry the design variables refer to: the sheet's surface (`shape.<…>`) and
+/// the tools (`tool.<name>.<…>`), both already checked.
+pub(crate) struct CaseGeometry<'a> {
+    /// The sheet's mid-surface.
+    pub surface: &'a Surface<f64>,
+    /// The rigid tools.
+    pub tools: &'a [RigidTool],
+}
+
 /// Check the `[[design]]` and `[dsa]` tables of a case (`None` when there are no `[[design]]`
-/// tables; a `[dsa]` table without them is an error). `thickness`, `material` and `monitors`
-/// are the case's, already checked.
+/// tables; a `[dsa]` table without them is an error). `thickness`, `material`, `monitors` and
+/// `geometry` are the case's, already checked.
 pub(crate) fn check(
     path: &Path,
     design: Vec<DesignFile>,
@@ -264,8 +273,9 @@ pub(crate) fn check(
     thickness: f64,
     material: &MaterialParams<f64>,
     monitors: &[CaseMonitor],
-    surface: &Surface<f64>,
+    geometry: &CaseGeometry<'_>,
 ) -> Result<Option<DsaSpec>, CaseError> {
+    let (surface, tools) = (geometry.surface, geometry.tools);
     if design.is_empty() {
         return match dsa {
             Some(_) => Err(invalid(
@@ -314,7 +324,7 @@ pub(crate) fn check(
                 format!("a name not used by an earlier design variable (design[{j}])"),
             ));
         }
-        let kind = design_kind(path, &format!("{key}.kind"), &d.kind, surface)?;
+        let kind = design_kind(path, &format!("{key}.kind"), &d.kind, surface, tools)?;
         if let Some(j) = entries.iter().position(|e| e.variable.kind == kind) {
             return Err(invalid(
                 path,
@@ -377,7 +387,18 @@ pub(crate) fn check(
             // The perturbed value must differ from the nominal one in floating point: a step
             // that vanishes against τ (or, for a tool offset, against the coordinates it
             // moves) gives a difference of 0 and a meaningless central difference.
-            let (value, what) = if is_tool {
+            let tool_parameter = match &variable.kind {
+                DesignKind::ToolShape {
+                    tool, parameter, ..
+                } => tools
+                    .iter()
+                    .find(|t| &t.name == tool)
+                    .and_then(|t| t.surface.parameter_values().get(*parameter).copied()),
+                _ => None,
+            };
+            let (value, what) = if let Some(p) = tool_parameter {
+                (p, "the tool's surface parameter")
+            } else if is_tool {
                 (coordinate_scale, "the sheet's coordinates")
             } else {
                 (tau, "the variable's value")
@@ -404,6 +425,15 @@ pub(crate) fn check(
                     )
                 })?;
             }
+            // A tool shape: the perturbed tool must be a valid tool (RigidTool::reshaped).
+            check_tool_shapes(std::slice::from_ref(&variable), tools, h).map_err(|e| {
+                invalid(
+                    path,
+                    format!("{steps_key}[{i}]"),
+                    super::shell_case::fmt_num(r),
+                    format!("a step that keeps the tool valid: {e}"),
+                )
+            })?;
         }
         entries.push(DesignEntry { variable, fd_steps });
     }
@@ -707,12 +737,12 @@ fn monitor_selection(
     Ok(vec![sens_monitor(path, key, m, c, comp)?])
 }
 
-/// A tool translation or rotation: its value (the offset from the case's tool) is 0 at the
-/// nominal design, so its finite-difference steps are absolute.
-fn is_tool_kind(kind: &DesignKind) -> bool {
+/// A tool translation, rotation or shape: its value (the offset from the case's tool) is 0 at
+/// the nominal design, so its finite-difference steps are absolute.
+pub fn is_tool_kind(kind: &DesignKind) -> bool {
     matches!(
         kind,
-        DesignKind::Tool { .. } | DesignKind::ToolRotation { .. }
+        DesignKind::Tool { .. } | DesignKind::ToolRotation { .. } | DesignKind::ToolShape { .. }
     )
 }
 
@@ -721,11 +751,13 @@ fn design_kind(
     key: &str,
     s: &str,
     surface: &Surface<f64>,
+    tools: &[RigidTool],
 ) -> Result<DesignKind, CaseError> {
     const EXPECTED: &str = "\"thickness\", \"material.<young|poisson|shear_factor|sigma0|\
-                            hardening|beta>\", \"shape.<surface parameter>\" or \
-                            \"tool.<name>.<x|y|z|rx|ry|rz>\"";
-    DesignKind::parse_on(s, surface)
+                            hardening|beta>\", \"shape.<surface parameter>\", \
+                            \"tool.<name>.<x|y|z|rx|ry|rz>\" or \
+                            \"tool.<name>.shape.<tool surface parameter>\"";
+    DesignKind::parse_with_tools(s, surface, tools)
         .map_err(|e| invalid(path, key, format!("{s:?}"), format!("{EXPECTED} ({e})")))
 }
 

@@ -130,6 +130,12 @@ impl Analysis for CaseAnalysis<'_> {
                         offset.translation, offset.rotation
                     )))
                 })?;
+            if !offset.shape.is_empty() {
+                let shape: Vec<(usize, f64)> = offset.shape.iter().map(|(&k, &d)| (k, d)).collect();
+                *tool = tool.reshaped(&shape).map_err(|e| {
+                    SensitivityError::Shell(ShellError::InvalidInput(e.to_string()))
+                })?;
+            }
         }
         let b = shell_build::build(&c).map_err(|e| {
             SensitivityError::Shell(ShellError::InvalidInput(format!(
@@ -1232,8 +1238,8 @@ pub fn to_json(case: &ShellCase, r: &DsaResult, status: &str) -> Value {
     })
 }
 
-/// `thickness`, `material.<name>`, `shape.<surface parameter>`, `tool.<name>.<x|y|z>` or
-/// `tool.<name>.<rx|ry|rz>`.
+/// `thickness`, `material.<name>`, `shape.<surface parameter>`, `tool.<name>.<x|y|z>`,
+/// `tool.<name>.<rx|ry|rz>` or `tool.<name>.shape.<tool surface parameter>`.
 pub fn kind_name(v: &DesignVariable) -> String {
     match &v.kind {
         crate::sensitivity::DesignKind::Material(p) => format!("material.{}", p.name()),
@@ -1249,6 +1255,9 @@ pub fn kind_name(v: &DesignVariable) -> String {
                 "tool.{tool}.{}",
                 crate::sensitivity::TOOL_ROTATION_AXES[*axis.min(&2)]
             )
+        }
+        crate::sensitivity::DesignKind::ToolShape { tool, name, .. } => {
+            format!("tool.{tool}.shape.{name}")
         }
         _ => "thickness".into(),
     }
@@ -1301,12 +1310,8 @@ pub fn table(r: &DsaResult, v: usize) -> String {
         kind_name(&var.entry.variable),
         var.value,
         col.map_or(String::from(", no finite differences"), |c| {
-            if matches!(
-                var.entry.variable.kind,
-                crate::sensitivity::DesignKind::Tool { .. }
-                    | crate::sensitivity::DesignKind::ToolRotation { .. }
-            ) {
-                // τ is the tool's offset or rotation (0): fd_steps are absolute.
+            if super::dsa_case::is_tool_kind(&var.entry.variable.kind) {
+                // τ is the tool's offset, rotation or shape offset (0): fd_steps are absolute.
                 format!(", Δτ = {:e} (absolute: τ is the tool's offset)", c.h)
             } else {
                 format!(", Δτ = {:e} (h/|τ| = {:e})", c.h, c.relative)

@@ -1372,7 +1372,16 @@ impl Checker<'_> {
             return Err(self.err("problem.title", format!("{t:?}"), super::NAME_EXPECTED));
         }
         let dsa = super::dsa_case::check(
-            self.path, f.design, f.dsa, thickness, &material, &monitors, &surface,
+            self.path,
+            f.design,
+            f.dsa,
+            thickness,
+            &material,
+            &monitors,
+            &super::dsa_case::CaseGeometry {
+                surface: &surface,
+                tools: &tools,
+            },
         )?;
         if let Some(spec) = &dsa {
             super::dsa_case::check_tool_names(self.path, &tools, spec)?;

@@ -194,6 +194,19 @@ impl SensitivityState {
                 })?;
                 s.tools[i].rotation[*axis] = 1.0;
             }
+            DesignKind::ToolShape {
+                tool, parameter, ..
+            } => {
+                let names = contact_tools(problem);
+                let i = names.iter().position(|n| n == tool).ok_or_else(|| {
+                    DesignError::UnknownTool {
+                        variable: var.name.clone(),
+                        tool: tool.clone(),
+                        expected: format!("{names:?}"),
+                    }
+                })?;
+                s.tools[i].shape = Some((*parameter, 1.0));
+            }
             #[allow(unreachable_patterns)]
             _ => {
                 return Err(DesignError::Unsupported {

@@ -54,7 +54,10 @@
 //! ([`crate::sensitivity::DesignKind::Tool`]) and a rotation vector `φ` of value 0 seeded
 //! along the axis of a tool-rotation variable ([`crate::sensitivity::DesignKind::ToolRotation`]:
 //! `R(φ)` in `D` is composed into the tool's motion, `R(θ(t)) R(φ)`, so the moved point, its
-//! tangents, curvatures and normal carry the rotation). The closest-point projection's final Newton
+//! tangents, curvatures and normal carry the rotation) and, for a tool-shape variable
+//! ([`crate::sensitivity::DesignKind::ToolShape`]), the tool's surface rebuilt in `D` with its
+//! design parameter seeded (`Surface::with_design_parameters`, [`DualState::tool_surfaces`]),
+//! so the tool point, tangents and normal carry `V^c = R ∂X/∂p` at fixed `ξ`. The closest-point projection's final Newton
 //! correction in `D` carries the projection sensitivity (eq 80) into the gap and the normal, so
 //! the derivative part of the contact force is the fictitious load `b'_N` of eq (83) plus its
 //! history terms, computed rather than derived. The contact's tangent is in the tangent the
@@ -173,6 +176,9 @@ pub struct DualState<D> {
     /// built about its pivot, value 0 (the problem's tools are at the design's orientation),
     /// seeded for tool-rotation variables.
     pub tool_rotations: Vec<Vector3<D>>,
+    /// Per tool of the contact load: its surface in `D` with the group's tool-shape variables
+    /// seeded on their design parameters (`None` without any: the tools' own surfaces).
+    pub tool_surfaces: Option<Vec<Surface<D>>>,
 }
 
 impl<D: DesignDual> DualState<D> {
@@ -187,6 +193,7 @@ impl<D: DesignDual> DualState<D> {
             poisson: self.material.poisson,
             tool_offsets: &self.tool_offsets,
             tool_rotations: &self.tool_rotations,
+            tool_surfaces: self.tool_surfaces.as_deref(),
         }
     }
 }
@@ -320,6 +327,7 @@ impl<D: DesignDual> DualDsa<D> {
             .first()
             .map(|c| c.contact.tools().iter().map(|t| t.name.as_str()).collect())
             .unwrap_or_default();
+        let tool_list = contacts.first().map_or(&[][..], |c| c.contact.tools());
         super::check_tools(&variables, &tool_names)?;
         let model = &problem.model;
         let design = Design::of(model);
@@ -336,6 +344,12 @@ impl<D: DesignDual> DualDsa<D> {
                 let mut tool_parts =
                     vec![[vec![0.0; nd], vec![0.0; nd], vec![0.0; nd]]; tool_names.len()];
                 let mut rotation_parts = tool_parts.clone();
+                // Per tool, per surface design parameter, the seed of each direction.
+                let mut tool_shape_parts: Vec<Vec<Vec<f64>>> = tool_list
+                    .iter()
+                    .map(|t| vec![vec![0.0; nd]; t.surface.n_design_parameters()])
+                    .collect();
+                let mut tool_shape = false;
                 for (k, v) in variables[first..first + count].iter().enumerate() {
                     match &v.kind {
                         DesignKind::Thickness => t_parts[k] = 1.0,
@@ -357,8 +371,53 @@ impl<D: DesignDual> DualDsa<D> {
                                 rotation_parts[i][*axis][k] = 1.0;
                             }
                         }
+                        DesignKind::ToolShape {
+                            tool, parameter, ..
+                        } => {
+                            // check_tools above: the tool exists.
+                            let i = tool_names.iter().position(|n| n == tool);
+                            let slot = i.and_then(|i| tool_shape_parts[i].get_mut(*parameter));
+                            let Some(slot) = slot else {
+                                return Err(SensitivityError::Design(
+                                    DesignError::InvalidPerturbation {
+                                        variable: v.name.clone(),
+                                        delta: 0.0,
+                                        detail: format!(
+                                            "tool `{tool}` surface parameter index {parameter}: \
+                                             expected one of the tool surface's parameters"
+                                        ),
+                                    },
+                                ));
+                            };
+                            slot[k] = 1.0;
+                            tool_shape = true;
+                        }
                     }
                 }
+                let tool_surfaces = if tool_shape {
+                    let built = tool_list
+                        .iter()
+                        .zip(&tool_shape_parts)
+                        .map(|(t, parts)| {
+                            let p: Vec<D> = t
+                                .surface
+                                .parameter_values()
+                                .iter()
+                                .zip(parts)
+                                .map(|(&v, e)| D::from_parts(v, e))
+                                .collect();
+                            t.surface.with_design_parameters::<D>(&p).map_err(|e| {
+                                SensitivityError::Shell(ShellError::InvalidInput(format!(
+                                    "dual surface of tool `{}`: {e}",
+                                    t.name
+                                )))
+                            })
+                        })
+                        .collect::<Result<Vec<_>, _>>()?;
+                    Some(built)
+                } else {
+                    None
+                };
                 let m = design.material.to_array();
                 let (particles, history, surfaces, positions) = match surface {
                     Some(s) if shape => {
@@ -396,6 +455,7 @@ impl<D: DesignDual> DualDsa<D> {
                         .iter()
                         .map(|p| Vector3::from_fn(|c, _| D::from_parts(0.0, &p[c])))
                         .collect(),
+                    tool_surfaces,
                 })
             })
             .collect::<Result<Vec<_>, SensitivityError>>()?;
@@ -620,6 +680,7 @@ impl<D: DesignDual> DualDsa<D> {
                 positions: g.positions.clone(),
                 tool_offsets: g.tool_offsets.clone(),
                 tool_rotations: g.tool_rotations.clone(),
+                tool_surfaces: g.tool_surfaces.clone(),
             });
         }
         self.pending = Some(next);

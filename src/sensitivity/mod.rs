@@ -14,7 +14,8 @@
 //! coordinates; their design velocity field (eqs 37–43) is hand-derived in [`shape`], and the
 //! dual reference seeds the surface parameter ([`shape::dual_geometry`]). Tool placements
 //! ([`DesignKind::Tool`], [`DesignKind::ToolRotation`]) translate a rigid tool's path or turn
-//! the tool as built (`b'_N`, eq 83).
+//! the tool as built, and tool shapes ([`DesignKind::ToolShape`]) change a design parameter of
+//! a tool's surface (`b'_N`, eq 83, with the design velocity `V^c` of eq 76).
 //!
 //! Layout: `docs/sensitivity.md`.
 
@@ -128,6 +129,24 @@ pub enum DesignKind {
         /// Axis 0, 1, 2.
         axis: usize,
     },
+    /// A design parameter of the named rigid tool's surface (`Surface::design_parameters` of
+    /// the tool as built: the radius of a cylinder die, a NURBS control-point coordinate or
+    /// weight, …): the tool's shape. Its design velocity on the tool is the surface's
+    /// `Surface::design_velocity` at fixed surface parameters `ξ`, moved with the tool:
+    /// `V^c = R ∂X/∂p`, `V^c,α = R ∂X,α/∂p` (eq 76; `R` the tool's rotation at the step), which
+    /// enter the projection sensitivity (eq 80), the gap (eq 78) and the normal's turn (the
+    /// curvature terms of eqs 77 and 83). The variable's value is the offset of the
+    /// parameter from the case's tool (0 at the nominal design), so its finite-difference
+    /// steps are absolute; the perturbed tool is built by
+    /// [`crate::contact::RigidTool::reshaped`].
+    ToolShape {
+        /// Tool name (`[[tool]] name`).
+        tool: String,
+        /// Index in the tool surface's `Surface::design_parameters`.
+        parameter: usize,
+        /// Its name there (`radius`, `cp[2][3].z`, …).
+        name: String,
+    },
 }
 
 /// The axis names of [`DesignKind::Tool`] in case keys (`tool.<name>.x`).
@@ -140,9 +159,17 @@ impl DesignKind {
     /// From a case-file key: `thickness`, `material.<name>` with `<name>` one of
     /// [`PARAM_NAMES`], `tool.<name>.<x|y|z>` (translation) or `tool.<name>.<rx|ry|rz>`
     /// (rotation; the tool name is checked against the case's tools by [`check_tools`]).
+    /// A `shape.<parameter>` or `tool.<name>.shape.<parameter>` key needs its surface
+    /// ([`DesignKind::parse_on`], [`DesignKind::parse_with_tools`]).
     pub fn parse(key: &str) -> Result<Self, DesignError> {
         if key == "thickness" {
             return Ok(DesignKind::Thickness);
+        }
+        if let Some((tool, name)) = split_tool_shape(key) {
+            return Err(DesignError::ToolShapeWithoutTool {
+                tool: tool.to_string(),
+                name: name.to_string(),
+            });
         }
         if let Some(rest) = key.strip_prefix("tool.") {
             let parsed = rest.rsplit_once('.').and_then(|(name, ax)| {
@@ -182,6 +209,49 @@ impl DesignKind {
         }
     }
 
+    /// As [`DesignKind::parse_on`], with `tool.<name>.shape.<parameter>` resolved on the
+    /// surface of the tool `<name>` among `tools` ([`DesignKind::tool_shape`]).
+    pub fn parse_with_tools(
+        key: &str,
+        surface: &Surface<f64>,
+        tools: &[crate::contact::RigidTool],
+    ) -> Result<Self, DesignError> {
+        match split_tool_shape(key) {
+            Some((tool, name)) => {
+                let Some(t) = tools.iter().find(|t| t.name == tool) else {
+                    return Err(DesignError::UnknownTool {
+                        variable: key.to_string(),
+                        tool: tool.to_string(),
+                        expected: format!(
+                            "{:?}",
+                            tools.iter().map(|t| t.name.as_str()).collect::<Vec<_>>()
+                        ),
+                    });
+                };
+                Self::tool_shape(t, name)
+            }
+            None => Self::parse_on(key, surface),
+        }
+    }
+
+    /// The tool-shape design variable of `tool`'s surface parameter `name` (`radius`,
+    /// `cp[1][2].z`, …); an unknown name is an error listing the valid ones.
+    pub fn tool_shape(tool: &crate::contact::RigidTool, name: &str) -> Result<Self, DesignError> {
+        match tool.surface.parameter_index(name) {
+            Some(parameter) => Ok(DesignKind::ToolShape {
+                tool: tool.name.clone(),
+                parameter,
+                name: name.to_string(),
+            }),
+            None => Err(DesignError::UnknownToolShapeParameter {
+                tool: tool.name.clone(),
+                name: name.to_string(),
+                kind: tool.surface.kind(),
+                expected: tool.surface.parameter_names().join(", "),
+            }),
+        }
+    }
+
     /// The shape design variable of `surface`'s design parameter `name` (`radius`,
     /// `centre.z`, `cp[2][3].z`, …); an unknown name is an error listing the valid ones.
     pub fn shape(surface: &Surface<f64>, name: &str) -> Result<Self, DesignError> {
@@ -197,6 +267,13 @@ impl DesignKind {
             }),
         }
     }
+}
+
+/// `tool.<name>.shape.<parameter>` split into the tool name and the parameter name (`None`
+/// for any other key, or an empty part).
+fn split_tool_shape(key: &str) -> Option<(&str, &str)> {
+    let (tool, name) = key.strip_prefix("tool.")?.split_once(".shape.")?;
+    (!tool.trim().is_empty() && !name.trim().is_empty()).then_some((tool, name))
 }
 
 /// A named design variable.
@@ -257,6 +334,15 @@ impl DesignVariable {
         Ok(Self::new(name, DesignKind::ToolRotation { tool, axis }))
     }
 
+    /// A tool-shape design variable: `tool`'s surface parameter `name`, named
+    /// `<tool>.<name>` (`die.radius`).
+    pub fn tool_shape(tool: &crate::contact::RigidTool, name: &str) -> Result<Self, DesignError> {
+        Ok(Self::new(
+            format!("{}.{name}", tool.name),
+            DesignKind::tool_shape(tool, name)?,
+        ))
+    }
+
     /// Its value at `design` (a shape variable of a design without a surface, or with an
     /// index beyond its parameters, is NaN: [`DesignVariable::perturbed`] and
     /// [`DesignVariable::validate_on`] report it as an error).
@@ -275,6 +361,9 @@ impl DesignVariable {
                 .get(*axis)
                 .copied()
                 .unwrap_or(f64::NAN),
+            DesignKind::ToolShape {
+                tool, parameter, ..
+            } => design.tool_shape_offset(tool, *parameter),
         }
     }
 
@@ -364,6 +453,18 @@ impl DesignVariable {
                     });
                 }
                 d.tool_offsets.entry(tool.clone()).or_default().rotation[*axis] += delta;
+            }
+            DesignKind::ToolShape {
+                tool, parameter, ..
+            } => {
+                // The perturbed surface is checked where the tool is rebuilt
+                // (`RigidTool::reshaped`, before any analysis: `check_tool_shapes`).
+                *d.tool_offsets
+                    .entry(tool.clone())
+                    .or_default()
+                    .shape
+                    .entry(*parameter)
+                    .or_default() += delta;
             }
         }
         Ok(d)
@@ -475,16 +576,21 @@ fn validate_list(
     Ok(())
 }
 
-/// The placement of one rigid tool relative to the case's ([`Design::tool_offsets`]): a
-/// translation of its whole path and a rotation of the tool as built about its pivot
-/// (`crate::contact::ToolPath::translated`, `crate::contact::ToolPath::rotated`).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+/// The placement and shape of one rigid tool relative to the case's
+/// ([`Design::tool_offsets`]): a translation of its whole path, a rotation of the tool as
+/// built about its pivot (`crate::contact::ToolPath::translated`,
+/// `crate::contact::ToolPath::rotated`) and offsets of its surface's design parameters
+/// (`crate::contact::RigidTool::reshaped`).
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct ToolOffset {
     /// Translation added to the path at every key ([`DesignKind::Tool`]).
     pub translation: [f64; 3],
     /// Rotation vector `φ` (radians, global axes) of the tool as built about its pivot,
     /// before its motion ([`DesignKind::ToolRotation`]).
     pub rotation: [f64; 3],
+    /// Offsets added to the tool surface's design parameters, by index in
+    /// `Surface::design_parameters` ([`DesignKind::ToolShape`]; absent: zero).
+    pub shape: BTreeMap<usize, f64>,
 }
 
 /// The design of a shell: thickness, material, (for shape variables) the mid-surface,
@@ -541,13 +647,24 @@ impl Design {
     pub fn tool_rotation(&self, name: &str) -> [f64; 3] {
         self.tool_offsets.get(name).map_or([0.0; 3], |o| o.rotation)
     }
+
+    /// The offset of tool `name`'s surface design parameter `parameter` (zero when not set).
+    pub fn tool_shape_offset(&self, name: &str, parameter: usize) -> f64 {
+        self.tool_offsets
+            .get(name)
+            .and_then(|o| o.shape.get(&parameter).copied())
+            .unwrap_or(0.0)
+    }
 }
 
 /// Check that every tool variable names one of `tools` (the case's `[[tool]]` names):
 /// [`DesignError::UnknownTool`] listing them otherwise.
 pub fn check_tools(variables: &[DesignVariable], tools: &[&str]) -> Result<(), DesignError> {
     for v in variables {
-        if let DesignKind::Tool { tool, .. } | DesignKind::ToolRotation { tool, .. } = &v.kind {
+        if let DesignKind::Tool { tool, .. }
+        | DesignKind::ToolRotation { tool, .. }
+        | DesignKind::ToolShape { tool, .. } = &v.kind
+        {
             if !tools.contains(&tool.as_str()) {
                 return Err(DesignError::UnknownTool {
                     variable: v.name.clone(),
@@ -555,6 +672,44 @@ pub fn check_tools(variables: &[DesignVariable], tools: &[&str]) -> Result<(), D
                     expected: format!("{tools:?}"),
                 });
             }
+        }
+    }
+    Ok(())
+}
+
+/// Check every tool-shape variable against `tools` (the case's tools): the tool exists and
+/// its surface, with the parameter moved by `±max_delta` (the largest finite-difference step,
+/// 0 for the derivative methods alone), is a valid tool ([`crate::contact::RigidTool::reshaped`]),
+/// so that no re-run can fail on a degenerate tool.
+pub fn check_tool_shapes(
+    variables: &[DesignVariable],
+    tools: &[crate::contact::RigidTool],
+    max_delta: f64,
+) -> Result<(), DesignError> {
+    for v in variables {
+        let DesignKind::ToolShape {
+            tool, parameter, ..
+        } = &v.kind
+        else {
+            continue;
+        };
+        let Some(t) = tools.iter().find(|t| &t.name == tool) else {
+            return Err(DesignError::UnknownTool {
+                variable: v.name.clone(),
+                tool: tool.clone(),
+                expected: format!(
+                    "{:?}",
+                    tools.iter().map(|t| t.name.as_str()).collect::<Vec<_>>()
+                ),
+            });
+        };
+        for delta in [max_delta, -max_delta] {
+            t.reshaped(&[(*parameter, delta)])
+                .map_err(|e| DesignError::InvalidPerturbation {
+                    variable: v.name.clone(),
+                    delta,
+                    detail: e.to_string(),
+                })?;
         }
     }
     Ok(())
@@ -1235,8 +1390,8 @@ pub enum DesignError {
     /// A key that is no design-variable kind.
     #[error(
         "design variable kind `{key}`: expected `thickness`, `material.<parameter>`, \
-         `shape.<surface parameter>` or `tool.<name>.<x|y|z|rx|ry|rz>` (a tool's translation \
-         or rotation)"
+         `shape.<surface parameter>`, `tool.<name>.<x|y|z|rx|ry|rz>` (a tool's translation \
+         or rotation) or `tool.<name>.shape.<surface parameter>` (a tool's shape)"
     )]
     UnknownKind {
         /// The key given.
@@ -1251,6 +1406,26 @@ pub enum DesignError {
         kind: &'static str,
         /// The admissible names.
         expected: String,
+    },
+    /// A tool-shape design variable of a surface that does not have the parameter.
+    #[error("tool-shape design variable `tool.{tool}.shape.{name}`: the tool's {kind} surface has no parameter `{name}`, expected one of {expected}")]
+    UnknownToolShapeParameter {
+        /// Tool name.
+        tool: String,
+        /// The name given.
+        name: String,
+        /// Surface kind.
+        kind: &'static str,
+        /// The admissible names.
+        expected: String,
+    },
+    /// A tool-shape design variable parsed without the case's tools.
+    #[error("tool-shape design variable `tool.{tool}.shape.{name}`: needs the case's tools (use DesignKind::parse_with_tools)")]
+    ToolShapeWithoutTool {
+        /// Tool name.
+        tool: String,
+        /// The parameter name.
+        name: String,
     },
     /// A shape design variable checked without the surface it belongs to.
     #[error("shape design variable `shape.{name}`: needs the shell's surface (use DesignKind::parse_on, validate_design_on, Design::of_shell)")]

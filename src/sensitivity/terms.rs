@@ -139,14 +139,23 @@ fn seeds_of(g: &DualState<Dual64>) -> SensitivityState {
         position: g.positions.as_ref().map(|x| x.iter().map(pv).collect()),
         thickness: g.thickness.eps,
         material: MaterialParams::from_array(g.material.to_array().map(|x| x.eps)),
-        // Tool translations and rotations both feed the `Tool` group (V^c, eq 76).
+        // Tool translations, rotations and shapes all feed the `Tool` group (V^c, eq 76).
         tools: g
             .tool_offsets
             .iter()
             .zip(&g.tool_rotations)
-            .map(|(a, r)| ToolRate {
+            .enumerate()
+            .map(|(i, (a, r))| ToolRate {
                 translation: [a[0].eps, a[1].eps, a[2].eps],
                 rotation: [r[0].eps, r[1].eps, r[2].eps],
+                // One variable per dual state: at most one seeded surface parameter.
+                shape: g.tool_surfaces.as_ref().and_then(|s| {
+                    s[i].parameter_values()
+                        .iter()
+                        .enumerate()
+                        .find(|(_, p)| p.eps != 0.0)
+                        .map(|(k, p)| (k, p.eps))
+                }),
             })
             .collect(),
     }
@@ -201,6 +210,7 @@ fn masked(g: &DualState<Dual64>, group: TermGroup) -> DualState<Dual64> {
         for v in m.tool_offsets.iter_mut().chain(&mut m.tool_rotations) {
             *v = v.map(|x| c(&x));
         }
+        m.tool_surfaces = None;
     }
     if group != TermGroup::Material {
         m.material = MaterialParams::from_array(m.material.to_array().map(|x| c(&x)));

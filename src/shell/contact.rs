@@ -185,6 +185,10 @@ pub struct ContactInputs<'a, T> {
     /// its pivot before its motion, `x^c = c + R(θ(t)) R(φ) R_φ₀ (X − c) + a(t)`
     /// ([`crate::contact::ToolPath::motion_with`]; zero: the tools as built).
     pub rotations: &'a [V3<T>],
+    /// Per tool, its surface as built in scalar `T` (tool-shape design variables seed its
+    /// design parameters, `Surface::with_design_parameters`; the value parts must be the
+    /// tools' own surfaces); `None`: the tools' surfaces as constants.
+    pub surfaces: Option<&'a [Surface<T>]>,
     /// The initial geometry of the in-plane points in `T` (shape design variables: the slave
     /// sites move with the design velocity of the mid-surface, eq 74's `V⁰`); `None`: the
     /// sites as built from the surface ([`ShellContact::new`]).
@@ -410,6 +414,7 @@ impl ShellContact {
             penalty: T::cst(self.penalty),
             offsets: &offsets,
             rotations: &offsets,
+            surfaces: None,
             initial: None,
         };
         self.evaluate_with(model, &inputs, q, t, surfaces)
@@ -489,6 +494,22 @@ impl ShellContact {
         Ok(out)
     }
 
+    /// The tools' surfaces in `T`: those of `inputs` (checked: one per tool) or the tools' own
+    /// as constants.
+    fn input_surfaces<T: Real>(
+        &self,
+        inputs: &ContactInputs<'_, T>,
+    ) -> Result<Vec<Surface<T>>, ShellError> {
+        match inputs.surfaces {
+            Some(s) if s.len() != self.tools.len() => Err(ShellError::Dimension {
+                expected: self.tools.len(),
+                got: s.len(),
+            }),
+            Some(s) => Ok(s.to_vec()),
+            None => Ok(self.tools.iter().map(|tl| tl.surface.lift()).collect()),
+        }
+    }
+
     /// Add `f_c` from evaluated sites (generic).
     fn scatter_forces<T: Real>(&self, model: &ShellModel, evals: &[SiteEval<T>], f: &mut [T]) {
         for (site, ev) in self.sites.iter().zip(evals) {
@@ -534,7 +555,9 @@ impl ShellContact {
     /// translation added to its path (tool-position design variables, eq 76 with a constant
     /// `V^c`) and each tool's rotation `R(φ)` of the tool as built composed into its motion
     /// (tool-rotation design variables: the moved point, its tangents and curvatures and the
-    /// normal all turn, eq 76 with `V^c = ȧ + Ω (x^c − p)`) and, when given, the initial
+    /// normal all turn, eq 76 with `V^c = ȧ + Ω (x^c − p)`), each tool's surface in `T`
+    /// ([`ContactInputs::surfaces`]: a tool-shape variable moves the tool point, tangents and
+    /// normal at fixed `ξ`, eq 76's `V^c = R ∂X/∂p`) and, when given, the initial
     /// geometry of the in-plane points ([`ContactInputs::initial`]: a shape design variable
     /// moves the slave points with `V⁰ + ζ t/2 ṅ⁰` and changes the face areas, eq 74).
     /// Eqs 68–70 evaluated through
@@ -566,7 +589,7 @@ impl ShellContact {
         if let Some(g) = &inputs.initial {
             g.check(model)?;
         }
-        let surfaces: Vec<Surface<T>> = self.tools.iter().map(|tl| tl.surface.lift()).collect();
+        let surfaces = self.input_surfaces(inputs)?;
         let evals = self.evaluate_with(model, inputs, q, t, &surfaces)?;
         self.scatter_forces(model, &evals, f);
         Ok(())
@@ -594,7 +617,7 @@ impl ShellContact {
         if let Some(g) = &inputs.initial {
             g.check(model)?;
         }
-        let surfaces: Vec<Surface<T>> = self.tools.iter().map(|tl| tl.surface.lift()).collect();
+        let surfaces = self.input_surfaces(inputs)?;
         let evals = self.evaluate_with(model, inputs, q, t, &surfaces)?;
         let mut out = vec![V3::zeros(); self.tools.len()];
         for ev in &evals {

@@ -13,6 +13,14 @@
 //!   `p = c + a(t)` the design velocity of the tool point is `V^c = ȧ + Ω (x^c − p)` (eq 76),
 //!   and the tangents, second derivatives and normal move with the tool:
 //!   `V^c,α = Ω x^c,α`, `V^c,αβ = Ω x^c,αβ`, `ṅ|_ξ = Ω n`;
+//! - the **tool shapes** `ṗ_k` (a tool-shape design variable changes a design parameter of the
+//!   tool's surface, `X(ξ; p)`, [`crate::contact::RigidTool::reshaped`]): at fixed surface
+//!   parameters `ξ` the tool point moves by `V^c = R ∂X/∂p ṗ` and its tangents by
+//!   `V^c,α = R ∂X,α/∂p ṗ` (eq 76, `R = R(t) R_φ` the tool's rotation;
+//!   [`crate::contact::RigidTool::shape_velocity`]); the normal turns at fixed `ξ` by
+//!   `ṅ|_ξ = (I − n nᵀ) ċ / (n·c)`, `c = x^c,1 × x^c,2`, `ċ = V^c,1 × x^c,2 + x^c,1 × V^c,2`
+//!   (`n = ±c/|c|`). Its curvature change does not enter the force's derivative (only the
+//!   tangent stiffness's);
 //! - the **thickness** `ṫ` (slave faces at `ζ t/2`, initial face areas) and the **penalty**
 //!   `ω̇` (`ω = c E/t` makes it design-dependent);
 //! - the **shell state**: the committed particle states' dots `ū̇, ḋ, ė` (the history
@@ -37,13 +45,15 @@
 //!
 //! **Projection sensitivity (eq 80).** Differentiating eq (67),
 //! `(x − x^c(ξ))·x^c,α(ξ) = 0`, with the tool point moving by `V^c` and its tangents by
-//! `V^c,α = Ω x^c,α`:
-//! `(ẋ − V^c − x^c,β ξ̇_β)·x^c,α + (x − x^c)·(Ω x^c,α + x^c,αβ ξ̇_β) = 0`; with
+//! `V^c,α` (`Ω x^c,α` for a rotation, `R ∂X,α/∂p ṗ` for a tool shape, zero for a
+//! translation):
+//! `(ẋ − V^c − x^c,β ξ̇_β)·x^c,α + (x − x^c)·(V^c,α + x^c,αβ ξ̇_β) = 0`; with
 //! `x − x^c = g n` (eq 68 at an interior projection) this is
-//! `A ξ̇ = [x^c,α·(ẋ − V^c) + g n·(Ω x^c,α)]`, `A = m − g b` (eqs 79–80: the last term is
-//! eq 80's `g n·V^c,α`, zero for a translation). **Gap and normal:** `g = (x − x^c)·n`, so
+//! `A ξ̇ = [x^c,α·(ẋ − V^c) + g n·V^c,α]`, `A = m − g b` (eqs 79–80). **Gap and normal:**
+//! `g = (x − x^c)·n`, so
 //! `ġ = n·(ẋ − V^c − x^c,β ξ̇_β) + g n·ṅ = n·(ẋ − V^c)` (eq 78; `n ⟂ x^c,β`, `n·ṅ = 0`);
-//! the normal turns with the tool and slides along it: `ṅ = Ω n + n,β ξ̇_β` with
+//! the normal turns with the tool (`ṅ|_ξ`: `Ω n` for a rotation, the tool-shape term above)
+//! and slides along it: `ṅ = ṅ|_ξ + n,β ξ̇_β` with
 //! Weingarten's `n,β = −(b m⁻¹)_βγ x^c,γ` (the curvature term of eqs 77, 83).
 //! **Force (eq 83's `b'_N` with the state terms):** `f = −ω w g n`
 //! (eq 70), so `ḟ = −(ω̇ w g + ω ẇ g + ω w ġ) n − ω w g ṅ`, with `ẇ` the derivative of
@@ -86,6 +96,10 @@ pub struct ToolRate {
     /// (global axes; `V^c = Ω (x^c − p)`, `Ω = [R(t) φ̇]×`, module documentation): a unit
     /// vector along the axis of a tool-rotation variable, zero otherwise.
     pub rotation: [f64; 3],
+    /// `(k, ṗ_k)`: the rate of the tool surface's design parameter `k`
+    /// (`Surface::design_parameters`) of a tool-shape variable (`V^c = R ∂X/∂p ṗ`,
+    /// `V^c,α = R ∂X,α/∂p ṗ` at fixed `ξ`, module documentation); `None` otherwise.
+    pub shape: Option<(usize, f64)>,
 }
 
 /// Derivatives of the contact force's inputs with respect to one design variable
@@ -319,10 +333,33 @@ impl ShellContact {
                 // Relative velocity of the slave point to the tool point,
                 // V^c = ȧ + Ω (x^c − p) (eq 76).
                 let (a_dot, spin, pivot) = &tool_motion[tool];
-                let x_dot = xbar_dot + d * zh_dot + d_dot * zh;
-                let v_c = a_dot + spin.cross(&(cp.surface.x - pivot));
-                let rel = x_dot - v_c;
                 let t = [cp.surface.xu, cp.surface.xv];
+                let n = cp.normal;
+                // A tool shape: V^c = R ∂X/∂p ṗ, V^c,α = R ∂X,α/∂p ṗ at fixed ξ and the
+                // normal's turn there, ṅ|_ξ = (I − n nᵀ) ċ / (n·c) (module documentation).
+                let (mut v_c, mut v_ca, mut n_dot_xi) = (
+                    *a_dot + spin.cross(&(cp.surface.x - pivot)),
+                    [spin.cross(&t[0]), spin.cross(&t[1])],
+                    spin.cross(&n),
+                );
+                if let Some((k, rate)) = seeds.tools[tool].shape {
+                    let tl = &self.tools()[tool];
+                    let (vx, va) = tl.shape_velocity(k, cp.xi, load).map_err(|e| {
+                        ShellError::InvalidInput(format!(
+                            "contact sensitivity: design velocity of tool `{}` at ξ = {:?}: {e}",
+                            tl.name, cp.xi
+                        ))
+                    })?;
+                    let (vx, va) = (vx * rate, [va[0] * rate, va[1] * rate]);
+                    v_c += vx;
+                    v_ca[0] += va[0];
+                    v_ca[1] += va[1];
+                    let c = t[0].cross(&t[1]);
+                    let c_dot = va[0].cross(&t[1]) + t[0].cross(&va[1]);
+                    n_dot_xi += (c_dot - n * n.dot(&c_dot)) / n.dot(&c);
+                }
+                let x_dot = xbar_dot + d * zh_dot + d_dot * zh;
+                let rel = x_dot - v_c;
                 let a_inv = cp.a_matrix().try_inverse();
                 let m_inv = cp.metric().try_inverse();
                 let (Some(a_inv), Some(m_inv)) = (a_inv, m_inv) else {
@@ -332,15 +369,14 @@ impl ShellContact {
                         site.point, fe.zeta
                     )));
                 };
-                // Eq 80: A ξ̇ = [x^c,α·(ẋ − V^c) + g n·(Ω x^c,α)].
+                // Eq 80: A ξ̇ = [x^c,α·(ẋ − V^c) + g n·V^c,α].
                 let g = cp.gap;
-                let n = cp.normal;
-                let rhs = |a: usize| t[a].dot(&rel) + g * n.dot(&spin.cross(&t[a]));
+                let rhs = |a: usize| t[a].dot(&rel) + g * n.dot(&v_ca[a]);
                 let xi_dot = a_inv * Vector2::new(rhs(0), rhs(1));
                 let g_dot = n.dot(&rel);
-                // ṅ = Ω n + n,β ξ̇_β, Weingarten: n,β = −(b m⁻¹)_βγ x^c,γ.
+                // ṅ = ṅ|_ξ + n,β ξ̇_β, Weingarten: n,β = −(b m⁻¹)_βγ x^c,γ.
                 let bm = cp.curvature() * m_inv;
-                let mut n_dot = spin.cross(&n);
+                let mut n_dot = n_dot_xi;
                 for b in 0..2 {
                     for gm in 0..2 {
                         n_dot -= t[gm] * (bm[(b, gm)] * xi_dot[b]);

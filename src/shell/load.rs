@@ -112,6 +112,7 @@ impl ContactLoad {
             penalty,
             offsets: s.tool_offsets,
             rotations: s.tool_rotations,
+            surfaces: s.tool_surfaces,
             initial: s.positions.map(|positions| InitialGeometry {
                 positions,
                 surfaces: s.surfaces,
@@ -157,6 +158,9 @@ pub struct LoadState<'a, T> {
     pub tool_offsets: &'a [V3<T>],
     /// Per tool of the contact: a rotation vector of the tool as built about its pivot.
     pub tool_rotations: &'a [V3<T>],
+    /// Per tool of the contact: its surface in `T`, seeded with tool-shape design variables
+    /// (`None`: the tools' own surfaces).
+    pub tool_surfaces: Option<&'a [crate::geometry::Surface<T>]>,
 }
 
 impl Load {
