@@ -16,7 +16,6 @@
 //! sign alternating from particle to particle, 0.5 for noise) and where the mode is largest.
 use shelldsa::io::shell_build::build;
 use shelldsa::io::shell_case::{read_shell_case, CellLayout};
-use shelldsa::shell::model::ShellModel;
 use shelldsa::shell::problem::ShellProblem;
 use shelldsa::solver::newton::ConvergedStep;
 use shelldsa::solver::observe::{Observed, StepObserver};
@@ -67,43 +66,6 @@ fn zigzag(x: &[f64], uv: &[[f64; 2]], counts: [usize; 2], domain: [[f64; 2]; 2])
         out[d] = num / den.max(f64::MIN_POSITIVE);
     }
     out
-}
-
-/// RMS over the quadrature points of the interpolated translation and director increment
-/// (`Σ Ψ_J ū_J`, `Σ Ψ_J (α_J × d_J)`) and of their gradients times the spacing `h`, relative to
-/// the RMS of the particles' coefficients: how much of a coefficient vector the RK
-/// approximation passes to the points (1 for a smooth field).
-fn transfer(model: &ShellModel, x: &[f64], h: f64) -> [f64; 4] {
-    let n = model.n_particles();
-    let (mut cu, mut cd) = (0.0, 0.0);
-    for j in 0..n {
-        let st = model.particle_state(j);
-        let a = st.e[0] * x[5 * j + 3] + st.e[1] * x[5 * j + 4];
-        cd += a.cross(&st.d).norm_squared();
-        cu += (0..3).map(|c| x[5 * j + c].powi(2)).sum::<f64>();
-    }
-    let (mut fu, mut fd, mut gu, mut gd, mut w) = (0.0, 0.0, 0.0, 0.0, 0.0);
-    for (k, p) in model.points.iter().enumerate() {
-        let (parts, loc) = model.gather_local(k, x);
-        let mut u = [nalgebra::Vector3::zeros(); 3];
-        let mut d = [nalgebra::Vector3::zeros(); 3];
-        for (i, (sd, st)) in p.shape.iter().zip(&parts).enumerate() {
-            let q = &loc[5 * i..5 * i + 5];
-            let uu = nalgebra::Vector3::new(q[0], q[1], q[2]);
-            let dd = (st.e[0] * q[3] + st.e[1] * q[4]).cross(&st.d);
-            for (m, f) in [sd.psi, sd.dpsi[0], sd.dpsi[1]].into_iter().enumerate() {
-                u[m] += uu * f;
-                d[m] += dd * f;
-            }
-        }
-        w += 1.0;
-        fu += u[0].norm_squared();
-        fd += d[0].norm_squared();
-        gu += (u[1].norm_squared() + u[2].norm_squared()) * h * h;
-        gd += (d[1].norm_squared() + d[2].norm_squared()) * h * h;
-    }
-    let r = |f: f64, c: f64| ((f / w) / (c / n as f64).max(f64::MIN_POSITIVE)).sqrt();
-    [r(fu, cu), r(fd, cd), r(gu, cu), r(gd, cd)]
 }
 
 impl StepObserver<&mut ShellProblem> for Probe {
@@ -160,7 +122,7 @@ impl StepObserver<&mut ShellProblem> for Probe {
                     at = j;
                 }
             }
-            let t = transfer(model, &p.vector, self.h);
+            let t = model.coefficient_transfer(&p.vector, self.h);
             out.push(format!(
                 "    transfer to the points: u {:.3} d {:.3}, h·grad u {:.3}, h·grad d {:.3}",
                 t[0], t[1], t[2], t[3]
@@ -315,7 +277,7 @@ fn main() {
                 let (i, j) = idx(*q);
                 x[5 * p + 2] = f(i, j);
             }
-            let t = transfer(model, &x, h);
+            let t = model.coefficient_transfer(&x, h);
             println!(
                 "RK transfer of a u_z coefficient field {name}: value {:.4}, h·gradient {:.4}",
                 t[0], t[2]

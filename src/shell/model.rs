@@ -559,6 +559,47 @@ impl ShellModel {
         })
     }
 
+    /// RMS over the quadrature points of the interpolated translation and director increment
+    /// (`Σ Ψ_J ū_J`, `Σ Ψ_J (α_J × d_J)`) and of their gradients times the spacing `h`, relative to
+    /// the RMS of the particles' coefficients: how much of a coefficient vector the RK
+    /// approximation passes to the points (1 for a smooth field): `[translation, director,
+    /// h·translation gradient, h·director gradient]` for the generalised vector `x` (5 per real
+    /// particle) and the particle spacing `h` in the parameter box. A coefficient field that
+    /// alternates from particle to particle passes nothing at supports of 4 and 8 spacings
+    /// (docs/stability.md §6).
+    pub fn coefficient_transfer(&self, x: &[f64], h: f64) -> [f64; 4] {
+        let n = self.n_particles();
+        let (mut cu, mut cd) = (0.0, 0.0);
+        for j in 0..n {
+            let st = self.particle_state(j);
+            let a = st.e[0] * x[5 * j + 3] + st.e[1] * x[5 * j + 4];
+            cd += a.cross(&st.d).norm_squared();
+            cu += (0..3).map(|c| x[5 * j + c].powi(2)).sum::<f64>();
+        }
+        let (mut fu, mut fd, mut gu, mut gd, mut w) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for (k, p) in self.points.iter().enumerate() {
+            let (parts, loc) = self.gather_local(k, x);
+            let mut u = [nalgebra::Vector3::zeros(); 3];
+            let mut d = [nalgebra::Vector3::zeros(); 3];
+            for (i, (sd, st)) in p.shape.iter().zip(&parts).enumerate() {
+                let q = &loc[5 * i..5 * i + 5];
+                let uu = nalgebra::Vector3::new(q[0], q[1], q[2]);
+                let dd = (st.e[0] * q[3] + st.e[1] * q[4]).cross(&st.d);
+                for (m, f) in [sd.psi, sd.dpsi[0], sd.dpsi[1]].into_iter().enumerate() {
+                    u[m] += uu * f;
+                    d[m] += dd * f;
+                }
+            }
+            w += 1.0;
+            fu += u[0].norm_squared();
+            fd += d[0].norm_squared();
+            gu += (u[1].norm_squared() + u[2].norm_squared()) * h * h;
+            gd += (d[1].norm_squared() + d[2].norm_squared()) * h * h;
+        }
+        let r = |f: f64, c: f64| ((f / w) / (c / n as f64).max(f64::MIN_POSITIVE)).sqrt();
+        [r(fu, cu), r(fd, cd), r(gu, cu), r(gd, cd)]
+    }
+
     /// The translation of shape-function particle `j` (real, or an image mapped from its
     /// source) in the DOF vector `q` (`n_dofs` long, e.g. a displacement sensitivity).
     pub fn translation_in(&self, j: usize, q: &[f64]) -> Vector3<f64> {
