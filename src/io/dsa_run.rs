@@ -635,6 +635,7 @@ pub fn run_with_output(
         let mut c = case.clone();
         c.steps.stops = nominal.loads.clone();
         c.steps.initial_step = c.steps.max_step;
+        c.steps.stop_failure = crate::solver::StopFailure::Continuation;
         replay_case = c;
         CaseAnalysis { case: &replay_case }
     };
