@@ -22,7 +22,7 @@ impl NonlinearProblem for Cubic {
     }
     fn residual(&mut self, u: &[f64], load: f64, r: &mut [f64]) -> Result<(), ProblemError> {
         self.evaluations += 1;
-        if !(u[0] < self.u_max) {
+        if u[0] >= self.u_max || u[0].is_nan() {
             return Err(ProblemError::Recoverable(format!(
                 "u = {} beyond {}",
                 u[0], self.u_max
