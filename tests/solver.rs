@@ -650,8 +650,12 @@ fn step_cutting_recovers_from_a_too_large_step() {
     prob.e_limit = 4.0;
     let pattern = prob.pattern.clone();
     let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+    // The cut is under test: without the line search (which backtracks instead of cutting).
     let newton = NewtonSolver {
-        options: NewtonOptions::default(),
+        options: NewtonOptions {
+            line_search: LineSearch::Off,
+            ..Default::default()
+        },
         stepping: LoadStepping {
             initial_step: 1.0,
             ..Default::default()
@@ -1414,8 +1418,12 @@ fn a_failed_clipped_step_is_cut_from_its_clipped_size() {
     prob.e_limit = 4.0;
     let pattern = prob.pattern.clone();
     let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+    // The cut is under test: without the line search (which backtracks instead of cutting).
     let newton = NewtonSolver {
-        options: NewtonOptions::default(),
+        options: NewtonOptions {
+            line_search: LineSearch::Off,
+            ..Default::default()
+        },
         stepping: LoadStepping {
             initial_step: 1.0,
             stops: vec![0.9],

@@ -633,7 +633,10 @@ pub fn run_with_output(
     // shrinks): the runs land on the same levels whatever their iteration counts (the hooked
     // run needs the converged tangent, and near a change of the contact set an iteration more
     // or less changes the adaptive growth; the discrete response depends on the levels). A
-    // re-run that has to cut a step still differs and is reported (`StepSequence`).
+    // re-run whose attempt at a level fails reaches it by continuation (`StopFailure`: a
+    // shorter step solved from the same committed state, not committed, starts a new attempt
+    // at the level), so it solves the same equations at the same levels; a re-run that still
+    // has to cut a step differs and is reported (`StepSequence`).
     let replay_case;
     let analysis = if case.tools.is_empty() {
         analysis
@@ -641,6 +644,7 @@ pub fn run_with_output(
         let mut c = case.clone();
         c.steps.stops = nominal.loads.clone();
         c.steps.initial_step = c.steps.max_step;
+        c.steps.stop_failure = crate::solver::StopFailure::Continuation;
         replay_case = c;
         CaseAnalysis { case: &replay_case }
     };

@@ -155,6 +155,7 @@ pub fn newton_settings(case: &ShellCase) -> (NewtonOptions, LoadStepping) {
             energy_atol: s.energy_atol,
             max_iterations: s.max_iterations,
             linear_updates: s.linear_updates,
+            line_search: s.line_search,
             ..NewtonOptions::default()
         },
         LoadStepping {
@@ -167,6 +168,7 @@ pub fn newton_settings(case: &ShellCase) -> (NewtonOptions, LoadStepping) {
             grow_factor: s.grow_factor,
             easy_iterations: s.easy_iterations,
             stops: s.stops.clone(),
+            stop_failure: s.stop_failure,
             max_attempts: s.max_attempts,
             ..LoadStepping::default()
         },

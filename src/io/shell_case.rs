@@ -224,6 +224,10 @@ struct StepsFile {
     #[serde(default)]
     linear_updates: Option<String>,
     #[serde(default)]
+    line_search: Option<String>,
+    #[serde(default)]
+    stop_failure: Option<String>,
+    #[serde(default)]
     stops: Vec<f64>,
     #[serde(default = "default_max_attempts")]
     max_attempts: i64,
@@ -547,6 +551,16 @@ pub struct StepsSpec {
     /// Measured on the plastic hemisphere at 17², 25², 33²: `"auto"` and `"krylov"` take the
     /// same CPU time within the machine's noise, so the simplest is the default.
     pub linear_updates: crate::solver::LinearUpdates,
+    /// What an unusable Newton iterate (an inverted cell, a failed return map, a diverged
+    /// residual, a singular tangent) leads to (`steps.line_search`): `"on-failure"` (the
+    /// default: backtrack along the update, `s` = 1/2 … 1/16, before the step is cut; steps
+    /// that converge without it take the same iterates) or `"off"` (cut the step).
+    pub line_search: crate::solver::LineSearch,
+    /// What a failed attempt to land on a stop leads to (`steps.stop_failure`): `"cut"` (the
+    /// default: a shorter step is committed) or `"continuation"` (the stop is reached from the
+    /// committed state through intermediate solutions that are not committed; the design
+    /// sensitivity's re-runs use it to land on the nominal run's levels).
+    pub stop_failure: crate::solver::StopFailure,
     /// Load levels the stepping lands on exactly (strictly ascending, finite, in
     /// `(0, final_load]`; possibly empty).
     pub stops: Vec<f64>,
@@ -2286,6 +2300,28 @@ impl Checker<'_> {
                 ))
             }
         };
+        let line_search = match s.line_search.as_deref() {
+            None | Some("on-failure") => crate::solver::LineSearch::OnFailure,
+            Some("off") => crate::solver::LineSearch::Off,
+            Some(other) => {
+                return Err(self.err(
+                    "steps.line_search",
+                    format!("{other:?}"),
+                    "\"on-failure\" or \"off\"",
+                ))
+            }
+        };
+        let stop_failure = match s.stop_failure.as_deref() {
+            None | Some("cut") => crate::solver::StopFailure::Cut,
+            Some("continuation") => crate::solver::StopFailure::Continuation,
+            Some(other) => {
+                return Err(self.err(
+                    "steps.stop_failure",
+                    format!("{other:?}"),
+                    "\"cut\" or \"continuation\"",
+                ))
+            }
+        };
         let arc_length = match s.control.as_deref() {
             None | Some("load") => {
                 for (k, given) in [
@@ -2376,6 +2412,8 @@ impl Checker<'_> {
             easy_iterations,
             predictor,
             linear_updates,
+            line_search,
+            stop_failure,
             stops: s.stops.clone(),
             max_attempts,
             arc_length,

@@ -609,6 +609,22 @@ pub fn monitor_displacements(
         .collect()
 }
 
+/// The line search's tries (written only when there were some): `{iteration, length,
+/// reason}` each, the reason why the iterate at the previous length was not usable.
+fn backtracks_json(b: &[crate::solver::Backtrack]) -> Value {
+    Value::Array(
+        b.iter()
+            .map(|t| {
+                json!({
+                    "iteration": t.iteration,
+                    "length": t.length,
+                    "reason": t.reason.to_string(),
+                })
+            })
+            .collect(),
+    )
+}
+
 /// What was recorded for one converged step.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StepSummary {
@@ -630,6 +646,11 @@ pub struct StepSummary {
     pub timing: StepTiming,
     /// Updates solved by preconditioned GMRES: `(k, Arnoldi steps)`.
     pub krylov: Vec<(usize, usize)>,
+    /// Backtracking tries of the Newton line search
+    /// ([`crate::solver::StepRecord::backtracks`]).
+    pub backtracks: Vec<crate::solver::Backtrack>,
+    /// Intermediate levels solved to start the step ([`crate::solver::StepRecord::continuation`]).
+    pub continuation: Vec<f64>,
     /// Monitor displacements, in the case's monitor order.
     pub monitors: Vec<[f64; 3]>,
     /// The VTU written for this step (relative to the output directory), if any.
@@ -943,6 +964,8 @@ impl ShellOutput {
             accepted_residual_only: record.factorised_at == Some(FactorisedAt::PreviousIterate),
             timing: record.timing,
             krylov: record.krylov.clone(),
+            backtracks: record.backtracks.clone(),
+            continuation: record.continuation.clone(),
             monitors,
             vtu,
             contact,
@@ -1143,6 +1166,12 @@ impl ShellOutput {
             "monitors": self.monitors_json(&s.monitors),
             "vtu": s.vtu,
         });
+        if let (false, Value::Object(o)) = (s.backtracks.is_empty(), &mut v) {
+            o.insert("line_search".into(), backtracks_json(&s.backtracks));
+        }
+        if let (false, Value::Object(o)) = (s.continuation.is_empty(), &mut v) {
+            o.insert("continuation".into(), json!(s.continuation));
+        }
         if let (false, Value::Object(o)) = (s.reactions.is_empty(), &mut v) {
             let r: serde_json::Map<String, Value> = s
                 .reactions
@@ -1204,7 +1233,7 @@ impl ShellOutput {
                     next += 1;
                     return Ok(next - 1);
                 }
-                Err(json!({
+                let mut e = json!({
                     "step": n + 1,
                     "load_factor": a.load,
                     "step_size": a.step_size,
@@ -1213,7 +1242,11 @@ impl ShellOutput {
                     "converged": false,
                     "failure": a.failure.as_ref().map(|f| f.to_string()),
                     "monitors": Value::Null,
-                }))
+                });
+                if let (false, Value::Object(o)) = (a.backtracks.is_empty(), &mut e) {
+                    o.insert("line_search".into(), backtracks_json(&a.backtracks));
+                }
+                Err(e)
             })
             .collect()
     }

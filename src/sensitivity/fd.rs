@@ -7,7 +7,9 @@
 //! steps, so every re-run must take the nominal run's steps: a re-run whose converged load
 //! levels differ (bit for bit) is an error ([`SensitivityError::StepSequence`]). Cases for
 //! finite differences therefore prescribe their steps (equal steps, no growth, or `stops` at
-//! every level).
+//! every level); with `stops` at every level a re-run reaches a level whose direct attempt
+//! fails by continuation ([`crate::solver::StopFailure::Continuation`]: the committed state
+//! solves the same equations from the same committed history, only Newton's start differs).
 //!
 //! **Active set.** The response is only piecewise smooth in the design: a layer point that
 //! yields at a step in one run and not in another (the yield status changes within `±h`) puts

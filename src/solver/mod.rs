@@ -32,10 +32,11 @@ pub use assembly::{
 pub use dirichlet::EssentialBc;
 pub use linear::{LinearSolver, Method, Parallelism, SolverOptions};
 pub use newton::{
-    Acceptance, ArcLength, ArcLengthReport, ConvergedStep, ConvergedTangent, CriticalKind,
-    CriticalPoint, FactorisedAt, FailureReason, LinearUpdates, LoadStepping, NewtonFailure,
-    NewtonOptions, NewtonReport, NewtonSolver, NonlinearProblem, Predictor, ProblemError,
-    StepRecord, StepTiming,
+    Acceptance, ArcLength, ArcLengthReport, Backtrack, ConvergedStep, ConvergedTangent,
+    CriticalKind, CriticalPoint, FactorisedAt, FailureReason, LineSearch, LinearUpdates,
+    LoadStepping, NewtonFailure, NewtonOptions, NewtonReport, NewtonSolver, NonlinearProblem,
+    Predictor, ProblemError, StepRecord, StepTiming, StopFailure, BACKTRACK_BUDGET,
+    BACKTRACK_LENGTHS,
 };
 pub use pattern::SparsityPattern;
 pub use supernodal::FillOrdering;

@@ -59,11 +59,29 @@
 //! (`tests/solver.rs`); one tangent assembly and one factorisation per step are saved. The
 //! converged step then reports [`FactorisedAt::PreviousIterate`].
 //!
+//! **Line search on failure** ([`LineSearch::OnFailure`], the default). An iterate at which
+//! the iteration cannot go on (a recoverable [`ProblemError`] such as an inverted cell or a
+//! return map that did not converge, a non-finite residual, a residual or energy beyond
+//! `divergence_factor`, a tangent that cannot be factorised) is replaced by `u_{k−1} + s Δu_{k−1}`
+//! for `s` = 1/2, 1/4, 1/8, 1/16 (at `k = 0`: along the predictor's increment, then the committed
+//! unknowns), each evaluated afresh from the committed history; at most [`BACKTRACK_BUDGET`]
+//! tries per attempt. It acts only where the attempt would otherwise fail, so every attempt
+//! that converges without it takes the same iterates (bit for bit). Measured on the half-sheet
+//! bending case (`verification/cylindrical-bending-dsa/half.toml`): after the punch separates,
+//! the secant predictor lifts the sheet off the dies it rests on under its self-weight (the
+//! contact holds it through a penetration of about 10⁻⁸ mm), the tangent there is singular
+//! (the sheet's rigid motion), and the shortened predictor converges where the step was cut.
+//!
 //! A step fails on a non-finite or diverging residual (`‖r_k‖` growing by more than
 //! `divergence_factor` over `r_ref`, or the energy over iteration 0 while the residual
 //! tolerance is not met), too many iterations, a singular tangent, or a
-//! recoverable [`ProblemError`]; it is then restored ([`NonlinearProblem::restore`]) and retried
-//! with `cut_factor · Δλ` (with the secant predictor scaled down accordingly). After a step that
+//! recoverable [`ProblemError`] (with the line search: when no shortened update helped); it is
+//! then restored ([`NonlinearProblem::restore`]) and retried
+//! with `cut_factor · Δλ` (with the secant predictor scaled down accordingly). With
+//! [`StopFailure::Continuation`] a failed attempt at a stop is not cut: the shorter step's
+//! solution (not committed) is the start of a new attempt at the stop from the same committed
+//! state, so that a run lands on prescribed levels (the design sensitivity's re-runs replay the
+//! nominal run's levels). After a step that
 //! converged in at most `easy_iterations`, `Δλ` grows by `grow_factor` up to `max_step`. A step
 //! that would pass one of the load levels in [`LoadStepping::stops`] (or the end) is clipped to
 //! land on it exactly; the next step resumes the unclipped `Δλ`. Below
@@ -241,6 +259,8 @@ pub struct NewtonOptions {
     /// Divergence when `‖r_k‖ > factor · r_ref` or `|Δu_kᵀ r_k| > factor · |Δu_0ᵀ r_0|`
     /// (default 1e8).
     pub divergence_factor: f64,
+    /// What an iterate that cannot be used leads to (default [`LineSearch::OnFailure`]).
+    pub line_search: LineSearch,
 }
 
 impl Default for NewtonOptions {
@@ -255,6 +275,7 @@ impl Default for NewtonOptions {
             max_iterations: 20,
             divergence_factor: 1e8,
             linear_updates: LinearUpdates::Direct,
+            line_search: LineSearch::OnFailure,
         }
     }
 }
@@ -293,6 +314,47 @@ pub enum LinearUpdates {
     /// with [`super::Method::DenseLu`] (small systems, where a factorisation costs a few
     /// solves).
     Auto,
+}
+
+/// What the driver does with an iterate at which the iteration cannot go on: the problem's
+/// evaluation failed recoverably (an inverted cell, a return map that did not converge), the
+/// residual is not finite or diverged (`divergence_factor`, residual or energy), or the tangent
+/// could not be factorised or solved with (singular). Without a line search the attempt fails
+/// and the step is cut.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LineSearch {
+    /// Fail the attempt: the step is cut.
+    Off,
+    /// Backtrack along the update that led to the iterate: `u_{k−1} + s Δu_{k−1}` for
+    /// `s` = 1/2, 1/4, 1/8, 1/16 ([`BACKTRACK_LENGTHS`]), each evaluated afresh from the
+    /// committed history; the first usable one is the iterate `k` (at most
+    /// [`BACKTRACK_BUDGET`] tries per attempt). At `k = 0` the update is the
+    /// predictor's increment `u_pred − u_n`, and after the four lengths the committed unknowns
+    /// themselves are tried (`s = 0`: the zero predictor). The attempt fails (and the step is
+    /// cut) only when every length fails. An attempt that never meets such an iterate takes
+    /// exactly the iterates it takes with [`LineSearch::Off`]: converged steps are unchanged
+    /// bit for bit, only steps that would be cut can converge.
+    #[default]
+    OnFailure,
+}
+
+/// The step lengths [`LineSearch::OnFailure`] tries, in order.
+pub const BACKTRACK_LENGTHS: [f64; 4] = [0.5, 0.25, 0.125, 0.0625];
+
+/// Most backtracking tries in one step attempt (over all its iterates). Measured on the
+/// half-sheet bending case: the attempts the line search rescued used at most 3 tries, those
+/// that failed anyway up to 30 (each an evaluation of residual and tangent).
+pub const BACKTRACK_BUDGET: usize = 5;
+
+/// One backtracking try of [`LineSearch::OnFailure`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Backtrack {
+    /// The iterate `k` whose update was shortened.
+    pub iteration: usize,
+    /// The step length `s` tried next (`u_{k−1} + s Δu_{k−1}`; at `k = 0`, `u_n + s (u_pred − u_n)`).
+    pub length: f64,
+    /// Why the iterate at the previous length was not usable.
+    pub reason: FailureReason,
 }
 
 /// Tolerance of the GMRES updates of [`LinearUpdates::KrylovHeld`]: `‖K Δu + r_k‖ ≤ HELD_RTOL ·
@@ -421,6 +483,27 @@ pub struct LoadStepping {
     /// (an easy clipped step says little about the full step). A clipped step that fails is
     /// cut from its clipped size.
     pub stops: Vec<f64>,
+    /// What a failed attempt at a stop leads to (default [`StopFailure::Cut`]).
+    pub stop_failure: StopFailure,
+}
+
+/// What the driver does when an attempt to land on a stop of [`LoadStepping::stops`] fails.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum StopFailure {
+    /// Cut the step: a level short of the stop is committed (and the stop reached later).
+    #[default]
+    Cut,
+    /// Reach the stop from the committed state by continuation: the step is cut as usual,
+    /// but the shorter step's converged state is not committed; it is the start (extrapolated
+    /// along its increment) of a new attempt at the stop, from the same committed state
+    /// (history, committed unknowns). A level that fails is halved again towards the last
+    /// intermediate solution, down to `min_step`. The committed state then solves the same
+    /// equations `r(u; history_n, λ_stop) = 0` as an attempt that converged directly (the
+    /// intermediate levels only change where Newton starts), so the converged levels are
+    /// exactly the stops: the discrete response of a path-dependent analysis is the same
+    /// function of the design as in a run that needed no continuation. The intermediate levels
+    /// are recorded in [`StepRecord::continuation`].
+    Continuation,
 }
 
 impl Default for LoadStepping {
@@ -437,6 +520,7 @@ impl Default for LoadStepping {
             max_attempts: 10_000,
             predictor: Predictor::default(),
             stops: Vec::new(),
+            stop_failure: StopFailure::Cut,
         }
     }
 }
@@ -497,6 +581,25 @@ impl FailureReason {
                 })
             }
             other => other,
+        }
+    }
+
+    /// An iterate's failure that a shorter update may avoid ([`LineSearch::OnFailure`]): a
+    /// recoverable problem error, a non-finite or diverged residual, a tangent that could not
+    /// be factorised or solved with.
+    fn backtrackable(&self) -> bool {
+        match self {
+            FailureReason::Problem(ProblemError::Recoverable(_))
+            | FailureReason::NonFiniteResidual
+            | FailureReason::Diverged { .. } => true,
+            FailureReason::LinearSolver(e) => matches!(
+                e,
+                SolverError::Singular { .. }
+                    | SolverError::NotPositiveDefinite { .. }
+                    | SolverError::NonFiniteMatrix { .. }
+                    | SolverError::NonFiniteRhs { .. }
+            ),
+            _ => false,
         }
     }
 
@@ -569,6 +672,12 @@ pub struct StepRecord {
     pub krylov: Vec<(usize, usize)>,
     /// Why it failed, if it did.
     pub failure: Option<FailureReason>,
+    /// Backtracking tries of the line search ([`LineSearch::OnFailure`]), in order.
+    pub backtracks: Vec<Backtrack>,
+    /// Intermediate levels solved (not committed) to start this attempt's iteration
+    /// ([`StopFailure::Continuation`]), in order; empty when the attempt started from the
+    /// predictor.
+    pub continuation: Vec<f64>,
 }
 
 /// Wall time of one step attempt by part, in seconds.
@@ -655,6 +764,9 @@ struct Work {
     /// The mode in use ([`LinearUpdates::Auto`] resolved).
     updates: LinearUpdates,
     held: Held,
+    /// Line search: the iterate the last update started from, and that update.
+    base: Vec<f64>,
+    dir: Vec<f64>,
 }
 
 impl NewtonSolver {
@@ -757,6 +869,8 @@ impl NewtonSolver {
             du: vec![0.0; n],
             values: vec![0.0; pattern.nnz()],
             g: Vec::new(),
+            base: vec![0.0; n],
+            dir: vec![0.0; n],
             updates: self.options.linear_updates.resolve(solver),
             held: Held {
                 cost: solver.refactorisation_cost(),
@@ -832,11 +946,33 @@ impl NewtonSolver {
                 timing: StepTiming::default(),
                 krylov: Vec::new(),
                 failure: None,
+                backtracks: Vec::new(),
+                continuation: Vec::new(),
             };
             let factorisations = solver.n_factorizations();
-            let outcome = self.attempt(
+            let start = (st.stop_failure == StopFailure::Continuation && reach).then(|| u.clone());
+            let mut outcome = self.attempt(
                 problem, pattern, solver, &report.u, &mut u, target, &mut rec, &mut work,
             );
+            if let (Some(start), Err(first)) = (start, &outcome) {
+                if first.retryable() {
+                    let first = first.clone();
+                    problem.restore();
+                    let u_n = report.u.clone();
+                    outcome = self.continuation(
+                        problem,
+                        pattern,
+                        solver,
+                        (&u_n, report.load),
+                        &start,
+                        (&mut u, target),
+                        first,
+                        &mut rec,
+                        &mut work,
+                        &mut report.attempts,
+                    );
+                }
+            }
             match outcome {
                 Ok((bc, acceptance, factorised_at)) => {
                     rec.converged = true;
@@ -929,20 +1065,74 @@ impl NewtonSolver {
         let mut held_in_step = false;
         let bc = EssentialBc::new(u.len(), &problem.essential(load))
             .map_err(|e| FailureReason::Setup(e.to_string()))?;
-        let predicted = rec.predictor != Predictor::Zero;
+        let mut predicted = rec.predictor != Predictor::Zero;
         let mut r_ref = 0.0;
         let mut e0 = 0.0;
         let mut r_prev = f64::INFINITY;
         let mut r_prev2 = f64::INFINITY;
-        for k in 0..=o.max_iterations {
+        // Line search (`LineSearch::OnFailure`): the update that led to `u` (at k = 0 the
+        // predictor's increment) and the lengths tried for the current iterate.
+        let line_search = o.line_search == LineSearch::OnFailure;
+        if line_search {
+            w.base.copy_from_slice(u_n);
+            for ((d, a), b) in w.dir.iter_mut().zip(&*u).zip(u_n) {
+                *d = a - b;
+            }
+        }
+        let mut tries = 0;
+        let mut k = 0;
+        loop {
+            let marks = (
+                rec.residual_norms.len(),
+                rec.roundoff_floors.len(),
+                rec.energy_norms.len(),
+                rec.krylov.len(),
+            );
+            // An unusable iterate: backtrack along its update (`LineSearch::OnFailure`), or
+            // fail the attempt.
+            macro_rules! reject {
+                ($reason:expr) => {{
+                    let reason: FailureReason = $reason;
+                    let lengths = BACKTRACK_LENGTHS.len() + usize::from(k == 0);
+                    let usable = line_search
+                        && reason.backtrackable()
+                        && tries < lengths
+                        && rec.backtracks.len() < BACKTRACK_BUDGET
+                        && w.dir.iter().any(|&d| d != 0.0);
+                    if !usable {
+                        return Err(reason);
+                    }
+                    let length = BACKTRACK_LENGTHS.get(tries).copied().unwrap_or(0.0);
+                    tries += 1;
+                    for ((x, b), d) in u.iter_mut().zip(&w.base).zip(&w.dir) {
+                        *x = b + length * d;
+                    }
+                    if length == 0.0 {
+                        // The committed unknowns: the zero predictor.
+                        rec.predictor = Predictor::Zero;
+                        predicted = false;
+                    }
+                    rec.residual_norms.truncate(marks.0);
+                    rec.roundoff_floors.truncate(marks.1);
+                    rec.energy_norms.truncate(marks.2);
+                    rec.krylov.truncate(marks.3);
+                    rec.backtracks.push(Backtrack {
+                        iteration: k,
+                        length,
+                        reason,
+                    });
+                    continue;
+                }};
+            }
             // Residual-first acceptance: when the last two residuals predict convergence under
             // quadratic contraction, try the residual alone and test it with the previous
-            // iterate's factorisation (module documentation).
-            if residual_first && k >= 2 {
+            // iterate's factorisation (module documentation). Not after a backtrack: the
+            // buffers then hold the rejected iterate's tangent.
+            if residual_first && k >= 2 && tries == 0 {
                 let predicted_next = r_prev.powi(3) / (r_prev2 * r_prev2);
                 let tol = (o.residual_rtol * r_ref).max(o.residual_atol);
                 if predicted_next.is_finite() && predicted_next <= 100.0 * tol {
-                    if let Some(how) = self.residual_only(
+                    let tried = self.residual_only(
                         problem,
                         pattern,
                         solver,
@@ -954,27 +1144,35 @@ impl NewtonSolver {
                         unknowns_terms,
                         rec,
                         w,
-                    )? {
-                        return Ok((bc, how, FactorisedAt::PreviousIterate));
+                    );
+                    match tried {
+                        Ok(Some(how)) => return Ok((bc, how, FactorisedAt::PreviousIterate)),
+                        Ok(None) => {}
+                        // The full evaluation below meets the same failure and backtracks.
+                        Err(e) if line_search && e.backtrackable() => {}
+                        Err(e) => return Err(e),
                     }
                 }
             }
             let clock = Instant::now();
             let evaluated = problem.residual_and_tangent(u, load, &mut w.r, &mut w.values);
             rec.timing.residual_and_tangent_s += clock.elapsed().as_secs_f64();
-            evaluated.map_err(FailureReason::Problem)?;
+            if let Err(e) = evaluated {
+                reject!(FailureReason::Problem(e));
+            }
             unknowns_terms = unknowns_term_scale(pattern, &w.values, u, u_n, &bc, &mut w.s);
             w.g.clear();
             w.g.extend(bc.dofs().iter().zip(bc.values()).map(|(&d, &v)| v - u[d]));
             for (x, r) in w.rhs.iter_mut().zip(&w.r) {
                 *x = -r;
             }
-            bc.apply_with(pattern, &mut w.values, &mut w.rhs, &w.g)
-                .map_err(FailureReason::LinearSolver)?;
+            if let Err(e) = bc.apply_with(pattern, &mut w.values, &mut w.rhs, &w.g) {
+                reject!(FailureReason::LinearSolver(e));
+            }
             let rnorm = free_dot(&bc, &w.rhs, &w.rhs).sqrt();
             rec.residual_norms.push(rnorm);
             if !rnorm.is_finite() {
-                return Err(FailureReason::NonFiniteResidual);
+                reject!(FailureReason::NonFiniteResidual);
             }
             if k == 0 {
                 let f = problem.force_norm(load);
@@ -984,7 +1182,7 @@ impl NewtonSolver {
                     rnorm.max(f)
                 };
             } else if r_ref > 0.0 && rnorm > o.divergence_factor * r_ref {
-                return Err(FailureReason::Diverged {
+                reject!(FailureReason::Diverged {
                     ratio: rnorm / r_ref,
                 });
             }
@@ -1021,7 +1219,9 @@ impl NewtonSolver {
                 }};
             }
             if !krylov {
-                factorise_held(solver, &w.values, rec, &mut w.held)?;
+                if let Err(e) = factorise_held(solver, &w.values, rec, &mut w.held) {
+                    reject!(e);
+                }
                 held_in_step = true;
                 factorised_here = true;
             }
@@ -1039,7 +1239,7 @@ impl NewtonSolver {
             }
             let clock = Instant::now();
             let iterative = match (krylov, w.updates) {
-                (false, _) => None,
+                (false, _) => Ok(None),
                 (true, LinearUpdates::KrylovHeld) => gmres_to(
                     pattern,
                     &w.values,
@@ -1049,12 +1249,14 @@ impl NewtonSolver {
                     HELD_RTOL * rnorm.max(r_ref),
                     w.held.budget(),
                     true,
-                )
-                .map_err(FailureReason::LinearSolver)?,
-                (true, _) => gmres(pattern, &w.values, solver, &w.rhs, &mut w.du, 1e-12, 20)
-                    .map_err(FailureReason::LinearSolver)?,
+                ),
+                (true, _) => gmres(pattern, &w.values, solver, &w.rhs, &mut w.du, 1e-12, 20),
             };
             rec.timing.solve_s += clock.elapsed().as_secs_f64();
+            let iterative = match iterative {
+                Ok(i) => i,
+                Err(e) => reject!(FailureReason::LinearSolver(e)),
+            };
             match iterative {
                 Some(info) => {
                     rec.krylov.push((k, info.iterations));
@@ -1062,7 +1264,9 @@ impl NewtonSolver {
                 }
                 None => {
                     if !factorised_here {
-                        factorise_held(solver, &w.values, rec, &mut w.held)?;
+                        if let Err(e) = factorise_held(solver, &w.values, rec, &mut w.held) {
+                            reject!(e);
+                        }
                         factorised_here = true;
                     }
                     w.held.direct_solve();
@@ -1070,7 +1274,9 @@ impl NewtonSolver {
                     let clock = Instant::now();
                     let solved = solver.solve_in_place(&mut w.du);
                     rec.timing.solve_s += clock.elapsed().as_secs_f64();
-                    solved.map_err(FailureReason::LinearSolver)?;
+                    if let Err(e) = solved {
+                        reject!(FailureReason::LinearSolver(e));
+                    }
                 }
             }
             let e = free_dot(&bc, &w.du, &w.rhs).abs();
@@ -1096,7 +1302,7 @@ impl NewtonSolver {
                 accept!(Acceptance::ResidualRoundoff);
             }
             if k >= 1 && !res_ok && e0 > 0.0 && e > o.divergence_factor * e0 {
-                return Err(FailureReason::Diverged { ratio: e / e0 });
+                reject!(FailureReason::Diverged { ratio: e / e0 });
             }
             // Two consecutive iterations without progress: round-off, not a slow approach.
             let stalled = |a: f64, b: f64| a >= o.stagnation_ratio * b;
@@ -1113,6 +1319,10 @@ impl NewtonSolver {
             if k == o.max_iterations {
                 return Err(FailureReason::MaxIterations(o.max_iterations));
             }
+            if line_search {
+                w.base.copy_from_slice(u);
+                w.dir.copy_from_slice(&w.du);
+            }
             for (x, d) in u.iter_mut().zip(&w.du) {
                 *x += d;
             }
@@ -1122,12 +1332,131 @@ impl NewtonSolver {
             rec.iterations = k + 1;
             r_prev2 = r_prev;
             r_prev = rnorm;
+            k += 1;
+            tries = 0;
         }
-        unreachable!("the loop returns at k = max_iterations")
     }
 }
 
 impl NewtonSolver {
+    /// [`StopFailure::Continuation`]: the attempt at the stop `target` from the committed
+    /// `(u_n, l_n)`, started at `start`, failed with `first` (its record in `rec`). Halve the
+    /// level towards the last intermediate solution (first the committed state) until an
+    /// attempt converges there, then try the stop again from that solution extrapolated along
+    /// the secant from `u_n`; every attempt evaluates from the committed history. On return
+    /// `rec` holds the last attempt at the stop (converged, with its intermediate levels, or
+    /// failed) and `u` its unknowns; the failed attempts before it are appended to `failed`.
+    #[allow(clippy::too_many_arguments)]
+    fn continuation<P: NonlinearProblem>(
+        &self,
+        problem: &mut P,
+        pattern: &SparsityPattern,
+        solver: &mut LinearSolver,
+        (u_n, l_n): (&[f64], f64),
+        start: &[f64],
+        (u, target): (&mut [f64], f64),
+        first: FailureReason,
+        rec: &mut StepRecord,
+        w: &mut Work,
+        failed: &mut Vec<StepRecord>,
+    ) -> Result<(EssentialBc, Acceptance, FactorisedAt), FailureReason> {
+        let st = &self.stepping;
+        let fresh = |load: f64, predictor: Predictor| StepRecord {
+            load_start: l_n,
+            load,
+            step_size: load - l_n,
+            iterations: 0,
+            residual_norms: Vec::new(),
+            energy_norms: Vec::new(),
+            converged: false,
+            predictor,
+            acceptance: None,
+            roundoff_floors: Vec::new(),
+            residual_only: Vec::new(),
+            factorised_at: None,
+            timing: StepTiming::default(),
+            krylov: Vec::new(),
+            failure: None,
+            backtracks: Vec::new(),
+            continuation: Vec::new(),
+        };
+        let predictor = rec.predictor;
+        rec.failure = Some(first);
+        // Where the copy of the failed attempt at the stop in `rec` went in `failed` (the
+        // attempts are listed in the order they were made).
+        failed.push(rec.clone());
+        let mut rec_at = Some(failed.len() - 1);
+        // The last solution `(from_u, from_l)` (first the committed state) and the increment of
+        // the unknowns per unit load along which the next start is extrapolated.
+        let mut from_u = u_n.to_vec();
+        let mut from_l = l_n;
+        let mut rate: Vec<f64> = start
+            .iter()
+            .zip(u_n)
+            .map(|(a, b)| (a - b) / (target - l_n))
+            .collect();
+        let mut levels = Vec::new();
+        let mut sub = target;
+        let starting = |from_u: &[f64], from_l: f64, rate: &[f64], load: f64, x: &mut [f64]| {
+            for ((x, a), r) in x.iter_mut().zip(from_u).zip(rate) {
+                *x = a + (load - from_l) * r;
+            }
+        };
+        loop {
+            sub = from_l + st.cut_factor * (sub - from_l);
+            if sub - from_l < st.min_step {
+                // `rec` holds the last attempt at the stop, failed (the caller lists it).
+                if let Some(i) = rec_at {
+                    failed.remove(i);
+                }
+                return Err(rec.failure.clone().expect("a failed attempt"));
+            }
+            let mut attempt = fresh(sub, predictor);
+            attempt.continuation.clone_from(&levels);
+            let mut v = vec![0.0; u.len()];
+            starting(&from_u, from_l, &rate, sub, &mut v);
+            match self.attempt(problem, pattern, solver, u_n, &mut v, sub, &mut attempt, w) {
+                Ok(_) => {
+                    problem.restore();
+                    for ((r, a), b) in rate.iter_mut().zip(&v).zip(u_n) {
+                        *r = (a - b) / (sub - l_n);
+                    }
+                    from_u = v;
+                    from_l = sub;
+                    levels.push(sub);
+                    *rec = fresh(target, predictor);
+                    rec.continuation.clone_from(&levels);
+                    starting(&from_u, from_l, &rate, target, u);
+                    match self.attempt(problem, pattern, solver, u_n, u, target, rec, w) {
+                        Ok(done) => return Ok(done),
+                        Err(e) if e.retryable() => {
+                            problem.restore();
+                            rec.failure = Some(e);
+                            failed.push(rec.clone());
+                            rec_at = Some(failed.len() - 1);
+                            sub = target;
+                        }
+                        Err(e) => return Err(e),
+                    }
+                }
+                Err(e) if e.retryable() => {
+                    problem.restore();
+                    attempt.failure = Some(e);
+                    failed.push(attempt);
+                }
+                Err(e) => {
+                    // Not retryable: the run stops with this attempt as its last.
+                    if let Some(i) = rec_at {
+                        failed.remove(i);
+                    }
+                    *rec = attempt;
+                    rec.failure = Some(e.clone());
+                    return Err(e);
+                }
+            }
+        }
+    }
+
     /// One residual-only evaluation at `u` tested with the factorisation of the previous
     /// iterate: accepted by the tolerances (residual, and energy with `Δu = K_prev⁻¹ r`) or the
     /// round-off floor (with the previous `S`). `None`: not accepted, or the essential
@@ -1566,6 +1895,8 @@ impl NewtonSolver {
                 timing: StepTiming::default(),
                 krylov: Vec::new(),
                 failure: None,
+                backtracks: Vec::new(),
+                continuation: Vec::new(),
             };
             let outcome = self.arc_attempt(
                 problem,
