@@ -306,7 +306,7 @@ fn loads_the_reference_cannot_carry_are_rejected() {
     assert_eq!(code, 1);
     assert!(!dir.join("m/sensitivity.json").exists());
     // ...but finite differences alone can run it (checked here up to the validation only).
-    assert!(shelldsa::io::dsa_run::validate(&c, &[DsaMethod::Fd]).is_ok());
+    assert!(shelldsa::io::dsa_case::validate(&c, &[DsaMethod::Fd]).is_ok());
 }
 
 #[test]

@@ -44,16 +44,24 @@
 //! admissible design ([`DesignVariable::perturbed`]: `t ± h > 0`, material parameters in their
 //! ranges). [`check_dsa_loads`] checks that the sensitivity methods can carry the case's loads.
 
+use super::shell_build;
 use super::shell_case::{Load, Monitor as CaseMonitor, ShellCase};
 use super::CaseError;
 use crate::contact::RigidTool;
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
+use crate::sensitivity::dual::SensitivityError;
+use crate::sensitivity::fd::Analysis;
+pub use crate::sensitivity::study::{DesignEntry, DsaMethod, DsaSpec};
 use crate::sensitivity::{
     check_tools, Design, DesignKind, DesignVariable, Layers, Monitor, Quantity,
 };
+use crate::shell::contact::ShellContact;
+use crate::shell::problem::ShellProblem;
+use crate::solver::NewtonSolver;
 use serde::Deserialize;
 use std::path::Path;
+use std::sync::Arc;
 
 /// Default relative finite-difference steps `h/|τ|`: 1e-3 and 1e-4 (truncation error of the
 /// central difference ~1e-6 and ~1e-8 of the response's curvature scale, both far above the
@@ -122,76 +130,6 @@ pub(crate) struct DistanceFile {
     target: Vec<[f64; 3]>,
 }
 
-/// A sensitivity method.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum DsaMethod {
-    /// The hand-derived continuum DSA (`sensitivity::continuum`, eqs 37–65).
-    Continuum,
-    /// The dual-number reference (`sensitivity::dual`).
-    Dual,
-    /// Central differences of complete re-runs (`sensitivity::fd`).
-    Fd,
-}
-
-impl DsaMethod {
-    /// The name used in case files and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            DsaMethod::Continuum => "continuum",
-            DsaMethod::Dual => "dual",
-            DsaMethod::Fd => "fd",
-        }
-    }
-
-    /// Parse a method name; `key` names where it was written (for the error).
-    pub fn parse(s: &str, key: &str, path: &Path) -> Result<Self, CaseError> {
-        match s {
-            "continuum" => Ok(DsaMethod::Continuum),
-            "dual" => Ok(DsaMethod::Dual),
-            "fd" => Ok(DsaMethod::Fd),
-            _ => Err(invalid(
-                path,
-                key,
-                format!("{s:?}"),
-                "\"continuum\", \"dual\" or \"fd\"",
-            )),
-        }
-    }
-}
-
-/// One checked design variable with its finite-difference steps.
-#[derive(Clone, Debug, PartialEq)]
-pub struct DesignEntry {
-    /// The variable.
-    pub variable: DesignVariable,
-    /// Relative steps `h/|τ|` (each finite, > 0), in the order written.
-    pub fd_steps: Vec<f64>,
-}
-
-impl DesignEntry {
-    /// The absolute steps `h = (h/|τ|)·|τ|` at `design`; for a tool translation or rotation
-    /// (whose value, the offset, is 0 at the nominal design) `fd_steps` are absolute lengths
-    /// or angles (radians).
-    pub fn absolute_steps(&self, design: &Design) -> Vec<f64> {
-        if is_tool_kind(&self.variable.kind) {
-            return self.fd_steps.clone();
-        }
-        let tau = self.variable.value(design).abs();
-        self.fd_steps.iter().map(|r| r * tau).collect()
-    }
-}
-
-/// The checked design-sensitivity part of a shell case.
-#[derive(Clone, Debug, PartialEq)]
-pub struct DsaSpec {
-    /// The design variables (at least one).
-    pub design: Vec<DesignEntry>,
-    /// The methods to run (default: continuum, dual and fd).
-    pub methods: Vec<DsaMethod>,
-    /// The monitored components (default: every case monitor, ux, uy, uz).
-    pub monitors: Vec<Monitor>,
-}
-
 fn invalid(
     path: &Path,
     key: impl Into<String>,
@@ -223,7 +161,14 @@ pub fn parse_methods(
     }
     let mut out = Vec::with_capacity(names.len());
     for (i, n) in names.iter().enumerate() {
-        let m = DsaMethod::parse(n.trim(), &format!("{key}[{i}]"), path)?;
+        let m = DsaMethod::from_name(n.trim()).ok_or_else(|| {
+            invalid(
+                path,
+                format!("{key}[{i}]"),
+                format!("{:?}", n.trim()),
+                "\"continuum\", \"dual\" or \"fd\"",
+            )
+        })?;
         if out.contains(&m) {
             return Err(invalid(
                 path,
@@ -309,7 +254,7 @@ pub(crate) fn check(
                 ),
             ));
         }
-        let is_tool = is_tool_kind(&kind);
+        let is_tool = kind.is_offset();
         let variable = DesignVariable::new(d.name.clone(), kind);
         let fd_steps = d
             .fd_steps
@@ -456,7 +401,7 @@ pub(crate) fn check(
             return Err(invalid(
                 path,
                 format!("design[{k}].kind"),
-                format!("{:?}", super::dsa_run::kind_name(&e.variable)),
+                format!("{:?}", e.variable.kind.key()),
                 "a thickness, material or tool variable with [[dsa.angle]] or [[dsa.distance]] \
                  responses (their initial points would move with a shape variable, whose \
                  design velocity these responses do not carry)",
@@ -676,15 +621,6 @@ fn monitor_selection(
     Ok(vec![sens_monitor(path, key, m, c, comp)?])
 }
 
-/// A tool translation or rotation: its value (the offset from the case's tool) is 0 at the
-/// nominal design, so its finite-difference steps are absolute.
-fn is_tool_kind(kind: &DesignKind) -> bool {
-    matches!(
-        kind,
-        DesignKind::Tool { .. } | DesignKind::ToolRotation { .. }
-    )
-}
-
 fn design_kind(
     path: &Path,
     key: &str,
@@ -707,7 +643,7 @@ pub fn check_tool_names(path: &Path, tools: &[RigidTool], spec: &DsaSpec) -> Res
             invalid(
                 path,
                 format!("design[{k}].kind"),
-                format!("{:?}", super::dsa_run::kind_name(&e.variable)),
+                format!("{:?}", e.variable.kind.key()),
                 format!("a tool of the case's [[tool]] tables {names:?} ({err})"),
             )
         })?;
@@ -773,4 +709,94 @@ pub fn check_load_control(case: &ShellCase) -> Result<(), CaseError> {
         ));
     }
     Ok(())
+}
+
+/// The case's analysis for any design ([`Analysis`]): the case with the design's thickness,
+/// material, surface and tool placements.
+pub struct CaseAnalysis<'a> {
+    /// The case.
+    pub case: &'a ShellCase,
+}
+
+impl Analysis for CaseAnalysis<'_> {
+    fn build(&self, design: &Design) -> Result<(ShellProblem, NewtonSolver), SensitivityError> {
+        self.build_with_contact(design).map(|(p, n, _)| (p, n))
+    }
+
+    /// The case with the design's thickness, material and tool offsets (each tool's whole path
+    /// translated, [`crate::contact::ToolPath::translated`], and the tool as built rotated
+    /// about its pivot, [`crate::contact::ToolPath::rotated`]), and its contact.
+    fn build_with_contact(
+        &self,
+        design: &Design,
+    ) -> Result<(ShellProblem, NewtonSolver, Option<Arc<ShellContact>>), SensitivityError> {
+        let mut c = self.case.clone();
+        c.thickness = design.thickness;
+        c.material = design.material;
+        if let Some(surface) = &design.surface {
+            // A shape design: the same case on the perturbed surface (the discretisation,
+            // boundaries, loads and monitors live on the parameter domain and stay).
+            c.surface = surface.clone();
+        }
+        for (name, offset) in &design.tool_offsets {
+            let tool = c
+                .tools
+                .iter_mut()
+                .find(|t| &t.name == name)
+                .ok_or_else(|| {
+                    SensitivityError::Design(crate::sensitivity::DesignError::UnknownTool {
+                        variable: name.clone(),
+                        tool: name.clone(),
+                        expected: format!(
+                            "{:?}",
+                            self.case.tools.iter().map(|t| &t.name).collect::<Vec<_>>()
+                        ),
+                    })
+                })?;
+            tool.path = tool
+                .path
+                .translated(offset.translation)
+                .and_then(|p| p.rotated(offset.rotation))
+                .map_err(|e| SensitivityError::Build {
+                    context: format!(
+                        "tool `{name}` moved by {:?} and rotated by {:?}",
+                        offset.translation, offset.rotation
+                    ),
+                    source: Box::new(e),
+                })?;
+        }
+        let b = shell_build::build(&c).map_err(|e| SensitivityError::Build {
+            context: self.case.path.display().to_string(),
+            source: Box::new(e),
+        })?;
+        Ok((b.problem, b.newton, b.contact))
+    }
+}
+
+/// The case's nominal design: thickness, material and surface.
+pub fn base_design(case: &ShellCase) -> Design {
+    Design {
+        thickness: case.thickness,
+        material: case.material,
+        surface: Some(case.surface.clone()),
+        tool_offsets: Default::default(),
+    }
+}
+
+/// Check everything a `dsa` run of `case` with `methods` needs, before any analysis: design
+/// variables present and admissible, loads the dual reference can carry, and, on the built
+/// model, [`validate_design`](crate::sensitivity::validate_design).
+pub fn validate(case: &ShellCase, methods: &[DsaMethod]) -> Result<DsaSpec, CaseError> {
+    let mut spec = case.dsa.clone().ok_or_else(|| CaseError::NoDesign {
+        path: case.path.clone(),
+    })?;
+    spec.methods = methods.to_vec();
+    check_load_control(case)?;
+    check_tool_names(&case.path, &case.tools, &spec)?;
+    if methods.contains(&DsaMethod::Dual) || methods.contains(&DsaMethod::Continuum) {
+        // Shape variables with contact are carried by both methods: the slave sites take the
+        // design velocity of the initial geometry (`shell::contact::InitialGeometry`).
+        check_dsa_loads(case)?;
+    }
+    Ok(spec)
 }

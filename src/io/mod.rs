@@ -8,8 +8,8 @@
 //!   assembled by [`shell_build`] and written by [`shell_output`].
 
 pub mod dsa_case;
+pub mod dsa_output;
 pub mod dsa_plots;
-pub mod dsa_run;
 pub mod plot;
 pub mod shell_build;
 pub mod shell_case;
@@ -50,6 +50,14 @@ pub enum CaseError {
         /// Cause.
         source: crate::geometry::GeometryError,
     },
+    /// `shelldsa dsa` on a case without design variables.
+    #[error(
+        "case file {path}: no [[design]] table: `shelldsa dsa` needs at least one design variable"
+    )]
+    NoDesign {
+        /// File.
+        path: PathBuf,
+    },
     /// A value outside its admissible range.
     #[error("case file {path}: `{key}` = {value} is invalid: expected {expected}")]
     Invalid {
@@ -62,55 +70,6 @@ pub enum CaseError {
         /// What was expected.
         expected: String,
     },
-}
-
-/// When a results file (`results.json` with its PVD, `sensitivity.json`) is rewritten whole
-/// while a run goes on: after every converged step up to [`RewriteSchedule::EVERY_STEP_UP_TO`],
-/// then once the number of steps has grown by a sixteenth since the last rewrite, or once the
-/// last rewrite is older than [`RewriteSchedule::MIN_INTERVAL_S`] and 100 times its own
-/// duration. Each step record is then written about 17 times in all (a geometric series), and
-/// rewrites take at most about 1 % of the wall time, so the cost per step stays bounded however
-/// long the run. (`steps.jsonl` has every converged step as soon as it converges.)
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct RewriteSchedule {
-    /// Steps in the last rewrite.
-    steps: usize,
-    /// When it ended.
-    at: std::time::Instant,
-    /// How long it took.
-    took: std::time::Duration,
-}
-
-impl RewriteSchedule {
-    pub(crate) const EVERY_STEP_UP_TO: usize = 32;
-    const GROWTH: usize = 16;
-    pub(crate) const MIN_INTERVAL_S: f64 = 10.0;
-
-    /// Nothing written yet, at `start`.
-    pub(crate) fn starting(start: std::time::Instant) -> Self {
-        Self {
-            steps: 0,
-            at: start,
-            took: std::time::Duration::ZERO,
-        }
-    }
-
-    /// Whether a rewrite with `steps` converged steps is due.
-    pub(crate) fn due(&self, steps: usize) -> bool {
-        let since = self.at.elapsed().as_secs_f64();
-        steps <= Self::EVERY_STEP_UP_TO
-            || steps >= self.steps + (self.steps / Self::GROWTH).max(1)
-            || since >= Self::MIN_INTERVAL_S.max(100.0 * self.took.as_secs_f64())
-    }
-
-    /// A rewrite with `steps` steps has just ended; it took `took`.
-    pub(crate) fn wrote(&mut self, steps: usize, took: std::time::Duration) {
-        *self = Self {
-            steps,
-            at: std::time::Instant::now(),
-            took,
-        };
-    }
 }
 
 /// A fixed-length array of a case file, of exactly `N` entries. serde's own array support reads

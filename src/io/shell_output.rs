@@ -684,7 +684,7 @@ pub struct ShellOutput {
     step_lines: Vec<String>,
     /// `steps.jsonl`, open for appending, and its length after the last whole line.
     step_log: Option<(std::fs::File, u64)>,
-    rewrites: super::RewriteSchedule,
+    rewrites: crate::solver::observe::RewriteSchedule,
     start: Instant,
     info: serde_json::Map<String, Value>,
     contact: Option<ContactTracking>,
@@ -759,7 +759,7 @@ impl ShellOutput {
             steps: Vec::new(),
             step_lines: Vec::new(),
             step_log: None,
-            rewrites: super::RewriteSchedule::starting(start),
+            rewrites: crate::solver::observe::RewriteSchedule::starting(start),
             start,
             info: serde_json::Map::new(),
             contact: None,

@@ -251,6 +251,16 @@ pub enum SensitivityError {
     /// Shell evaluation.
     #[error(transparent)]
     Shell(#[from] ShellError),
+    /// The analysis could not be built for a design (`context` names what was built: the case
+    /// file, a moved tool).
+    #[error("{context}: {source}")]
+    Build {
+        /// What was built.
+        context: String,
+        /// Why it failed.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
     /// Linear solver set-up.
     #[error(transparent)]
     Solver(#[from] crate::solver::SolverError),

@@ -22,6 +22,7 @@ pub mod continuum;
 pub mod dual;
 pub mod fd;
 pub mod shape;
+pub mod study;
 pub mod terms;
 
 use crate::geometry::Surface;
@@ -195,6 +196,30 @@ impl DesignKind {
                 kind: surface.kind(),
                 expected: surface.parameter_names().join(", "),
             }),
+        }
+    }
+
+    /// The case-file key of the kind (the inverse of [`DesignKind::parse_on`]): `thickness`,
+    /// `material.<name>`, `shape.<surface parameter>`, `tool.<name>.<x|y|z>` or
+    /// `tool.<name>.<rx|ry|rz>`.
+    pub fn key(&self) -> String {
+        match self {
+            DesignKind::Thickness => "thickness".into(),
+            DesignKind::Material(p) => format!("material.{}", p.name()),
+            DesignKind::Shape { name, .. } => format!("shape.{name}"),
+            DesignKind::Tool { tool, axis } => format!("tool.{tool}.{}", TOOL_AXES[*axis.min(&2)]),
+            DesignKind::ToolRotation { tool, axis } => {
+                format!("tool.{tool}.{}", TOOL_ROTATION_AXES[*axis.min(&2)])
+            }
+        }
+    }
+
+    /// Whether the variable's value is an offset from the case (0 at the nominal design: a
+    /// tool translation or rotation), so that its finite-difference steps are absolute.
+    pub fn is_offset(&self) -> bool {
+        match self {
+            DesignKind::Thickness | DesignKind::Material(_) | DesignKind::Shape { .. } => false,
+            DesignKind::Tool { .. } | DesignKind::ToolRotation { .. } => true,
         }
     }
 }

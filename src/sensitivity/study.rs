@@ -1,6 +1,9 @@
-//! `shelldsa dsa`: the design sensitivities of a shell case by the hand-derived continuum DSA,
-//! the dual-number reference and central differences of complete re-runs, the table in the
-//! format of the paper's Tables 1–2, and `sensitivity.json` (`docs/sensitivity.md`).
+//! The design sensitivity study of `shelldsa dsa`: the design sensitivities of an analysis by
+//! the hand-derived continuum DSA, the dual-number reference and central differences of
+//! complete re-runs ([`fd`]), with the Taylor test, collected per design variable
+//! ([`DsaResult`], written by `io::dsa_output` as the paper's Tables 1–2 and
+//! `sensitivity.json`, `docs/sensitivity.md`). The analysis for any design is an
+//! [`Analysis`] (for a case file: `io::dsa_case::CaseAnalysis`).
 //!
 //! Order of the runs: (1) the plain analysis (no hook; its wall time is `timing_s.analysis`,
 //! and its monitors are the nominal responses `ψ(τ)` of the finite differences); (2a) the
@@ -11,52 +14,99 @@
 //! relative step, the re-runs at `τ ± h` (`timing_s.fd`, all of them). The Taylor remainder
 //! `|ψ(τ + h) − ψ(τ) − h ψ'|` of every step size reuses the `τ + h` re-run.
 
-use super::dsa_case::{
-    check_dsa_loads, check_load_control, check_tool_names, DesignEntry, DsaMethod, DsaSpec,
-};
-use super::shell_build;
-use super::shell_case::ShellCase;
-use super::shell_output::{
-    add_sensitivity_fields, shell_vtu_with_contact, OutputGrid, SensitivityField, PVD_FILE,
-};
-use super::vtu::PvdCollection;
-use super::CaseError;
-use super::RewriteSchedule;
-use crate::sensitivity::dual::{DualMode, SensitivityError};
-use crate::sensitivity::fd::{self, fit_rate, Analysis, RunResponse, TaylorFit, TaylorRow};
-use crate::sensitivity::terms::{breakdown, TermBreakdown};
-use crate::sensitivity::{
-    run_hooked, validate_design_on, Design, DesignVariable, HookedMethods, Quantity,
+use super::dual::{DualMode, SensitivityError};
+use super::fd::{self, fit_rate, Analysis, RunResponse, TaylorFit, TaylorRow};
+use super::terms::{breakdown, TermBreakdown};
+use super::{
+    run_hooked, validate_design, validate_design_on, Design, DesignVariable, HookedMethods,
     SensitivityFields,
 };
 use crate::shell::contact::ShellContact;
 use crate::shell::model::ShellModel;
 use crate::shell::problem::ShellProblem;
-use crate::shell::ShellError;
+use crate::solver::observe::RewriteSchedule;
 use crate::solver::NewtonSolver;
-use serde_json::{json, Value};
-use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 use thiserror::Error;
+
+/// A sensitivity method.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum DsaMethod {
+    /// The hand-derived continuum DSA (`sensitivity::continuum`, eqs 37–65).
+    Continuum,
+    /// The dual-number reference (`sensitivity::dual`).
+    Dual,
+    /// Central differences of complete re-runs (`sensitivity::fd`).
+    Fd,
+}
+
+impl DsaMethod {
+    /// Every method, in the order of their names.
+    pub const ALL: [DsaMethod; 3] = [DsaMethod::Continuum, DsaMethod::Dual, DsaMethod::Fd];
+
+    /// The name used in case files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            DsaMethod::Continuum => "continuum",
+            DsaMethod::Dual => "dual",
+            DsaMethod::Fd => "fd",
+        }
+    }
+
+    /// The method of a name ([`DsaMethod::name`]).
+    pub fn from_name(s: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == s)
+    }
+}
+
+/// One checked design variable with its finite-difference steps.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DesignEntry {
+    /// The variable.
+    pub variable: DesignVariable,
+    /// Relative steps `h/|τ|` (each finite, > 0), in the order written.
+    pub fd_steps: Vec<f64>,
+}
+
+impl DesignEntry {
+    /// The absolute steps `h = (h/|τ|)·|τ|` at `design`; for a variable whose value is an
+    /// offset (0 at the nominal design, [`super::DesignKind::is_offset`]: a tool translation or
+    /// rotation) `fd_steps` are absolute lengths or angles (radians).
+    pub fn absolute_steps(&self, design: &Design) -> Vec<f64> {
+        if self.variable.kind.is_offset() {
+            return self.fd_steps.clone();
+        }
+        let tau = self.variable.value(design).abs();
+        self.fd_steps.iter().map(|r| r * tau).collect()
+    }
+}
+
+/// The checked design-sensitivity part of a shell case.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DsaSpec {
+    /// The design variables (at least one).
+    pub design: Vec<DesignEntry>,
+    /// The methods to run (default: continuum, dual and fd).
+    pub methods: Vec<DsaMethod>,
+    /// The monitored components (default: every case monitor, ux, uy, uz).
+    pub monitors: Vec<super::Monitor>,
+}
 
 /// Errors of a `dsa` run.
 #[derive(Debug, Error)]
 pub enum DsaError {
-    /// The case has no `[[design]]` table.
-    #[error(
-        "case file {0}: no [[design]] table: `shelldsa dsa` needs at least one design variable"
-    )]
-    NoDesign(String),
-    /// Invalid case input (design variables, loads the reference cannot carry).
-    #[error(transparent)]
-    Case(#[from] CaseError),
     /// The analysis or a method failed.
     #[error(transparent)]
     Sensitivity(#[from] SensitivityError),
-    /// A hooked run took other load steps than the plain analysis.
-    #[error("{0}")]
-    Inconsistent(String),
+    /// A hooked run took other load levels than the plain analysis.
+    #[error("{}", fd::load_levels_differ(.levels, .nominal, "plain analysis"))]
+    LoadLevels {
+        /// The hooked run's converged load levels.
+        levels: Vec<f64>,
+        /// The plain analysis'.
+        nominal: Vec<f64>,
+    },
     /// `--terms STEP` beyond the converged steps of the plain analysis.
     #[error("--terms {step}: expected a converged load step in 1..={steps}")]
     StepOutOfRange {
@@ -65,90 +115,61 @@ pub enum DsaError {
         /// Converged steps of the plain analysis.
         steps: usize,
     },
-    /// A feature of the analysis that the sensitivity methods do not carry.
-    #[error("case file {path}: `{key}` = {value}: {why}")]
-    Unsupported {
-        /// The case file.
-        path: String,
-        /// The key.
-        key: &'static str,
-        /// Its value.
-        value: String,
-        /// What is missing.
-        why: &'static str,
-    },
 }
 
-/// The case's analysis for any design: the case with `thickness` and `material` replaced.
-pub struct CaseAnalysis<'a> {
-    /// The case.
-    pub case: &'a ShellCase,
+/// The analysis replaying given load levels: every level is a stop of the load stepping and
+/// the step size starts at `max_step` (≥ every gap), so each step is clipped to the next level
+/// and keeps its size (a clipped step neither grows nor shrinks).
+struct Replay<'a> {
+    analysis: &'a dyn Analysis,
+    levels: Vec<f64>,
 }
 
-impl Analysis for CaseAnalysis<'_> {
+impl Analysis for Replay<'_> {
     fn build(&self, design: &Design) -> Result<(ShellProblem, NewtonSolver), SensitivityError> {
         self.build_with_contact(design).map(|(p, n, _)| (p, n))
     }
-
-    /// The case with the design's thickness, material and tool offsets (each tool's whole path
-    /// translated, [`crate::contact::ToolPath::translated`], and the tool as built rotated
-    /// about its pivot, [`crate::contact::ToolPath::rotated`]), and its contact.
+    fn solver(&self) -> crate::solver::SolverOptions {
+        self.analysis.solver()
+    }
     fn build_with_contact(
         &self,
         design: &Design,
     ) -> Result<(ShellProblem, NewtonSolver, Option<Arc<ShellContact>>), SensitivityError> {
-        let mut c = self.case.clone();
-        c.thickness = design.thickness;
-        c.material = design.material;
-        if let Some(surface) = &design.surface {
-            // A shape design: the same case on the perturbed surface (the discretisation,
-            // boundaries, loads and monitors live on the parameter domain and stay).
-            c.surface = surface.clone();
-        }
-        for (name, offset) in &design.tool_offsets {
-            let tool = c
-                .tools
-                .iter_mut()
-                .find(|t| &t.name == name)
-                .ok_or_else(|| {
-                    SensitivityError::Design(crate::sensitivity::DesignError::UnknownTool {
-                        variable: name.clone(),
-                        tool: name.clone(),
-                        expected: format!(
-                            "{:?}",
-                            self.case.tools.iter().map(|t| &t.name).collect::<Vec<_>>()
-                        ),
-                    })
-                })?;
-            tool.path = tool
-                .path
-                .translated(offset.translation)
-                .and_then(|p| p.rotated(offset.rotation))
-                .map_err(|e| {
-                    SensitivityError::Shell(ShellError::InvalidInput(format!(
-                        "tool `{name}` moved by {:?} and rotated by {:?}: {e}",
-                        offset.translation, offset.rotation
-                    )))
-                })?;
-        }
-        let b = shell_build::build(&c).map_err(|e| {
-            SensitivityError::Shell(ShellError::InvalidInput(format!(
-                "{}: {e}",
-                self.case.path.display()
-            )))
-        })?;
-        Ok((b.problem, b.newton, b.contact))
+        let (problem, mut newton, contact) = self.analysis.build_with_contact(design)?;
+        newton.stepping.stops = self.levels.clone();
+        newton.stepping.initial_step = newton.stepping.max_step;
+        Ok((problem, newton, contact))
     }
 }
 
-/// A sensitivity method's problem for `design`: the problem (which owns its loads) and its
-/// driver.
-fn method_problem(
-    analysis: &CaseAnalysis<'_>,
-    design: &Design,
-) -> Result<(ShellProblem, NewtonSolver), DsaError> {
-    let (problem, newton, _) = analysis.build_with_contact(design)?;
-    Ok((problem, newton))
+/// Writes the fields of the run that carries the derivative methods as it goes (the VTU
+/// files of `shelldsa dsa`); a failure is kept and stops further writing, the run goes on.
+pub trait StepWriter {
+    /// Open for the hooked run: `contact` is its contact (for the contact pressure),
+    /// `variables` the design variables' names.
+    fn open(
+        &mut self,
+        contact: Option<Arc<ShellContact>>,
+        variables: Vec<String>,
+    ) -> Result<(), String>;
+    /// Whether converged step `step` (1-based) at `load` is written.
+    fn due(&self, step: usize, load: f64) -> bool;
+    /// Write step `step` at `load` of `model` with the methods' committed sensitivities
+    /// (`(method name, fields)`; `None` fields: zero, the initial state).
+    fn write(
+        &mut self,
+        step: usize,
+        load: f64,
+        model: &ShellModel,
+        methods: &[(&str, Option<&dyn SensitivityFields>)],
+    );
+    /// Time spent writing so far.
+    fn time(&self) -> Duration;
+    /// The first error writing, if any.
+    fn error(&self) -> Option<&str>;
+    /// The files written so far.
+    fn written(&self) -> &[VtuStep];
 }
 
 /// Per-step derivatives `[step][monitor][variable]` regrouped as `[variable][step][monitor]`.
@@ -164,16 +185,6 @@ fn by_variable<'a>(
                 .collect()
         })
         .collect()
-}
-
-/// The case's nominal design: thickness, material and surface.
-pub fn base_design(case: &ShellCase) -> Design {
-    Design {
-        thickness: case.thickness,
-        material: case.material,
-        surface: Some(case.surface.clone()),
-        tool_offsets: Default::default(),
-    }
 }
 
 /// Central differences of one variable with one step size.
@@ -265,133 +276,6 @@ pub struct VtuStep {
     pub file: String,
 }
 
-/// The VTU files of the run that carries the derivative methods, in the plain run's layout
-/// (`[output] vtu`, `every`, `subdivide`; `shell.pvd` and `steps/step_NNNN.vtu`, step 0 the
-/// initial state, every `every`-th converged step and the one reaching `final_load`): every
-/// array of the plain run's VTU ([`shell_vtu_with_contact`]) and, per design variable and
-/// method, the sensitivity fields of [`add_sensitivity_fields`], named
-/// `d_u/d_<variable> (<method>)` and `d_eps_p_<top|mid|bottom>/d_<variable> (<method>)`.
-pub struct StepVtu<'a> {
-    dir: PathBuf,
-    case: &'a ShellCase,
-    grid: OutputGrid,
-    contact: Option<Arc<ShellContact>>,
-    variables: Vec<String>,
-    pvd: PvdCollection,
-    time: std::time::Duration,
-    written: Vec<VtuStep>,
-    error: Option<String>,
-}
-
-impl<'a> StepVtu<'a> {
-    /// The writer into `dir` for `case`'s output grid, with the hooked run's `contact` (for
-    /// the contact pressure) and the names of its design variables.
-    pub fn new(
-        dir: &Path,
-        case: &'a ShellCase,
-        contact: Option<Arc<ShellContact>>,
-        variables: Vec<String>,
-    ) -> Result<Self, String> {
-        let cq = shell_build::particle_grid(case);
-        let cq = shell_build::cell_quadrature(case, &cq).map_err(|e| e.to_string())?;
-        let grid = OutputGrid::new(&cq, case.output.subdivide).map_err(|e| e.to_string())?;
-        let steps = dir.join("steps");
-        std::fs::create_dir_all(&steps)
-            .map_err(|e| format!("cannot create {}: {e}", steps.display()))?;
-        Ok(StepVtu {
-            dir: dir.to_owned(),
-            case,
-            grid,
-            contact,
-            variables,
-            pvd: PvdCollection::new(dir.join(PVD_FILE)),
-            time: std::time::Duration::ZERO,
-            written: Vec::new(),
-            error: None,
-        })
-    }
-
-    /// Whether converged step `step` (1-based) at `load` is written: every `every`-th and the
-    /// one reaching `final_load` (as the plain run).
-    pub fn due(&self, step: usize, load: f64) -> bool {
-        let s = &self.case.steps;
-        let last = (s.final_load - load).abs() <= 1e-12 * s.final_load.abs().max(1.0);
-        self.error.is_none() && (step % self.case.output.every == 0 || last)
-    }
-
-    /// Write step `step` at `load` of `model` with the methods' committed sensitivities
-    /// (`(method name, fields)`; `None` fields: zero, the initial state). A failure is kept
-    /// ([`Self::error`]) and stops further writing.
-    pub fn write(
-        &mut self,
-        step: usize,
-        load: f64,
-        model: &ShellModel,
-        methods: &[(&str, Option<&dyn SensitivityFields>)],
-    ) {
-        if self.error.is_some() {
-            return;
-        }
-        let t = Instant::now();
-        if let Err(e) = self.write_files(step, load, model, methods) {
-            self.error = Some(e);
-        }
-        self.time += t.elapsed();
-    }
-
-    fn write_files(
-        &mut self,
-        step: usize,
-        load: f64,
-        model: &ShellModel,
-        methods: &[(&str, Option<&dyn SensitivityFields>)],
-    ) -> Result<(), String> {
-        let pressure = match &self.contact {
-            Some(c) => Some(
-                c.report(model, &vec![0.0; model.n_dofs()], load)
-                    .map_err(|e| format!("contact at step {step}: {e}"))?
-                    .pressure,
-            ),
-            None => None,
-        };
-        let n_layer_points = model.points.len() * model.thickness_rule.len();
-        let mut fields = Vec::new();
-        for (method, f) in methods {
-            for (v, name) in self.variables.iter().enumerate() {
-                let (translations, plastic_strain) = match f {
-                    Some(f) => (f.translations(model, v), f.plastic_strain(v)),
-                    None => (vec![0.0; model.n_dofs()], vec![0.0; n_layer_points]),
-                };
-                fields.push(SensitivityField {
-                    label: format!("{name} ({method})"),
-                    translations,
-                    plastic_strain,
-                });
-            }
-        }
-        let rel = format!("steps/step_{step:04}.vtu");
-        let path = self.dir.join(&rel);
-        let w = shell_vtu_with_contact(model, &self.case.surface, &self.grid, pressure.as_deref())
-            .and_then(|w| add_sensitivity_fields(w, model, &self.grid, &fields))
-            .map_err(|e| format!("{}: {e}", path.display()))?;
-        w.write(&path).map_err(|e| e.to_string())?;
-        self.pvd
-            .add_and_write(load, &rel)
-            .map_err(|e| e.to_string())?;
-        self.written.push(VtuStep {
-            step,
-            load,
-            file: rel,
-        });
-        Ok(())
-    }
-
-    /// The first error writing the files.
-    pub fn error(&self) -> Option<&str> {
-        self.error.as_deref()
-    }
-}
-
 /// The cost of the derivative methods per design variable, as fractions of the plain
 /// analysis' wall time, measured both ways ([`DsaResult::cost`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -470,36 +354,19 @@ impl std::fmt::Display for DsaFailure {
     }
 }
 
-/// Check everything a `dsa` run of `case` with `methods` needs, before any analysis: design
-/// variables present and admissible, loads the dual reference can carry, and, on the built
-/// model, [`validate_design`](crate::sensitivity::validate_design).
-pub fn validate(case: &ShellCase, methods: &[DsaMethod]) -> Result<DsaSpec, DsaError> {
-    let mut spec = case
-        .dsa
-        .clone()
-        .ok_or_else(|| DsaError::NoDesign(case.path.display().to_string()))?;
-    spec.methods = methods.to_vec();
-    check_load_control(case)?;
-    check_tool_names(&case.path, &case.tools, &spec)?;
-    if methods.contains(&DsaMethod::Dual) || methods.contains(&DsaMethod::Continuum) {
-        // Shape variables with contact are carried by both methods: the slave sites take the
-        // design velocity of the initial geometry (`shell::contact::InitialGeometry`).
-        check_dsa_loads(case)?;
-    }
-    Ok(spec)
-}
-
-/// Run the analysis and the methods of `spec` on `case`; `progress` receives one line per
-/// run ([`run_observed`] without the pre-check of a step and without the updates).
+/// Run the analysis (for any design: `analysis`; nominal design `base`) and the methods of
+/// `spec`; `progress` receives one line per run ([`run_observed`] without the pre-check of a
+/// step and without the updates).
 pub fn run(
-    case: &ShellCase,
+    analysis: &dyn Analysis,
+    base: &Design,
     spec: &DsaSpec,
     progress: &mut dyn FnMut(&str),
 ) -> Result<DsaResult, DsaError> {
-    run_observed(case, spec, None, progress, &mut |_| {})
+    run_observed(analysis, base, spec, None, progress, &mut |_| {})
 }
 
-/// Run the analysis and the methods of `spec` on `case`. `progress` receives one line per run;
+/// Run the analysis and the methods of `spec`. `progress` receives one line per run;
 /// `update` the results so far (to write `sensitivity.json` as the run goes): after converged
 /// steps of the plain analysis and of the run with the derivative methods (on the schedule of
 /// [`RewriteSchedule`]), after each of those runs, after every finite-difference step size of
@@ -511,44 +378,53 @@ pub fn run(
 /// a failed method or re-run is recorded in [`DsaResult::failures`] (naming the method, the
 /// variable and `h`) and everything else still runs and is kept.
 pub fn run_observed(
-    case: &ShellCase,
+    analysis: &dyn Analysis,
+    base: &Design,
     spec: &DsaSpec,
     need_step: Option<usize>,
     progress: &mut dyn FnMut(&str),
     update: &mut dyn FnMut(&DsaResult),
 ) -> Result<DsaResult, DsaError> {
-    run_with_output(case, spec, need_step, None, progress, update)
+    run_with_output(analysis, base, spec, need_step, None, progress, update)
 }
 
-/// [`run_observed`], and with `out` (and `[output] vtu = true`) the VTU files of the run with
-/// the derivative methods in `out` ([`StepVtu`]; none when only finite differences run).
+/// [`run_observed`], and with `writer` the fields of the run with the derivative methods
+/// written as it goes ([`StepWriter`]; nothing when only finite differences run).
 pub fn run_with_output(
-    case: &ShellCase,
+    analysis: &dyn Analysis,
+    base: &Design,
     spec: &DsaSpec,
     need_step: Option<usize>,
-    out: Option<&Path>,
+    writer: Option<&mut dyn StepWriter>,
     progress: &mut dyn FnMut(&str),
     update: &mut dyn FnMut(&DsaResult),
 ) -> Result<DsaResult, DsaError> {
-    let analysis = CaseAnalysis { case };
-    let base = base_design(case);
     let vars: Vec<DesignVariable> = spec.design.iter().map(|d| d.variable.clone()).collect();
     let monitors = &spec.monitors;
+    let surface = base.surface.as_ref();
 
     // (1) The plain analysis.
     let t = Instant::now();
-    let (problem, newton, contact) = analysis.build_with_contact(&base)?;
-    validate_design_on(&vars, &problem.model, &case.surface, 0.0)
-        .map_err(SensitivityError::from)?;
+    let (problem, newton, contact) = analysis.build_with_contact(base)?;
+    let with_contact = contact.is_some();
     // Every finite-difference design (shape: the perturbed surface with a regular normal at
     // every particle and point of the model) is checked before the analysis.
-    if spec.methods.contains(&DsaMethod::Fd) {
-        for d in &spec.design {
-            for h in d.absolute_steps(&base) {
-                d.variable
-                    .validate_on(&problem.model, &case.surface, h)
-                    .map_err(SensitivityError::from)?;
+    let fd_steps = |d: &DesignEntry| match spec.methods.contains(&DsaMethod::Fd) {
+        true => d.absolute_steps(base),
+        false => Vec::new(),
+    };
+    let checked = match surface {
+        Some(s) => validate_design_on(&vars, &problem.model, s, 0.0),
+        None => validate_design(&vars, &problem.model, 0.0),
+    };
+    checked.map_err(SensitivityError::from)?;
+    for d in &spec.design {
+        for h in fd_steps(d) {
+            match surface {
+                Some(s) => d.variable.validate_on(&problem.model, s, h),
+                None => d.variable.validate(&problem.model, h),
             }
+            .map_err(SensitivityError::from)?;
         }
     }
     let mut result = DsaResult {
@@ -558,7 +434,7 @@ pub fn run_with_output(
             .iter()
             .map(|entry| VariableResult {
                 entry: entry.clone(),
-                value: entry.variable.value(&base),
+                value: entry.variable.value(base),
                 continuum: None,
                 dual: None,
                 fd: Vec::new(),
@@ -628,15 +504,16 @@ pub fn run_with_output(
     // run needs the converged tangent, and near a change of the contact set an iteration more
     // or less changes the adaptive growth; the discrete response depends on the levels). A
     // re-run that has to cut a step still differs and is reported (`StepSequence`).
-    let replay_case;
-    let analysis = if case.tools.is_empty() {
-        analysis
-    } else {
-        let mut c = case.clone();
-        c.steps.stops = nominal.loads.clone();
-        c.steps.initial_step = c.steps.max_step;
-        replay_case = c;
-        CaseAnalysis { case: &replay_case }
+    let replay;
+    let analysis: &dyn Analysis = match with_contact {
+        false => analysis,
+        true => {
+            replay = Replay {
+                analysis,
+                levels: nominal.loads.clone(),
+            };
+            &replay
+        }
     };
 
     // (2) The continuum DSA and the dual reference: both observe one hooked run when both are
@@ -663,19 +540,19 @@ pub fn run_with_output(
         .into_iter()
         .filter_map(|(w, n)| w.then_some(n))
         .collect();
-    let mut vtu: Option<StepVtu> = None;
+    let mut vtu: Option<&mut dyn StepWriter> = None;
     let mut vtu_before_run = 0.0;
     let (continuum_run, dual_run) = if want_continuum || want_dual {
         let mut schedule = RewriteSchedule::starting(Instant::now());
-        let built = analysis.build_with_contact(&base).map_err(DsaError::from);
-        if let (Some(dir), true, Ok((problem, _, contact))) = (out, case.output.vtu, &built) {
+        let built = analysis.build_with_contact(base).map_err(DsaError::from);
+        if let (Some(w), Ok((problem, _, contact))) = (writer, &built) {
             let names = vars.iter().map(|v| v.name.clone()).collect();
-            match StepVtu::new(dir, case, contact.clone(), names) {
-                Ok(mut w) => {
+            match w.open(contact.clone(), names) {
+                Ok(()) => {
                     let zero: Vec<_> = method_names.iter().map(|m| (*m, None)).collect();
                     w.write(0, 0.0, &problem.model, &zero);
                     // Only the writes inside the hooked run leave its total.
-                    vtu_before_run = w.time.as_secs_f64();
+                    vtu_before_run = w.time().as_secs_f64();
                     vtu = Some(w);
                 }
                 Err(e) => result.vtu_error = Some(e),
@@ -684,7 +561,7 @@ pub fn run_with_output(
         let runs = built.and_then(|(problem, newton, _)| {
             run_hooked(
                 problem,
-                Some(&case.surface),
+                surface,
                 vars.clone(),
                 monitors.clone(),
                 &newton,
@@ -745,22 +622,21 @@ pub fn run_with_output(
 
     let vtu_time = vtu
         .as_ref()
-        .map_or(0.0, |w| w.time.as_secs_f64() - vtu_before_run);
+        .map_or(0.0, |w| w.time().as_secs_f64() - vtu_before_run);
     if let Some(w) = vtu {
-        result.time_vtu = Some(w.time.as_secs_f64());
-        result.vtu_error = w.error;
-        result.vtu = w.written;
+        result.time_vtu = Some(w.time().as_secs_f64());
+        result.vtu_error = w.error().map(str::to_string);
+        result.vtu = w.written().to_vec();
     }
 
     // (2a) The continuum DSA.
     if let Some(r) = continuum_run {
         let loads: Vec<f64> = r.records.iter().map(|s| s.load).collect();
         if loads != nominal.loads {
-            let e = DsaError::Inconsistent(fd::load_levels_differ(
-                &loads,
-                &nominal.loads,
-                "plain analysis",
-            ));
+            let e = DsaError::LoadLevels {
+                levels: loads,
+                nominal: nominal.loads.clone(),
+            };
             fail(&mut result, progress, DsaFailure::method("continuum", e));
             for v in &mut result.variables {
                 v.continuum = None;
@@ -793,11 +669,10 @@ pub fn run_with_output(
     if let Some(r) = dual_run {
         let loads: Vec<f64> = r.records.iter().map(|s| s.load).collect();
         if loads != nominal.loads {
-            let e = DsaError::Inconsistent(fd::load_levels_differ(
-                &loads,
-                &nominal.loads,
-                "plain analysis",
-            ));
+            let e = DsaError::LoadLevels {
+                levels: loads,
+                nominal: nominal.loads.clone(),
+            };
             fail(&mut result, progress, DsaFailure::method("dual", e));
             for v in &mut result.variables {
                 v.dual = None;
@@ -849,21 +724,12 @@ pub fn run_with_output(
             break;
         }
         let var = &entry.variable;
-        for (&relative, h) in entry.fd_steps.iter().zip(entry.absolute_steps(&base)) {
+        for (&relative, h) in entry.fd_steps.iter().zip(entry.absolute_steps(base)) {
             let mut one = |delta: f64| -> Result<RunResponse, DsaError> {
                 let t = Instant::now();
                 done += 1;
-                let (problem, newton, contact) = analysis.build_with_contact(
-                    &var.perturbed(&base, delta)
-                        .map_err(SensitivityError::from)?,
-                )?;
-                let r = fd::response_with_contact(
-                    problem,
-                    contact,
-                    &newton,
-                    analysis.solver(),
-                    monitors,
-                )?;
+                let design = var.perturbed(base, delta).map_err(SensitivityError::from)?;
+                let r = fd::run_at(analysis, &design, monitors)?;
                 fd::same_steps(var, delta, &nominal, &r)?;
                 progress(&format!(
                     "fd {done}/{total_runs}: `{}` {} h (h/|τ| = {relative:e}, h = {delta:.4e}) \
@@ -896,35 +762,14 @@ pub fn run_with_output(
                     continue;
                 }
             };
-            let derivatives = plus
-                .values
-                .iter()
-                .zip(&minus.values)
-                .map(|(p, m)| p.iter().zip(m).map(|(a, b)| (a - b) / (2.0 * h)).collect())
-                .collect();
+            let derivatives = fd::central(&plus, &minus, h);
             // The Taylor test checks the continuum derivative when it ran, else the dual one.
             let vr = &mut result.variables[v];
             let taylor = vr
                 .continuum
                 .as_ref()
                 .or(vr.dual.as_ref())
-                .map(|d| TaylorRow {
-                    h,
-                    remainder: plus
-                        .values
-                        .iter()
-                        .zip(&nominal.values)
-                        .zip(d)
-                        .map(|((p, n), g)| {
-                            p.iter()
-                                .zip(n)
-                                .zip(g)
-                                .map(|((a, b), g)| (a - b - h * g).abs())
-                                .fold(0.0, f64::max)
-                        })
-                        .collect(),
-                    flagged: fd::flags(&[&nominal, &plus]),
-                });
+                .map(|d| fd::taylor_row(&plus, &nominal, d, h));
             vr.fd.push(FdColumn {
                 relative,
                 h,
@@ -1015,242 +860,6 @@ fn value_difference<'a>(nominal: &[Vec<f64>], run: impl Iterator<Item = &'a [f64
     }
 }
 
-/// A number for JSON: `null` when not finite (JSON has no NaN).
-fn num(v: f64) -> Value {
-    if v.is_finite() {
-        json!(v)
-    } else {
-        Value::Null
-    }
-}
-
-/// `sensitivity.json` before any analysis (`status` `"running"`, no steps yet) or after a plain
-/// analysis that failed (`status` `"failed: ..."`).
-pub fn empty_json(case: &ShellCase, spec: &DsaSpec, status: &str) -> Value {
-    json!({
-        "kind": "shell-dsa",
-        "case": case.path.display().to_string(),
-        "title": case.title,
-        "status": status,
-        "failures": [],
-        "methods": spec.methods.iter().map(|m| m.name()).collect::<Vec<_>>(),
-        "design_variables": spec.design.iter().map(|d| d.variable.name.clone()).collect::<Vec<_>>(),
-        "variables": [],
-        "loads": [],
-    })
-}
-
-/// Write `doc` as `DIR/sensitivity.json` (pretty, replaced whole: a reader or a killed run
-/// sees the previous or the new file).
-pub fn write_json(path: &std::path::Path, doc: &Value) -> Result<(), String> {
-    let text = serde_json::to_string_pretty(doc).map_err(|e| format!("{}: {e}", path.display()))?;
-    super::vtu::replace_file(path, text.as_bytes())
-        .map_err(|e| format!("cannot write {}: {e}", path.display()))
-}
-
-/// The notes written at the top of `sensitivity.json`.
-pub const NOTES: [&str; 6] = [
-    "continuum: the hand-derived continuum DSA (eqs 37-65: fictitious loads solved with the \
-     converged, factorised tangent at every step); dual: the dual-number reference through \
-     the same kernels; continuum_vs_dual: per variable, the largest |continuum - dual| \
-     relative to max |dual| over the steps and monitors",
-    "timing_s.analysis: wall time of a separate plain run of the analysis (no sensitivity \
-     hook), the nominal run of the finite differences; timing_s.continuum and timing_s.dual: \
-     each method's own time inside its analysis run with the hook (the whole hooked runs: \
-     continuum_run_total_s, dual_run_total_s; with both methods asked for, one run observed \
-     by both, so the two totals are the same run's); timing_s.continuum_stages: the continuum DSA by stage (fictitious loads, solve, history update, monitors; s); timing_s.fd: all finite-difference re-runs",
-    "fd_central and fd_step are lists, one entry per step size of the variable's fd_steps \
-     (relative steps h/|tau|; fd_step holds the absolute h); fd_flagged[k] marks load steps \
-     where the yield status of some layer point differs among the runs at tau-h, tau, tau+h \
-     (at that step or an earlier one): such differences straddle a kink and are not \
-     comparable",
-    "taylor: per load step, the least-squares slope of log |psi(tau+h) - psi(tau) - h psi'| \
-     (max over the monitors; psi' the continuum derivative when it ran, else the dual one) \
-     against log h over the unflagged step sizes; 2 when psi' is the derivative of the \
-     discrete response",
-    "cost_per_variable: fractions of the plain analysis' wall time per design variable; \
-     continuum_own and dual_own: each method's own time in the hooked run; hooked_over_plain: \
-     (hooked run - plain run) / plain run / variables, everything the methods add including \
-     the tangents at converged states (with both methods, one run carries both)",
-    "vtu: the files of the run with the derivative methods (the plain run's VTU layout and \
-     arrays, plus point data uv, d_u/d_<variable> (<method>) = sum_J Psi_J du_J/dtau at the \
-     node, the derivative a displacement monitor there records, and cell data \
-     d_eps_p_<top|mid|bottom>/d_<variable> (<method>), the cell means of the layer points' \
-     deps_p/dtau with the nominal weights); timing_s.vtu: writing them, left out of the \
-     hooked run totals",
-];
-
-/// `sensitivity.json`. Everything but `timing_s` and `dual_run_total_s` is a deterministic
-/// function of the case. `status` is `"running"` while the methods run (the file is rewritten
-/// after each), then `"complete"`, or `"incomplete"` when some method or re-run failed
-/// (`failures` names each: method, variable, h, error).
-pub fn to_json(case: &ShellCase, r: &DsaResult, status: &str) -> Value {
-    let monitors: Vec<Value> = r
-        .spec
-        .monitors
-        .iter()
-        .map(|m| match &m.quantity {
-            Quantity::Displacement { uv, component } => {
-                json!({"label": m.label, "quantity": "displacement", "uv": uv, "component": component})
-            }
-            Quantity::ToolForce { tool, component } => {
-                json!({"label": m.label, "quantity": "tool-force", "tool": tool, "component": component})
-            }
-            Quantity::ChordAngle { points, plane, .. } => {
-                json!({"label": m.label, "quantity": "chord-angle", "points": points, "plane": plane})
-            }
-            Quantity::TargetDistance {
-                points, targets, ..
-            } => {
-                json!({"label": m.label, "quantity": "target-distance", "points": points, "targets": targets})
-            }
-            Quantity::PlasticStrain {
-                region,
-                layers,
-                rho,
-            } => {
-                json!({"label": m.label, "quantity": "plastic-strain", "region": region,
-                       "layers": format!("{layers:?}").to_lowercase(), "rho": rho})
-            }
-        })
-        .collect();
-    let variables: Vec<Value> = r
-        .variables
-        .iter()
-        .map(|v| {
-            let steps: Vec<Value> = (0..r.nominal.loads.len())
-                .map(|s| {
-                    let mut comps = serde_json::Map::new();
-                    for (m, mon) in r.spec.monitors.iter().enumerate() {
-                        comps.insert(
-                            mon.label.clone(),
-                            json!({
-                                "value": num(r.nominal.values[s][m]),
-                                "continuum": v.continuum.as_ref().and_then(|d| d.get(s)).map_or(Value::Null, |d| num(d[m])),
-                                "dual": v.dual.as_ref().and_then(|d| d.get(s)).map_or(Value::Null, |d| num(d[m])),
-                                "fd_central": v.fd.iter().map(|c| num(c.derivatives[s][m])).collect::<Vec<_>>(),
-                                "fd_step": v.fd.iter().map(|c| num(c.h)).collect::<Vec<_>>(),
-                            }),
-                        );
-                    }
-                    json!({
-                        "step": s + 1,
-                        "load": r.nominal.loads[s],
-                        "plastic_points": r.nominal.yielding[s].iter().filter(|y| **y).count(),
-                        "fd_flagged": v.fd.iter().map(|c| c.flagged[s]).collect::<Vec<_>>(),
-                        "taylor_remainder": v.fd.iter().map(|c| c.taylor.as_ref().and_then(|t| t.remainder.get(s)).map_or(Value::Null, |t| num(*t))).collect::<Vec<_>>(),
-                        "monitors": comps,
-                    })
-                })
-                .collect();
-            let fits: Vec<Value> = v
-                .taylor
-                .iter()
-                .map(|f| {
-                    json!({
-                        "step": f.step + 1,
-                        "rate": f.rate.map_or(Value::Null, num),
-                        "used_h": f.used,
-                        "excluded_h_active_set": f.excluded,
-                        "exact_h": f.exact,
-                    })
-                })
-                .collect();
-            let rates: Vec<f64> = v.taylor.iter().filter_map(|f| f.rate).collect();
-            json!({
-                "name": v.entry.variable.name,
-                "kind": kind_name(&v.entry.variable),
-                "value": v.value,
-                "fd_steps_relative": v.entry.fd_steps,
-                "fd_steps": v.fd.iter().map(|c| c.h).collect::<Vec<_>>(),
-                "flagged_steps": flagged_steps(v),
-                "continuum_vs_dual": continuum_vs_dual(v).map_or(Value::Null, num),
-                "taylor": {
-                    "rate_min": rates.iter().copied().reduce(f64::min),
-                    "rate_max": rates.iter().copied().reduce(f64::max),
-                    "per_step": fits,
-                },
-                "steps": steps,
-            })
-        })
-        .collect();
-    let failures: Vec<Value> = r
-        .failures
-        .iter()
-        .map(|f| {
-            json!({
-                "method": f.method,
-                "variable": f.variable,
-                "h": f.h,
-                "fd_step_relative": f.relative,
-                "error": f.message,
-            })
-        })
-        .collect();
-    json!({
-        "kind": "shell-dsa",
-        "case": case.path.display().to_string(),
-        "title": case.title,
-        "status": status,
-        "failures": failures,
-        "notes": NOTES,
-        "methods": r.spec.methods.iter().map(|m| m.name()).collect::<Vec<_>>(),
-        "monitors": monitors,
-        "loads": r.nominal.loads,
-        "dual_value_difference": r.dual_value_difference.map_or(Value::Null, num),
-        "dual_state_mismatch": r.dual_state_mismatch.map_or(Value::Null, num),
-        "continuum_value_difference": r.continuum_value_difference.map_or(Value::Null, num),
-        "timing_s": {
-            "analysis": r.time_analysis,
-            "continuum": r.time_continuum,
-            "dual": r.time_dual,
-            "fd": r.time_fd,
-            "vtu": r.time_vtu,
-            "continuum_stages": r.continuum_stages.map_or(Value::Null, |t| json!({
-                "rhs": t.rhs,
-                "solve": t.solve,
-                "update": t.update,
-                "record": t.record,
-            })),
-        },
-        "cost_per_variable": {
-            "continuum_own": r.cost().continuum_own.map_or(Value::Null, num),
-            "dual_own": r.cost().dual_own.map_or(Value::Null, num),
-            "hooked_over_plain": r.cost().hooked_over_plain.map_or(Value::Null, num),
-        },
-        "dual_run_total_s": r.time_dual_run,
-        "continuum_run_total_s": r.time_continuum_run,
-        "vtu": {
-            "collection": (!r.vtu.is_empty()).then_some(super::shell_output::PVD_FILE),
-            "steps": r.vtu.iter().map(|v| json!({"step": v.step, "load": v.load, "file": v.file})).collect::<Vec<_>>(),
-            "error": r.vtu_error,
-        },
-        "variables": variables,
-    })
-}
-
-/// `thickness`, `material.<name>`, `shape.<surface parameter>`, `tool.<name>.<x|y|z>` or
-/// `tool.<name>.<rx|ry|rz>`.
-pub fn kind_name(v: &DesignVariable) -> String {
-    match &v.kind {
-        crate::sensitivity::DesignKind::Material(p) => format!("material.{}", p.name()),
-        crate::sensitivity::DesignKind::Shape { name, .. } => format!("shape.{name}"),
-        crate::sensitivity::DesignKind::Tool { tool, axis } => {
-            format!(
-                "tool.{tool}.{}",
-                crate::sensitivity::TOOL_AXES[*axis.min(&2)]
-            )
-        }
-        crate::sensitivity::DesignKind::ToolRotation { tool, axis } => {
-            format!(
-                "tool.{tool}.{}",
-                crate::sensitivity::TOOL_ROTATION_AXES[*axis.min(&2)]
-            )
-        }
-        _ => "thickness".into(),
-    }
-}
-
 /// The largest `|continuum − dual|` over the steps and monitors, relative to the largest
 /// `|dual|` (`None` unless both ran).
 pub fn continuum_vs_dual(v: &VariableResult) -> Option<f64> {
@@ -1262,128 +871,6 @@ pub fn continuum_vs_dual(v: &VariableResult) -> Option<f64> {
         .zip(d.iter().flatten())
         .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
     Some(if big > 0.0 { diff / big } else { diff })
-}
-
-/// Per step size, the 1-based load steps flagged by the active-set test.
-fn flagged_steps(v: &VariableResult) -> Vec<Value> {
-    v.fd
-        .iter()
-        .map(|c| {
-            json!({
-                "fd_step_relative": c.relative,
-                "steps": c.flagged.iter().enumerate().filter(|(_, f)| **f).map(|(s, _)| s + 1).collect::<Vec<_>>(),
-            })
-        })
-        .collect()
-}
-
-fn cell(v: Option<f64>) -> String {
-    match v {
-        Some(x) if x.is_finite() => format!("{x:>13.5e}"),
-        _ => format!("{:>13}", "—"),
-    }
-}
-
-/// The table of one design variable in the format of the paper's Tables 1–2, at its first
-/// step size `h` (`Δτ`): per load step and monitor component ψ, `Δψ = (ψ(τ+h) − ψ(τ−h))/2`
-/// (central differences), `ψ'Δτ` per method, and `Δψ / ψ'Δτ × 100` (finite differences
-/// against the continuum derivative when it ran, else the dual one: the paper's ratio).
-/// `*` marks a step flagged by the active-set test.
-pub fn table(r: &DsaResult, v: usize) -> String {
-    let var = &r.variables[v];
-    let col = var.fd.first();
-    let mut s = format!(
-        "design variable `{}` ({}), τ = {:e}{}\n",
-        var.entry.variable.name,
-        kind_name(&var.entry.variable),
-        var.value,
-        col.map_or(String::from(", no finite differences"), |c| {
-            if matches!(
-                var.entry.variable.kind,
-                crate::sensitivity::DesignKind::Tool { .. }
-                    | crate::sensitivity::DesignKind::ToolRotation { .. }
-            ) {
-                // τ is the tool's offset or rotation (0): fd_steps are absolute.
-                format!(", Δτ = {:e} (absolute: τ is the tool's offset)", c.h)
-            } else {
-                format!(", Δτ = {:e} (h/|τ| = {:e})", c.h, c.relative)
-            }
-        })
-    );
-    let (dual_head, cont_head) = if col.is_some() {
-        ("ψ'Δτ dual", "ψ'Δτ cont.")
-    } else {
-        ("ψ' dual", "ψ' cont.")
-    };
-    s.push_str(&format!(
-        "{:>4} {:>11} {:<10} {:>13} {:>13} {:>13} {:>13} {:>10}\n",
-        "step", "λ", "monitor", "ψ", "Δψ (FD)", dual_head, cont_head, "ratio×100"
-    ));
-    for st in 0..r.nominal.loads.len() {
-        let flag = col.is_some_and(|c| c.flagged[st]);
-        for (m, mon) in r.spec.monitors.iter().enumerate() {
-            let fd = col.map(|c| c.derivatives[st][m] * c.h);
-            let scaled = |d: &Vec<Vec<f64>>| {
-                let g = d.get(st)?[m];
-                col.map(|c| g * c.h).or(Some(g))
-            };
-            let dual = var.dual.as_ref().and_then(scaled);
-            let cont = var.continuum.as_ref().and_then(scaled);
-            let ratio = match (fd, cont.or(dual)) {
-                (Some(a), Some(b)) if b != 0.0 => format!("{:>10.4}", 100.0 * a / b),
-                (Some(0.0), Some(_)) => format!("{:>10}", "0 = 0"),
-                _ => format!("{:>10}", "—"),
-            };
-            s.push_str(&format!(
-                "{:>4} {:>11} {:<10} {} {} {} {} {}{}\n",
-                st + 1,
-                super::plot::plain_tick(r.nominal.loads[st]),
-                mon.label,
-                cell(Some(r.nominal.values[st][m])),
-                cell(fd),
-                cell(dual),
-                cell(cont),
-                ratio,
-                if flag { " *" } else { "" }
-            ));
-        }
-    }
-    for c in &var.fd {
-        s.push_str(&format!(
-            "h/|τ| = {:e}: max |Δψ/ψ'Δτ − 1| over unflagged components with |ψ'| ≥ 1e-6 max|ψ'|: {}\n",
-            c.relative,
-            max_rel_diff(var, c).map_or("—".into(), |e| format!("{e:.3e}"))
-        ));
-    }
-    if let Some(e) = continuum_vs_dual(var) {
-        s.push_str(&format!(
-            "continuum vs dual: max |ψ'_cont − ψ'_dual| / max |ψ'_dual| = {e:.3e}\n"
-        ));
-    }
-    let rates: Vec<String> = var
-        .taylor
-        .iter()
-        .filter_map(|f| f.rate.map(|r| format!("{}: {r:.3}", f.step + 1)))
-        .collect();
-    if !rates.is_empty() {
-        s.push_str(&format!("Taylor rate per step: {}\n", rates.join(", ")));
-    }
-    let flagged: Vec<String> = var
-        .fd
-        .iter()
-        .filter(|c| c.flagged.iter().any(|f| *f))
-        .map(|c| {
-            let first = c.flagged.iter().position(|f| *f).map_or(0, |p| p + 1);
-            format!("h/|τ| = {:e} from step {first}", c.relative)
-        })
-        .collect();
-    if !flagged.is_empty() {
-        s.push_str(&format!(
-            "* active set changed within ±h (not comparable): {}\n",
-            flagged.join("; ")
-        ));
-    }
-    s
 }
 
 /// The largest `|fd/ψ' − 1|` of one step size (`ψ'` continuum when it ran, else dual) over the
@@ -1412,121 +899,19 @@ pub fn max_rel_diff(v: &VariableResult, c: &FdColumn) -> Option<f64> {
 /// reference at converged step `step` (1-based), one entry per design variable
 /// ([`crate::sensitivity::terms`]).
 pub fn terms(
-    case: &ShellCase,
+    analysis: &dyn Analysis,
+    base: &Design,
     spec: &DsaSpec,
     step: usize,
 ) -> Result<Vec<TermBreakdown>, DsaError> {
-    let analysis = CaseAnalysis { case };
-    let base = base_design(case);
-    let (problem, newton) = method_problem(&analysis, &base)?;
+    let (problem, newton, _) = analysis.build_with_contact(base)?;
     let vars: Vec<DesignVariable> = spec.design.iter().map(|d| d.variable.clone()).collect();
     Ok(breakdown(
         problem,
-        Some(&case.surface),
+        base.surface.as_ref(),
         vars,
         &newton,
         analysis.solver(),
         step,
     )?)
-}
-
-/// The breakdown of one variable as a table: per group the largest continuum and dual entries
-/// and their largest difference with its row (particle, DOF); then the end-of-step
-/// sensitivities field by field with the worst integration point or particle.
-pub fn terms_table(b: &TermBreakdown) -> String {
-    let mut s = format!(
-        "terms at step {} (λ = {:e}), design variable `{}` ({}):\n",
-        b.step,
-        b.load,
-        b.variable.name,
-        kind_name(&b.variable)
-    );
-    s.push_str(&format!(
-        "{:<10} {:>13} {:>13} {:>13} {:>10}  worst row\n",
-        "group", "max|cont.|", "max|dual|", "max|diff|", "rel."
-    ));
-    for g in &b.groups {
-        let worst = match g.worst_dof {
-            _ if g.max_difference == 0.0 => "—".to_string(),
-            Some((p, c)) => format!("particle {p} dof {c}"),
-            None => format!("constraint row {}", g.worst_row),
-        };
-        s.push_str(&format!(
-            "{:<10} {:>13.5e} {:>13.5e} {:>13.5e} {:>10.2e}  {}\n",
-            g.group.map_or("total", |t| t.name()),
-            g.continuum_max,
-            g.dual_max,
-            g.max_difference,
-            g.relative(),
-            worst
-        ));
-    }
-    s.push_str(&format!(
-        "{:<12} {:>13} {:>13} {:>10}  worst point\n",
-        "n+1 field", "max|dual|", "max|diff|", "rel."
-    ));
-    for f in &b.update {
-        let at = match f.worst.1 {
-            _ if f.max_difference == 0.0 => "—".to_string(),
-            Some(l) => format!(
-                "point {} layer {l} at ({:.4}, {:.4})",
-                f.worst.0, f.worst_uv[0], f.worst_uv[1]
-            ),
-            None => format!(
-                "particle {} at ({:.4}, {:.4})",
-                f.worst.0, f.worst_uv[0], f.worst_uv[1]
-            ),
-        };
-        s.push_str(&format!(
-            "{:<12} {:>13.5e} {:>13.5e} {:>10.2e}  {}\n",
-            f.field,
-            f.dual_max,
-            f.max_difference,
-            f.relative(),
-            at
-        ));
-    }
-    s
-}
-
-/// `terms.json`: the breakdowns of all variables.
-pub fn terms_json(bs: &[TermBreakdown]) -> Value {
-    let one = |b: &TermBreakdown| {
-        json!({
-            "step": b.step,
-            "load": b.load,
-            "variable": b.variable.name,
-            "kind": kind_name(&b.variable),
-            "groups": b.groups.iter().map(|g| json!({
-                "group": g.group.map_or("total", |t| t.name()),
-                "continuum_max": num(g.continuum_max),
-                "dual_max": num(g.dual_max),
-                "max_difference": num(g.max_difference),
-                "relative": num(g.relative()),
-                "worst_row": g.worst_row,
-                "worst_particle_dof": g.worst_dof,
-            })).collect::<Vec<_>>(),
-            "update": b.update.iter().map(|f| json!({
-                "field": f.field,
-                "dual_max": num(f.dual_max),
-                "max_difference": num(f.max_difference),
-                "relative": num(f.relative()),
-                "worst_index": f.worst.0,
-                "worst_layer": f.worst.1,
-                "worst_uv": f.worst_uv,
-            })).collect::<Vec<_>>(),
-        })
-    };
-    json!({
-        "kind": "shell-dsa-terms",
-        "notes": [
-            "groups: the continuum fictitious load (eq 65's right-hand side) of each term group, \
-             seeded with the dual reference's committed sensitivities at the step start, against \
-             the dual residual's derivative part with only that group seeded; total = all groups",
-            "update: the continuum end-of-step sensitivities (its own solve of eq 65 with the \
-             converged tangent, history update eqs 44-51, particle update) against the dual \
-             reference's committed dual state",
-        ],
-        "breakdowns": bs.iter().map(one).collect::<Vec<_>>(),
-    })
 }

@@ -293,3 +293,52 @@ impl<P: NonlinearProblem + ?Sized> NonlinearProblem for &mut P {
         (**self).restore()
     }
 }
+
+/// When a results file (`results.json` with its PVD, `sensitivity.json`) is rewritten whole
+/// while a run goes on: after every converged step up to [`RewriteSchedule::EVERY_STEP_UP_TO`],
+/// then once the number of steps has grown by a sixteenth since the last rewrite, or once the
+/// last rewrite is older than [`RewriteSchedule::MIN_INTERVAL_S`] and 100 times its own
+/// duration. Each step record is then written about 17 times in all (a geometric series), and
+/// rewrites take at most about 1 % of the wall time, so the cost per step stays bounded however
+/// long the run. (`steps.jsonl` has every converged step as soon as it converges.)
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct RewriteSchedule {
+    /// Steps in the last rewrite.
+    steps: usize,
+    /// When it ended.
+    at: std::time::Instant,
+    /// How long it took.
+    took: std::time::Duration,
+}
+
+impl RewriteSchedule {
+    pub(crate) const EVERY_STEP_UP_TO: usize = 32;
+    const GROWTH: usize = 16;
+    pub(crate) const MIN_INTERVAL_S: f64 = 10.0;
+
+    /// Nothing written yet, at `start`.
+    pub(crate) fn starting(start: std::time::Instant) -> Self {
+        Self {
+            steps: 0,
+            at: start,
+            took: std::time::Duration::ZERO,
+        }
+    }
+
+    /// Whether a rewrite with `steps` converged steps is due.
+    pub(crate) fn due(&self, steps: usize) -> bool {
+        let since = self.at.elapsed().as_secs_f64();
+        steps <= Self::EVERY_STEP_UP_TO
+            || steps >= self.steps + (self.steps / Self::GROWTH).max(1)
+            || since >= Self::MIN_INTERVAL_S.max(100.0 * self.took.as_secs_f64())
+    }
+
+    /// A rewrite with `steps` steps has just ended; it took `took`.
+    pub(crate) fn wrote(&mut self, steps: usize, took: std::time::Duration) {
+        *self = Self {
+            steps,
+            at: std::time::Instant::now(),
+            took,
+        };
+    }
+}

@@ -6,8 +6,8 @@
 #![allow(dead_code)]
 
 use nalgebra::Vector3;
-use shelldsa::io::dsa_run;
 use shelldsa::io::shell_case::{parse_shell_case, ShellCase};
+use shelldsa::sensitivity::study;
 use shelldsa::shell::point::ParticleState;
 use std::path::Path;
 
@@ -150,7 +150,7 @@ pub fn max_diff(a: &[f64], b: &[f64]) -> f64 {
 /// Asserts the Taylor remainder's rate `2 ± 0.1` (the derivative of the discrete response) at
 /// every step of `var` with at least three unflagged step sizes; returns how many steps were
 /// fitted.
-pub fn assert_taylor_rates(var: &dsa_run::VariableResult, name: &str) -> usize {
+pub fn assert_taylor_rates(var: &study::VariableResult, name: &str) -> usize {
     let mut fitted = 0;
     for f in &var.taylor {
         if f.used.len() >= 3 {
