@@ -46,6 +46,7 @@ use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PA
 use crate::shell::point_sensitivity::{commit_particle_dot, ModelSeeds, StepLinearisation};
 use crate::shell::problem::ShellProblem;
 use crate::solver::observe::StepObserver;
+use crate::solver::Failure;
 use crate::solver::NonlinearProblem;
 use crate::solver::{
     ConvergedStep, ConvergedTangent, FactorisedAt, NewtonReport, NewtonSolver, ProblemError,
@@ -310,8 +311,8 @@ pub struct ContinuumDsa {
     failure: Option<String>,
 }
 
-fn fatal(e: impl std::fmt::Display) -> ProblemError {
-    ProblemError::Fatal(format!("continuum sensitivity: {e}"))
+fn fatal(e: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> ProblemError {
+    ProblemError::Failed(Failure::new("continuum sensitivity", e))
 }
 
 impl ContinuumDsa {
@@ -861,10 +862,10 @@ impl StepObserver<ShellProblem> for ContinuumDsa {
             self.spare = p.into_iter().map(|s| s.history).collect();
         }
     }
-    fn failure(&self) -> Option<String> {
+    fn failure(&self) -> Option<Failure> {
         self.failure
             .as_ref()
-            .map(|f| format!("continuum sensitivity: {f}"))
+            .map(|f| Failure::new("continuum sensitivity", f.clone()))
     }
 }
 

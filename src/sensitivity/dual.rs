@@ -93,6 +93,7 @@ use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PA
 use crate::shell::problem::ShellProblem;
 use crate::shell::ShellError;
 use crate::solver::observe::{Observed, StepObserver};
+use crate::solver::Failure;
 use crate::solver::{
     ConvergedStep, ConvergedTangent, FactorisedAt, NewtonFailure, NewtonReport, NewtonSolver,
     ProblemError, SolverOptions,
@@ -251,6 +252,10 @@ pub enum SensitivityError {
     /// Shell evaluation.
     #[error(transparent)]
     Shell(#[from] ShellError),
+    /// An observer of the analysis' steps (a method's recording, a monitor) failed after a
+    /// commit.
+    #[error(transparent)]
+    Observer(Failure),
     /// The analysis could not be built for a design (`context` names what was built: the case
     /// file, a moved tool).
     #[error("{context}: {source}")]
@@ -299,8 +304,8 @@ pub struct DualDsa<D: DesignDual> {
 /// The shell problem with the dual-number reference in its convergence hook.
 pub type DualShellProblem<D> = Observed<ShellProblem, DualDsa<D>>;
 
-fn fatal(e: impl std::fmt::Display) -> ProblemError {
-    ProblemError::Fatal(format!("dual sensitivity reference: {e}"))
+fn fatal(e: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> ProblemError {
+    ProblemError::Failed(Failure::new("dual sensitivity reference", e))
 }
 
 impl<D: DesignDual> DualDsa<D> {
@@ -515,7 +520,6 @@ impl<D: DesignDual> DualDsa<D> {
         load: f64,
     ) -> Result<Vec<D>, ShellError> {
         let model = &problem.model;
-        let n_q = problem.n_generalised();
         let (f_int, _) = model.internal_force_with_surfaces(
             &g.particles,
             &g.history,
@@ -536,20 +540,7 @@ impl<D: DesignDual> DualDsa<D> {
             .zip(&g.unknowns)
             .map(|(&v, c)| *c + D::cst(v - c.value()))
             .collect();
-        for (c, (row, &k)) in problem
-            .constraints()
-            .iter()
-            .zip(problem.constraint_scales())
-            .enumerate()
-        {
-            let mu = ud[n_q + c];
-            let mut gc = D::cst(-load * row.value);
-            for &(d, a) in &row.terms {
-                r[d] += mu * (k * a);
-                gc += ud[d] * a;
-            }
-            r[n_q + c] = gc * k;
-        }
+        problem.add_constraint_rows(&ud, load, &mut r);
         Ok(r)
     }
 
@@ -816,7 +807,7 @@ impl<D: DesignDual> StepObserver<ShellProblem> for DualDsa<D> {
         step: &ConvergedStep<'_>,
     ) -> Result<(), ProblemError> {
         if let Some(f) = &self.failure {
-            return Err(fatal(f));
+            return Err(fatal(f.clone()));
         }
         let t0 = Instant::now();
         let out = self.hook(problem, step);
@@ -841,10 +832,10 @@ impl<D: DesignDual> StepObserver<ShellProblem> for DualDsa<D> {
     fn on_restore(&mut self) {
         self.pending = None;
     }
-    fn failure(&self) -> Option<String> {
+    fn failure(&self) -> Option<Failure> {
         self.failure
             .as_ref()
-            .map(|f| format!("dual sensitivity reference: {f}"))
+            .map(|f| Failure::new("dual sensitivity reference", f.clone()))
     }
 }
 

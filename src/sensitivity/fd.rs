@@ -22,6 +22,7 @@ use super::{Design, DesignVariable, Monitor};
 use crate::shell::contact::ShellContact;
 use crate::shell::problem::ShellProblem;
 use crate::solver::observe::{Observed, StepObserver, Tapped};
+use crate::solver::Failure;
 use crate::solver::{LinearSolver, Method, NewtonSolver, SolverOptions};
 use std::sync::Arc;
 
@@ -47,7 +48,7 @@ struct Recording<'a> {
     out: RunResponse,
     /// `ē^p` of every layer point at the step start.
     before: Vec<f64>,
-    failure: Option<String>,
+    failure: Option<Failure>,
 }
 
 impl StepObserver<ShellProblem> for Recording<'_> {
@@ -79,12 +80,12 @@ impl StepObserver<ShellProblem> for Recording<'_> {
                 self.out.contact.push(c);
             }
             Err(e) => {
-                self.failure.get_or_insert(e.to_string());
+                self.failure.get_or_insert(Failure::new("monitor", e));
             }
         }
     }
-    fn failure(&self) -> Option<String> {
-        self.failure.as_ref().map(|f| format!("monitor: {f}"))
+    fn failure(&self) -> Option<Failure> {
+        self.failure.clone()
     }
 }
 
@@ -141,9 +142,7 @@ pub fn response_observed(
         .run(&mut p, &pattern, &mut linear, &u0)
         .map_err(SensitivityError::Newton)?;
     if let Some(f) = p.observer.failure() {
-        return Err(SensitivityError::Shell(
-            crate::shell::ShellError::InvalidInput(f),
-        ));
+        return Err(SensitivityError::Observer(f));
     }
     Ok(p.observer.observer.out)
 }

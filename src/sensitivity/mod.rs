@@ -1365,7 +1365,7 @@ pub fn run_hooked(
             .run(&mut obs, &pattern, &mut linear, &u0)
             .map_err(dual::SensitivityError::Newton)?;
         if let Some(f) = obs.observer.failure() {
-            return Err(dual::SensitivityError::Shell(ShellError::InvalidInput(f)));
+            return Err(dual::SensitivityError::Observer(f));
         }
         let total = t0.elapsed();
         let (c, d) = obs.observer.observer;

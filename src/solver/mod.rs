@@ -33,9 +33,9 @@ pub use dirichlet::EssentialBc;
 pub use linear::{LinearSolver, Method, Parallelism, SolverOptions};
 pub use newton::{
     Acceptance, ArcLength, ArcLengthReport, ConvergedStep, ConvergedTangent, CriticalKind,
-    CriticalPoint, FactorisedAt, FailureReason, LinearUpdates, LoadStepping, NewtonFailure,
-    NewtonOptions, NewtonReport, NewtonSolver, NonlinearProblem, Predictor, ProblemError,
-    StepRecord, StepTiming,
+    CriticalPoint, FactorisedAt, Failure, FailureReason, LinearUpdates, LoadStepping,
+    NewtonFailure, NewtonOptions, NewtonReport, NewtonSolver, NonlinearProblem, Predictor,
+    ProblemError, StepRecord, StepTiming,
 };
 pub use pattern::SparsityPattern;
 pub use supernodal::FillOrdering;

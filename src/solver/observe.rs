@@ -10,7 +10,7 @@
 //! that fails after a commit (which cannot return an error) reports it through
 //! [`StepObserver::failure`]; the next evaluation stops the run with it.
 
-use super::newton::{ConvergedStep, ConvergedTangent, NonlinearProblem, ProblemError};
+use super::newton::{ConvergedStep, ConvergedTangent, Failure, NonlinearProblem, ProblemError};
 
 /// What an observer of converged steps does (all hooks default to nothing).
 pub trait StepObserver<P: ?Sized> {
@@ -33,8 +33,9 @@ pub trait StepObserver<P: ?Sized> {
     fn after_commit(&mut self, _problem: &P, _u: &[f64], _load: f64) {}
     /// The trial state was rejected.
     fn on_restore(&mut self) {}
-    /// A failure recorded after a commit: stops the run at the next evaluation.
-    fn failure(&self) -> Option<String> {
+    /// A failure recorded after a commit (what failed and why): stops the run at the next
+    /// evaluation.
+    fn failure(&self) -> Option<Failure> {
         None
     }
 }
@@ -64,7 +65,7 @@ impl<P: ?Sized, A: StepObserver<P>, B: StepObserver<P>> StepObserver<P> for (A, 
         self.0.on_restore();
         self.1.on_restore();
     }
-    fn failure(&self) -> Option<String> {
+    fn failure(&self) -> Option<Failure> {
         self.0.failure().or_else(|| self.1.failure())
     }
 }
@@ -95,7 +96,7 @@ impl<P: ?Sized, A: StepObserver<P>> StepObserver<P> for Option<A> {
             a.on_restore();
         }
     }
-    fn failure(&self) -> Option<String> {
+    fn failure(&self) -> Option<Failure> {
         self.as_ref().and_then(|a| a.failure())
     }
 }
@@ -141,7 +142,7 @@ impl<P: ?Sized, O: StepObserver<P>> StepObserver<P> for Tapped<'_, P, O> {
     fn on_restore(&mut self) {
         self.observer.on_restore();
     }
-    fn failure(&self) -> Option<String> {
+    fn failure(&self) -> Option<Failure> {
         self.observer.failure()
     }
 }
@@ -165,7 +166,7 @@ impl<P, O> Observed<P, O> {
 impl<P: NonlinearProblem, O: StepObserver<P>> Observed<P, O> {
     fn check(&self) -> Result<(), ProblemError> {
         match self.observer.failure() {
-            Some(f) => Err(ProblemError::Fatal(f)),
+            Some(f) => Err(ProblemError::Failed(f)),
             None => Ok(()),
         }
     }
