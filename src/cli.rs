@@ -305,7 +305,7 @@ fn dsa(
     methods: Option<&[String]>,
     terms: Option<usize>,
 ) -> i32 {
-    use crate::io::{dsa_case, dsa_output};
+    use crate::io::{dsa_output, dsa_study};
     use crate::sensitivity::study;
     let Case::Shell(c) = case else {
         err!(
@@ -349,7 +349,7 @@ fn dsa(
             return EXIT_BAD_INPUT;
         }
     }
-    let spec = match dsa_case::validate(c, &methods) {
+    let spec = match dsa_study::validate(c, &methods) {
         Ok(s) => s,
         Err(e) => {
             err!("error: {e}");
@@ -387,8 +387,8 @@ fn dsa(
     // The last results written: kept with the failure if the run stops.
     let mut last: Option<serde_json::Value> = None;
     let progress = &mut |line: &str| con.line(line);
-    let analysis = dsa_case::CaseAnalysis { case: c };
-    let base = dsa_case::base_design(c);
+    let analysis = dsa_study::CaseAnalysis { case: c };
+    let base = dsa_study::base_design(c);
     let mut vtu = dsa_output::StepVtu::new(out, c);
     let writer: Option<&mut dyn study::StepWriter> = match c.output.vtu {
         true => Some(&mut vtu),

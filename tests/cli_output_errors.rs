@@ -466,7 +466,8 @@ fn dsa_whose_analysis_stops_keeps_its_converged_steps() {
 /// derivative columns grow one step at a time.
 #[test]
 fn dsa_updates_after_every_converged_step() {
-    use shelldsa::io::dsa_case::{self, base_design, CaseAnalysis, DsaMethod};
+    use shelldsa::io::dsa_case::DsaMethod;
+    use shelldsa::io::dsa_study::{self, base_design, CaseAnalysis};
     use shelldsa::sensitivity::study;
     let dir = unique_dir("dsa-step-updates");
     let design = "[[design]]\nname = \"t\"\nkind = \"thickness\"\nfd_steps = [1e-3]\n\
@@ -480,7 +481,7 @@ fn dsa_updates_after_every_converged_step() {
     let path = write_case(&dir, &text);
     let case = parse_shell_case(&text, &path).unwrap();
     let methods = [DsaMethod::Continuum, DsaMethod::Dual];
-    let spec = dsa_case::validate(&case, &methods).unwrap();
+    let spec = dsa_study::validate(&case, &methods).unwrap();
     // (nominal steps, continuum steps, dual steps) at each update.
     let mut seen: Vec<(usize, usize, usize)> = Vec::new();
     let r = study::run_observed(

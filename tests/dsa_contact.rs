@@ -23,8 +23,9 @@ mod small_bending;
 use nalgebra::Vector3;
 use num_dual::Dual64;
 use shelldsa::contact::{PathKey, RigidTool, ToolPath};
-use shelldsa::io::dsa_case::{self, base_design, CaseAnalysis, DsaMethod};
+use shelldsa::io::dsa_case::DsaMethod;
 use shelldsa::io::dsa_output;
+use shelldsa::io::dsa_study::{self, base_design, CaseAnalysis};
 use shelldsa::io::shell_build;
 use shelldsa::io::shell_case::parse_shell_case;
 use shelldsa::sensitivity::study;
@@ -727,7 +728,7 @@ layers = "top"
 rho = 300.0
 "#;
     let c = case(0.5, design);
-    let spec = dsa_case::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
+    let spec = dsa_study::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
     let t0 = std::time::Instant::now();
     let r = study::run(
         &CaseAnalysis { case: &c },
@@ -833,7 +834,7 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
              pivot = [0.0, 2.5, 10.51]",
         );
     let c = parse_shell_case(&text, Path::new("tests/dsa_contact.rs")).unwrap();
-    let spec = dsa_case::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
+    let spec = dsa_study::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
     let t0 = std::time::Instant::now();
     let r = study::run(
         &CaseAnalysis { case: &c },
@@ -899,7 +900,7 @@ kind = "tool.die.ry"
 monitors = ["center.uz", "edge.ux", "edge.uz"]
 "#;
     let c = case(0.5, design);
-    let spec = dsa_case::validate(&c, &[DsaMethod::Continuum, DsaMethod::Dual]).unwrap();
+    let spec = dsa_study::validate(&c, &[DsaMethod::Continuum, DsaMethod::Dual]).unwrap();
     let r = study::run(
         &CaseAnalysis { case: &c },
         &base_design(&c),
@@ -1090,7 +1091,7 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
         .replace("{design}", design)
         .replace("penalty = 1000.0", "penalty_factor = 0.014285714285714285");
     let c = parse_shell_case(&text, Path::new("tests/dsa_contact.rs")).unwrap();
-    let spec = dsa_case::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
+    let spec = dsa_study::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
     let r = study::run(
         &CaseAnalysis { case: &c },
         &base_design(&c),
@@ -1152,7 +1153,7 @@ kind = "tool.die.rz"
 monitors = ["center.uz"]
 "#;
     let c = case(0.25, design);
-    let spec = dsa_case::validate(&c, &[DsaMethod::Continuum, DsaMethod::Dual]).unwrap();
+    let spec = dsa_study::validate(&c, &[DsaMethod::Continuum, DsaMethod::Dual]).unwrap();
     let bs = study::terms(&CaseAnalysis { case: &c }, &base_design(&c), &spec, 8).unwrap();
     assert_eq!(bs.len(), 3);
     for b in &bs {

@@ -12,7 +12,7 @@ use num_dual::Dual64;
 use shelldsa::geometry::{
     AnnulusSector, CylinderSector, NurbsSurface, Rectangle, SphereZone, Surface, SurfaceDerivs,
 };
-use shelldsa::io::dsa_case::{base_design, CaseAnalysis};
+use shelldsa::io::dsa_study::{base_design, CaseAnalysis};
 use shelldsa::io::shell_build;
 use shelldsa::io::shell_case::{parse_shell_case, ShellCase};
 use shelldsa::sensitivity::shape::{dual_geometry, lamina_vectors_dot, ShapeVelocity};

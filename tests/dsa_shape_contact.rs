@@ -24,8 +24,9 @@ mod small_bending;
 use nalgebra::Vector3;
 use num_dual::Dual64;
 use shelldsa::geometry::Surface;
-use shelldsa::io::dsa_case::{self, base_design, CaseAnalysis, DsaMethod};
+use shelldsa::io::dsa_case::DsaMethod;
 use shelldsa::io::dsa_output;
+use shelldsa::io::dsa_study::{self, base_design, CaseAnalysis};
 use shelldsa::io::shell_build;
 use shelldsa::io::shell_case::parse_shell_case;
 use shelldsa::sensitivity::shape::{dual_geometry, ShapeVelocity};
@@ -469,7 +470,7 @@ fd_steps = [4e-4, 2e-4, 1e-4]
 monitors = ["center.uz", "edge.ux", "edge.uz"]
 "#;
     let c = case(0.25, design);
-    let spec = dsa_case::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
+    let spec = dsa_study::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
     let t0 = std::time::Instant::now();
     let r = study::run(
         &CaseAnalysis { case: &c },
@@ -580,7 +581,7 @@ kind = "shape.edge_v.y"
 monitors = ["center.uz"]
 "#;
     let c = case(0.25, design);
-    let spec = dsa_case::validate(&c, &[DsaMethod::Continuum, DsaMethod::Dual]).unwrap();
+    let spec = dsa_study::validate(&c, &[DsaMethod::Continuum, DsaMethod::Dual]).unwrap();
     // Step 12: plastic (61 yielding layer points), the punch and the die active.
     let bs = study::terms(&CaseAnalysis { case: &c }, &base_design(&c), &spec, 12).unwrap();
     assert_eq!(bs.len(), 2);

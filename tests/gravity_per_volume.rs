@@ -2,7 +2,8 @@
 //! per unit area is `ρ g t`, so it follows the thickness, and the thickness design derivative
 //! carries it three ways (continuum, dual, central differences of re-runs).
 
-use shelldsa::io::dsa_case::{self, base_design, CaseAnalysis, DsaMethod};
+use shelldsa::io::dsa_case::DsaMethod;
+use shelldsa::io::dsa_study::{self, base_design, CaseAnalysis};
 use shelldsa::io::shell_case::parse_shell_case;
 use shelldsa::sensitivity::study;
 use std::path::Path;
@@ -80,7 +81,7 @@ fn self_weight_per_volume_follows_the_thickness_three_ways() {
     .unwrap();
     let methods = [DsaMethod::Continuum, DsaMethod::Dual, DsaMethod::Fd];
     let run = |case| {
-        let spec = dsa_case::validate(case, &methods).unwrap();
+        let spec = dsa_study::validate(case, &methods).unwrap();
         study::run(
             &CaseAnalysis { case },
             &base_design(case),

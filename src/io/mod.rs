@@ -10,6 +10,7 @@
 pub mod dsa_case;
 pub mod dsa_output;
 pub mod dsa_plots;
+pub mod dsa_study;
 pub mod plot;
 pub mod shell_build;
 pub mod shell_case;
@@ -70,6 +71,25 @@ pub enum CaseError {
         /// What was expected.
         expected: String,
     },
+}
+
+/// A named point whose displacement is recorded at every converged step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Monitor {
+    /// Name (unique).
+    pub name: String,
+    /// Parameter point.
+    pub at: [f64; 2],
+}
+
+/// A number as a message shows it: plain between 1e-4 and 1e15, else in exponent form (`{}`
+/// writes 1e308 with 309 digits).
+pub(crate) fn fmt_num(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() || (1e-4..1e15).contains(&v.abs()) {
+        v.to_string()
+    } else {
+        format!("{v:e}")
+    }
 }
 
 /// A fixed-length array of a case file, of exactly `N` entries. serde's own array support reads
@@ -422,11 +442,7 @@ fn material_path_case(f: MaterialPathFile, path: &Path) -> Result<Case, CaseErro
     }
     let h = f.design.fd_step;
     if !(h > 0.0 && h.is_finite()) {
-        return Err(invalid(
-            "design.fd_step",
-            shell_case::fmt_num(h),
-            "a finite step > 0",
-        ));
+        return Err(invalid("design.fd_step", fmt_num(h), "a finite step > 0"));
     }
     if !f.design.tau.is_finite() {
         return Err(invalid(
@@ -453,11 +469,7 @@ fn material_path_case(f: MaterialPathFile, path: &Path) -> Result<Case, CaseErro
         ("check.fd_floor", check.fd_floor),
     ] {
         if !(v > 0.0 && v < 1.0) {
-            return Err(invalid(
-                key,
-                shell_case::fmt_num(v),
-                "a relative tolerance in (0, 1)",
-            ));
+            return Err(invalid(key, fmt_num(v), "a relative tolerance in (0, 1)"));
         }
     }
     let mut mp = match (&f.path.generator, f.path.segment.is_empty()) {
@@ -540,7 +552,7 @@ fn material_path_case(f: MaterialPathFile, path: &Path) -> Result<Case, CaseErro
     if let Some(what) = mp.lost_in_step(h) {
         return Err(invalid(
             "design.fd_step",
-            shell_case::fmt_num(h),
+            fmt_num(h),
             &format!(
                 "a step that changes every τ-dependent value in floating point: with τ ± h, \
                  {what} is unchanged, so its central difference is 0"

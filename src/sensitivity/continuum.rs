@@ -173,34 +173,15 @@ impl SensitivityState {
                 s.surface = Some(v.points);
                 s.position = Some(v.positions);
             }
-            DesignKind::Tool { tool, axis } => {
+            DesignKind::Tool { tool, axis } | DesignKind::ToolRotation { tool, axis } => {
                 let names = contact_tools(problem);
-                let i = names.iter().position(|n| n == tool).ok_or_else(|| {
-                    DesignError::UnknownTool {
-                        variable: var.name.clone(),
-                        tool: tool.clone(),
-                        expected: format!("{names:?}"),
-                    }
-                })?;
-                s.tools[i].translation[*axis] = 1.0;
-            }
-            DesignKind::ToolRotation { tool, axis } => {
-                let names = contact_tools(problem);
-                let i = names.iter().position(|n| n == tool).ok_or_else(|| {
-                    DesignError::UnknownTool {
-                        variable: var.name.clone(),
-                        tool: tool.clone(),
-                        expected: format!("{names:?}"),
-                    }
-                })?;
-                s.tools[i].rotation[*axis] = 1.0;
-            }
-            #[allow(unreachable_patterns)]
-            _ => {
-                return Err(DesignError::Unsupported {
-                    name: var.name.clone(),
-                    method: "continuum",
-                })
+                let names: Vec<&str> = names.iter().map(String::as_str).collect();
+                super::check_tools(std::slice::from_ref(var), &names)?;
+                let i = names.iter().position(|n| n == tool).unwrap_or_default();
+                match var.kind {
+                    DesignKind::Tool { .. } => s.tools[i].translation[*axis] = 1.0,
+                    _ => s.tools[i].rotation[*axis] = 1.0,
+                }
             }
         }
         Ok(s)

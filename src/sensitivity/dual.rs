@@ -86,7 +86,6 @@ use super::{
 };
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
-use crate::scalar::Real;
 use crate::shell::load::{ContactLoad, Load, LoadState};
 use crate::shell::model::commit_particle;
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
@@ -99,48 +98,10 @@ use crate::solver::{
     ProblemError, SolverOptions,
 };
 use nalgebra::Vector3;
-use num_dual::{Derivative, Dual64, DualSVec64};
 use std::time::{Duration, Instant};
 use thiserror::Error;
 
-/// A dual scalar that carries the derivatives of `DIRECTIONS` design variables.
-pub trait DesignDual: Real {
-    /// Number of directions per value.
-    const DIRECTIONS: usize;
-    /// The value `x` with derivative parts `parts` (length [`Self::DIRECTIONS`]).
-    fn from_parts(x: f64, parts: &[f64]) -> Self;
-    /// Derivative part `k`.
-    fn part(&self, k: usize) -> f64;
-}
-
-impl DesignDual for Dual64 {
-    const DIRECTIONS: usize = 1;
-    fn from_parts(x: f64, parts: &[f64]) -> Self {
-        Dual64::new(x, parts[0])
-    }
-    fn part(&self, k: usize) -> f64 {
-        debug_assert_eq!(k, 0);
-        self.eps
-    }
-}
-
-impl<const N: usize> DesignDual for DualSVec64<N> {
-    const DIRECTIONS: usize = N;
-    fn from_parts(x: f64, parts: &[f64]) -> Self {
-        if parts.iter().all(|p| *p == 0.0) {
-            // No derivative stored: constants stay cheap in num-dual's arithmetic.
-            DualSVec64::new(x, Derivative::none())
-        } else {
-            DualSVec64::new(
-                x,
-                Derivative::some(nalgebra::SVector::<f64, N>::from_column_slice(parts)),
-            )
-        }
-    }
-    fn part(&self, k: usize) -> f64 {
-        self.eps.0.as_ref().map_or(0.0, |v| v[k])
-    }
-}
+pub use crate::scalar::DesignDual;
 
 /// The dual state of one group of design variables, parallel to the model's f64 state.
 #[derive(Clone, Debug)]

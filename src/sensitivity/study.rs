@@ -3,7 +3,7 @@
 //! complete re-runs ([`fd`]), with the Taylor test, collected per design variable
 //! ([`DsaResult`], written by `io::dsa_output` as the paper's Tables 1–2 and
 //! `sensitivity.json`, `docs/sensitivity.md`). The analysis for any design is an
-//! [`Analysis`] (for a case file: `io::dsa_case::CaseAnalysis`).
+//! [`Analysis`] (for a case file: `io::dsa_study::CaseAnalysis`).
 //!
 //! Order of the runs: (1) the plain analysis (no hook; its wall time is `timing_s.analysis`,
 //! and its monitors are the nominal responses `ψ(τ)` of the finite differences); (2a) the
@@ -18,8 +18,7 @@ use super::dual::{DualMode, SensitivityError};
 use super::fd::{self, fit_rate, Analysis, RunResponse, TaylorFit, TaylorRow};
 use super::terms::{breakdown, TermBreakdown};
 use super::{
-    run_hooked, validate_design, validate_design_on, Design, DesignVariable, HookedMethods,
-    SensitivityFields,
+    check_design, run_hooked, Design, DesignScope, DesignVariable, HookedMethods, SensitivityFields,
 };
 use crate::shell::contact::ShellContact;
 use crate::shell::model::ShellModel;
@@ -407,26 +406,25 @@ pub fn run_with_output(
     let t = Instant::now();
     let (problem, newton, contact) = analysis.build_with_contact(base)?;
     let with_contact = contact.is_some();
-    // Every finite-difference design (shape: the perturbed surface with a regular normal at
-    // every particle and point of the model) is checked before the analysis.
-    let fd_steps = |d: &DesignEntry| match spec.methods.contains(&DsaMethod::Fd) {
-        true => d.absolute_steps(base),
-        false => Vec::new(),
+    // The design variables at the nominal design and every finite-difference design (shape:
+    // the perturbed surface with a regular normal at every particle and point of the model)
+    // are checked before the analysis.
+    let fd = spec.methods.contains(&DsaMethod::Fd);
+    let deltas = |i: usize| {
+        let steps = match fd {
+            true => spec.design[i].absolute_steps(base),
+            false => Vec::new(),
+        };
+        std::iter::once(0.0)
+            .chain(steps.into_iter().flat_map(|h| [h, -h]))
+            .collect()
     };
-    let checked = match surface {
-        Some(s) => validate_design_on(&vars, &problem.model, s, 0.0),
-        None => validate_design(&vars, &problem.model, 0.0),
+    let scope = DesignScope {
+        base: Some(base),
+        model: Some(&problem.model),
+        tools: None,
     };
-    checked.map_err(SensitivityError::from)?;
-    for d in &spec.design {
-        for h in fd_steps(d) {
-            match surface {
-                Some(s) => d.variable.validate_on(&problem.model, s, h),
-                None => d.variable.validate(&problem.model, h),
-            }
-            .map_err(SensitivityError::from)?;
-        }
-    }
+    check_design(&vars, &deltas, &scope).map_err(SensitivityError::from)?;
     let mut result = DsaResult {
         spec: spec.clone(),
         variables: spec
