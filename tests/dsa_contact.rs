@@ -35,7 +35,9 @@ use shelldsa::shell::contact_sensitivity::ToolRate;
 use shelldsa::shell::model::ShellModel;
 use shelldsa::shell::point::ParticleState;
 use shelldsa::solver::{LinearSolver, Method, SolverOptions};
-use small_bending::{assert_taylor_rates, case, max_abs, max_diff, zero_state, Lcg, CASE};
+use small_bending::{
+    assert_taylor_rates, case, max_abs, max_diff, run_case, zero_state, Lcg, CASE,
+};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -730,13 +732,7 @@ rho = 300.0
     let c = case(0.5, design);
     let spec = dsa_study::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
     let t0 = std::time::Instant::now();
-    let r = study::run(
-        &CaseAnalysis { case: &c },
-        &base_design(&c),
-        &spec,
-        &mut |_| {},
-    )
-    .unwrap();
+    let r = run_case(&c, &spec);
     println!(
         "{} steps; analysis {:.2} s, dual reference {:.2} s, fd {:.2} s (total {:.1} s); \
          dual state mismatch {:.1e}, dual value difference {:.1e}",
@@ -836,13 +832,7 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
     let c = parse_shell_case(&text, Path::new("tests/dsa_contact.rs")).unwrap();
     let spec = dsa_study::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
     let t0 = std::time::Instant::now();
-    let r = study::run(
-        &CaseAnalysis { case: &c },
-        &base_design(&c),
-        &spec,
-        &mut |_| {},
-    )
-    .unwrap();
+    let r = run_case(&c, &spec);
     println!(
         "rotations: {} steps; analysis {:.2} s, continuum {:.3} s, dual {:.2} s, fd {:.2} s \
          (total {:.1} s)",
@@ -901,13 +891,7 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
 "#;
     let c = case(0.5, design);
     let spec = dsa_study::validate(&c, &[DsaMethod::Continuum, DsaMethod::Dual]).unwrap();
-    let r = study::run(
-        &CaseAnalysis { case: &c },
-        &base_design(&c),
-        &spec,
-        &mut |_| {},
-    )
-    .unwrap();
+    let r = run_case(&c, &spec);
     for method in ["continuum", "dual"] {
         let d = |v: &study::VariableResult| match method {
             "continuum" => v.continuum.clone(),
@@ -1092,13 +1076,7 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
         .replace("penalty = 1000.0", "penalty_factor = 0.014285714285714285");
     let c = parse_shell_case(&text, Path::new("tests/dsa_contact.rs")).unwrap();
     let spec = dsa_study::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
-    let r = study::run(
-        &CaseAnalysis { case: &c },
-        &base_design(&c),
-        &spec,
-        &mut |_| {},
-    )
-    .unwrap();
+    let r = run_case(&c, &spec);
     for var in &r.variables {
         continuum_matches_dual(var);
         let last = var.fd.last().unwrap();

@@ -38,7 +38,9 @@ use shelldsa::shell::contact_sensitivity::ToolRate;
 use shelldsa::shell::model::ShellModel;
 use shelldsa::shell::point::{ParticleState, SurfacePoint};
 use shelldsa::solver::{LinearSolver, Method, SolverOptions};
-use small_bending::{assert_taylor_rates, case, max_abs, max_diff, zero_state, Lcg, CASE};
+use small_bending::{
+    assert_taylor_rates, case, max_abs, max_diff, run_case, zero_state, Lcg, CASE,
+};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -472,13 +474,7 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
     let c = case(0.25, design);
     let spec = dsa_study::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
     let t0 = std::time::Instant::now();
-    let r = study::run(
-        &CaseAnalysis { case: &c },
-        &base_design(&c),
-        &spec,
-        &mut |_| {},
-    )
-    .unwrap();
+    let r = run_case(&c, &spec);
     println!(
         "{} steps; analysis {:.2} s, continuum {:.3} s, dual {:.2} s, fd {:.2} s (total {:.1} s); \
          dual state mismatch {:.1e}",

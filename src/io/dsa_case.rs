@@ -122,7 +122,8 @@ pub(crate) struct DistanceFile {
     target: Vec<[f64; 3]>,
 }
 
-fn invalid(
+/// A [`CaseError::Invalid`] of the case file `path`.
+pub(super) fn invalid(
     path: &Path,
     key: impl Into<String>,
     value: impl Into<String>,

@@ -3,7 +3,7 @@
 //! `shelldsa dsa` run before any analysis (the loads the sensitivity methods carry, load
 //! control, the design variables' tools).
 
-use super::dsa_case::{check_tool_names, DsaMethod, DsaSpec};
+use super::dsa_case::{check_tool_names, invalid, DsaMethod, DsaSpec};
 use super::shell_build;
 use super::shell_case::{Load, ShellCase};
 use super::CaseError;
@@ -14,20 +14,6 @@ use crate::shell::contact::ShellContact;
 use crate::shell::problem::ShellProblem;
 use crate::solver::NewtonSolver;
 use std::sync::Arc;
-
-fn invalid(
-    path: &std::path::Path,
-    key: impl Into<String>,
-    value: impl Into<String>,
-    expected: impl Into<String>,
-) -> CaseError {
-    CaseError::Invalid {
-        path: path.into(),
-        key: key.into(),
-        value: value.into(),
-        expected: expected.into(),
-    }
-}
 
 /// Rejects, before any analysis, the loads the sensitivity methods cannot carry yet: edge
 /// moments (they act through the director) and edge forces (their design derivative through

@@ -142,6 +142,9 @@ impl Analysis for Replay<'_> {
     }
 }
 
+/// The committed sensitivities of the methods at a step: `(method name, fields)`.
+pub type MethodFields<'a> = [(&'a str, Option<&'a dyn SensitivityFields>)];
+
 /// Writes the fields of the run that carries the derivative methods as it goes (the VTU
 /// files of `shelldsa dsa`); a failure is kept and stops further writing, the run goes on.
 pub trait StepWriter {
@@ -156,13 +159,7 @@ pub trait StepWriter {
     fn due(&self, step: usize, load: f64) -> bool;
     /// Write step `step` at `load` of `model` with the methods' committed sensitivities
     /// (`(method name, fields)`; `None` fields: zero, the initial state).
-    fn write(
-        &mut self,
-        step: usize,
-        load: f64,
-        model: &ShellModel,
-        methods: &[(&str, Option<&dyn SensitivityFields>)],
-    );
+    fn write(&mut self, step: usize, load: f64, model: &ShellModel, methods: &MethodFields<'_>);
     /// Time spent writing so far.
     fn time(&self) -> Duration;
     /// The first error writing, if any.

@@ -6,6 +6,8 @@
 #![allow(dead_code)]
 
 use nalgebra::Vector3;
+use shelldsa::io::dsa_case::DsaSpec;
+use shelldsa::io::dsa_study::{base_design, CaseAnalysis};
 use shelldsa::io::shell_case::{parse_shell_case, ShellCase};
 use shelldsa::sensitivity::study;
 use shelldsa::shell::point::ParticleState;
@@ -164,4 +166,15 @@ pub fn assert_taylor_rates(var: &study::VariableResult, name: &str) -> usize {
         }
     }
     fitted
+}
+
+/// The study of case `c` with `spec` (no progress lines).
+pub fn run_case(c: &ShellCase, spec: &DsaSpec) -> study::DsaResult {
+    study::run(
+        &CaseAnalysis { case: c },
+        &base_design(c),
+        spec,
+        &mut |_| {},
+    )
+    .unwrap()
 }
