@@ -15,7 +15,7 @@
 //! percentages: `DSA_BENCH_CASE=hemisphere cargo bench --bench dsa -- nomatch`.
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use shelldsa::io::dsa_run::CaseAnalysis;
+use shelldsa::io::dsa_study::CaseAnalysis;
 use shelldsa::io::shell_case::{read_shell_case, ShellCase};
 use shelldsa::sensitivity::continuum::run_continuum;
 use shelldsa::sensitivity::dual::{run_dual_on, DualMode};
@@ -51,7 +51,7 @@ impl Setup {
         Setup { case, vars }
     }
     fn base(&self) -> Design {
-        shelldsa::io::dsa_run::base_design(&self.case)
+        shelldsa::io::dsa_study::base_design(&self.case)
     }
     fn analysis(&self) -> f64 {
         let a = CaseAnalysis { case: &self.case };

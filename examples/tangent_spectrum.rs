@@ -91,7 +91,7 @@ impl StepObserver<&mut ShellProblem> for Probe {
                 ..Default::default()
             },
         )
-        .map_err(|e| ProblemError::Fatal(e.to_string()))?;
+        .map_err(|e| ProblemError::Failed(shelldsa::solver::Failure::new("spectrum", e)))?;
         let model = &problem.model;
         let mut out = Vec::new();
         let vals: Vec<String> = sp

@@ -309,7 +309,8 @@ fn dsa(
     methods: Option<&[String]>,
     terms: Option<usize>,
 ) -> i32 {
-    use crate::io::dsa_run;
+    use crate::io::{dsa_output, dsa_study};
+    use crate::sensitivity::study;
     let Case::Shell(c) = case else {
         err!(
             "error: `shelldsa dsa` takes a shell case (`[problem] kind = \"shell\"`); a \
@@ -322,7 +323,9 @@ fn dsa(
         None => {
             err!(
                 "error: {}",
-                dsa_run::DsaError::NoDesign(c.path.display().to_string())
+                crate::io::CaseError::NoDesign {
+                    path: c.path.clone()
+                }
             );
             return EXIT_BAD_INPUT;
         }
@@ -350,7 +353,7 @@ fn dsa(
             return EXIT_BAD_INPUT;
         }
     }
-    let spec = match dsa_run::validate(c, &methods) {
+    let spec = match dsa_study::validate(c, &methods) {
         Ok(s) => s,
         Err(e) => {
             err!("error: {e}");
@@ -360,7 +363,7 @@ fn dsa(
     let path = out.join("sensitivity.json");
     let written = std::fs::create_dir_all(out)
         .map_err(|e| format!("cannot create output directory {}: {e}", out.display()))
-        .and_then(|()| dsa_run::write_json(&path, &dsa_run::empty_json(c, &spec, "running")));
+        .and_then(|()| dsa_output::write_json(&path, &dsa_output::empty_json(c, &spec, "running")));
     if let Err(e) = written {
         err!("error: {e}");
         return EXIT_OUTPUT;
@@ -388,10 +391,17 @@ fn dsa(
     // The last results written: kept with the failure if the run stops.
     let mut last: Option<serde_json::Value> = None;
     let progress = &mut |line: &str| con.line(line);
-    let run = dsa_run::run_with_output(c, &spec, terms, Some(out), progress, &mut |r| {
+    let analysis = dsa_study::CaseAnalysis { case: c };
+    let base = dsa_study::base_design(c);
+    let mut vtu = dsa_output::StepVtu::new(out, c);
+    let writer: Option<&mut dyn study::StepWriter> = match c.output.vtu {
+        true => Some(&mut vtu),
+        false => None,
+    };
+    let run = study::run_with_output(&analysis, &base, &spec, terms, writer, progress, &mut |r| {
         if write_error.is_none() {
-            let doc = dsa_run::to_json(c, r, "running");
-            if let Err(e) = dsa_run::write_json(&path, &doc) {
+            let doc = dsa_output::to_json(c, r, "running");
+            if let Err(e) = dsa_output::write_json(&path, &doc) {
                 err!("error: {e} (the run goes on)");
                 write_error = Some(e);
             }
@@ -404,9 +414,7 @@ fn dsa(
             err!("error: {e}");
             let stopped = matches!(
                 e,
-                dsa_run::DsaError::Sensitivity(crate::sensitivity::dual::SensitivityError::Newton(
-                    _
-                ))
+                study::DsaError::Sensitivity(crate::sensitivity::dual::SensitivityError::Newton(_))
             );
             let status = format!("failed: {e}");
             let doc = match last {
@@ -415,9 +423,9 @@ fn dsa(
                     doc["status"] = serde_json::Value::String(status);
                     doc
                 }
-                None => dsa_run::empty_json(c, &spec, &status),
+                None => dsa_output::empty_json(c, &spec, &status),
             };
-            let _ = dsa_run::write_json(&path, &doc);
+            let _ = dsa_output::write_json(&path, &doc);
             return if stopped {
                 EXIT_STOPPED
             } else {
@@ -427,7 +435,7 @@ fn dsa(
     };
     say!(con, "");
     for v in 0..result.variables.len() {
-        say!(con, "{}", dsa_run::table(&result, v));
+        say!(con, "{}", dsa_output::table(&result, v));
     }
     let fmt = |t: Option<f64>| t.map_or("—".to_string(), |t| format!("{t:.3} s"));
     say!(
@@ -480,7 +488,7 @@ fn dsa(
     } else {
         "incomplete"
     };
-    if let Err(e) = dsa_run::write_json(&path, &dsa_run::to_json(c, &result, status)) {
+    if let Err(e) = dsa_output::write_json(&path, &dsa_output::to_json(c, &result, status)) {
         err!("error: {e}");
         return EXIT_OUTPUT;
     }
@@ -528,7 +536,7 @@ fn dsa(
             con,
             "term breakdown at step {step} (analysis with the dual reference, Dual64):"
         );
-        let bs = match dsa_run::terms(c, &spec, step) {
+        let bs = match study::terms(&analysis, &base, &spec, step) {
             Ok(b) => b,
             Err(e) => {
                 err!("error: --terms {step}: {e}");
@@ -536,10 +544,10 @@ fn dsa(
             }
         };
         for b in &bs {
-            say!(con, "{}", dsa_run::terms_table(b));
+            say!(con, "{}", dsa_output::terms_table(b));
         }
         let path = out.join("terms.json");
-        if let Err(e) = dsa_run::write_json(&path, &dsa_run::terms_json(&bs)) {
+        if let Err(e) = dsa_output::write_json(&path, &dsa_output::terms_json(&bs)) {
             err!("error: {e}");
             code = EXIT_OUTPUT;
         } else {

@@ -50,6 +50,45 @@ pub fn seed<const N: usize>(x: f64, k: usize) -> DualN<N> {
     DualN::<N>::from_re(x).derivative(k)
 }
 
+/// A dual scalar that carries the derivatives of `DIRECTIONS` design variables.
+pub trait DesignDual: Real {
+    /// Number of directions per value.
+    const DIRECTIONS: usize;
+    /// The value `x` with derivative parts `parts` (length [`Self::DIRECTIONS`]).
+    fn from_parts(x: f64, parts: &[f64]) -> Self;
+    /// Derivative part `k`.
+    fn part(&self, k: usize) -> f64;
+}
+
+impl DesignDual for num_dual::Dual64 {
+    const DIRECTIONS: usize = 1;
+    fn from_parts(x: f64, parts: &[f64]) -> Self {
+        num_dual::Dual64::new(x, parts[0])
+    }
+    fn part(&self, k: usize) -> f64 {
+        debug_assert_eq!(k, 0);
+        self.eps
+    }
+}
+
+impl<const N: usize> DesignDual for num_dual::DualSVec64<N> {
+    const DIRECTIONS: usize = N;
+    fn from_parts(x: f64, parts: &[f64]) -> Self {
+        if parts.iter().all(|p| *p == 0.0) {
+            // No derivative stored: constants stay cheap in num-dual's arithmetic.
+            num_dual::DualSVec64::new(x, num_dual::Derivative::none())
+        } else {
+            num_dual::DualSVec64::new(
+                x,
+                num_dual::Derivative::some(nalgebra::SVector::<f64, N>::from_column_slice(parts)),
+            )
+        }
+    }
+    fn part(&self, k: usize) -> f64 {
+        self.eps.0.as_ref().map_or(0.0, |v| v[k])
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

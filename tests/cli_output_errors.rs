@@ -467,7 +467,8 @@ fn dsa_whose_analysis_stops_keeps_its_converged_steps() {
 #[test]
 fn dsa_updates_after_every_converged_step() {
     use shelldsa::io::dsa_case::DsaMethod;
-    use shelldsa::io::dsa_run;
+    use shelldsa::io::dsa_study::{self, base_design, CaseAnalysis};
+    use shelldsa::sensitivity::study;
     let dir = unique_dir("dsa-step-updates");
     let design = "[[design]]\nname = \"t\"\nkind = \"thickness\"\nfd_steps = [1e-3]\n\
                   [dsa]\nmonitors = [\"tip\"]\n";
@@ -480,17 +481,24 @@ fn dsa_updates_after_every_converged_step() {
     let path = write_case(&dir, &text);
     let case = parse_shell_case(&text, &path).unwrap();
     let methods = [DsaMethod::Continuum, DsaMethod::Dual];
-    let spec = dsa_run::validate(&case, &methods).unwrap();
+    let spec = dsa_study::validate(&case, &methods).unwrap();
     // (nominal steps, continuum steps, dual steps) at each update.
     let mut seen: Vec<(usize, usize, usize)> = Vec::new();
-    let r = dsa_run::run_observed(&case, &spec, None, &mut |_| {}, &mut |r| {
-        let v = &r.variables[0];
-        seen.push((
-            r.nominal.loads.len(),
-            v.continuum.as_ref().map_or(0, |c| c.len()),
-            v.dual.as_ref().map_or(0, |d| d.len()),
-        ));
-    })
+    let r = study::run_observed(
+        &CaseAnalysis { case: &case },
+        &base_design(&case),
+        &spec,
+        None,
+        &mut |_| {},
+        &mut |r| {
+            let v = &r.variables[0];
+            seen.push((
+                r.nominal.loads.len(),
+                v.continuum.as_ref().map_or(0, |c| c.len()),
+                v.dual.as_ref().map_or(0, |d| d.len()),
+            ));
+        },
+    )
     .unwrap();
     let n = r.nominal.loads.len();
     assert_eq!(n, 5);

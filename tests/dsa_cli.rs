@@ -5,7 +5,8 @@
 //! `sensitivity.json` on a second run.
 
 use serde_json::Value;
-use shelldsa::io::dsa_case::{check_dsa_loads, DsaMethod};
+use shelldsa::io::dsa_case::DsaMethod;
+use shelldsa::io::dsa_study::check_dsa_loads;
 use shelldsa::io::shell_case::parse_shell_case;
 use shelldsa::io::CaseError;
 use std::path::{Path, PathBuf};
@@ -330,7 +331,7 @@ fn loads_the_reference_cannot_carry_are_rejected() {
     assert_eq!(code, 1);
     assert!(!dir.join("m/sensitivity.json").exists());
     // ...but finite differences alone can run it (checked here up to the validation only).
-    assert!(shelldsa::io::dsa_run::validate(&c, &[DsaMethod::Fd]).is_ok());
+    assert!(shelldsa::io::dsa_study::validate(&c, &[DsaMethod::Fd]).is_ok());
 }
 
 #[test]

@@ -31,16 +31,20 @@ use num_dual::Dual64;
 use shelldsa::contact::{PathKey, RigidTool, ToolPath};
 use shelldsa::geometry::Surface;
 use shelldsa::io::dsa_case::DsaMethod;
-use shelldsa::io::dsa_run;
+use shelldsa::io::dsa_output;
+use shelldsa::io::dsa_study::{self, base_design, CaseAnalysis};
 use shelldsa::io::shell_build;
 use shelldsa::io::shell_case::parse_shell_case;
+use shelldsa::sensitivity::study;
 use shelldsa::shell::contact::{ContactFaces, ContactInputs, ShellContact};
 use shelldsa::shell::contact_sensitivity::ContactSeeds;
 use shelldsa::shell::contact_sensitivity::ToolRate;
 use shelldsa::shell::model::ShellModel;
 use shelldsa::shell::point::ParticleState;
 use shelldsa::solver::{LinearSolver, Method, SolverOptions};
-use small_bending::{assert_taylor_rates, case, max_abs, max_diff, zero_state, Lcg, CASE};
+use small_bending::{
+    assert_taylor_rates, case, max_abs, max_diff, run_case, zero_state, Lcg, CASE,
+};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -679,7 +683,7 @@ fn tool_rotation_sensitivity_matches_dual_and_central_differences() {
 /// The continuum (hand-derived, with `ShellContact::force_dot` for `b'_N`) derivative equals the
 /// dual one: the three-way check asks 1e-8 relative on every component with |ψ'| ≥ 1e-6 max|ψ'| (both solve
 /// eq 65 with the same tangent; their right-hand sides differ by round-off).
-fn continuum_matches_dual(var: &dsa_run::VariableResult) {
+fn continuum_matches_dual(var: &study::VariableResult) {
     let name = &var.entry.variable.name;
     let (c, d) = (var.continuum.as_ref().unwrap(), var.dual.as_ref().unwrap());
     let big = d.iter().flatten().fold(0.0f64, |a, x| a.max(x.abs()));
@@ -693,13 +697,13 @@ fn continuum_matches_dual(var: &dsa_run::VariableResult) {
     assert!(worst <= 1e-8, "`{name}`: continuum vs dual {worst:e}");
 }
 
-fn check_variable(r: &dsa_run::DsaResult, v: usize) {
+fn check_variable(r: &study::DsaResult, v: usize) {
     let var = &r.variables[v];
     let name = &var.entry.variable.name;
     continuum_matches_dual(var);
     println!(
         "{}",
-        dsa_run::table(r, v)
+        dsa_output::table(r, v)
             .lines()
             .filter(|l| !l.starts_with(' '))
             .collect::<Vec<_>>()
@@ -720,7 +724,7 @@ fn check_variable(r: &dsa_run::DsaResult, v: usize) {
     // 1.6e-5, 4.1e-6, 1.0e-6, 2.6e-7 for die x at h = 4, 2, 1, 0.5 ·1e-3; die z ≤ 2.9e-7,
     // t ≤ 5.5e-6) above the re-runs' noise (~1e-14 relative responses / h ≈ 1e-10): 1e-5 at
     // the smallest h leaves a factor ~40 and still fails a wrong derivative term.
-    let e = dsa_run::max_rel_diff(var, last).expect("comparable components");
+    let e = study::max_rel_diff(var, last).expect("comparable components");
     assert!(e < 1e-5, "{name}: dual vs FD {e:e}");
     // The Taylor remainder of the dual derivative falls as h² (the derivative of the discrete
     // response) at every step with at least three unflagged step sizes.
@@ -773,9 +777,9 @@ region = [[0.0, 0.3], [0.0, 1.0]]
 rho = 1e5
 "#;
     let c = case(0.5, design);
-    let spec = dsa_run::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
+    let spec = dsa_study::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
     let t0 = std::time::Instant::now();
-    let r = dsa_run::run(&c, &spec, &mut |_| {}).unwrap();
+    let r = run_case(&c, &spec);
     println!(
         "{} steps; analysis {:.2} s, dual reference {:.2} s, fd {:.2} s (total {:.1} s); \
          dual state mismatch {:.1e}, dual value difference {:.1e}",
@@ -914,9 +918,9 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
              pivot = [0.0, 2.5, 10.51]",
         );
     let c = parse_shell_case(&text, Path::new("tests/dsa_contact.rs")).unwrap();
-    let spec = dsa_run::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
+    let spec = dsa_study::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
     let t0 = std::time::Instant::now();
-    let r = dsa_run::run(&c, &spec, &mut |_| {}).unwrap();
+    let r = run_case(&c, &spec);
     println!(
         "rotations: {} steps; analysis {:.2} s, continuum {:.3} s, dual {:.2} s, fd {:.2} s \
          (total {:.1} s)",
@@ -933,7 +937,7 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
         let all: Vec<String> = var
             .fd
             .iter()
-            .map(|c| format!("{:.2e}", dsa_run::max_rel_diff(var, c).unwrap_or(f64::NAN)))
+            .map(|c| format!("{:.2e}", study::max_rel_diff(var, c).unwrap_or(f64::NAN)))
             .collect();
         println!(
             "`{}`: continuum vs FD per h {all:?}",
@@ -974,10 +978,10 @@ kind = "tool.die.ry"
 monitors = ["center.uz", "edge.ux", "edge.uz"]
 "#;
     let c = case(0.5, design);
-    let spec = dsa_run::validate(&c, &[DsaMethod::Continuum, DsaMethod::Dual]).unwrap();
-    let r = dsa_run::run(&c, &spec, &mut |_| {}).unwrap();
+    let spec = dsa_study::validate(&c, &[DsaMethod::Continuum, DsaMethod::Dual]).unwrap();
+    let r = run_case(&c, &spec);
     for method in ["continuum", "dual"] {
-        let d = |v: &dsa_run::VariableResult| match method {
+        let d = |v: &study::VariableResult| match method {
             "continuum" => v.continuum.clone(),
             _ => v.dual.clone(),
         };
@@ -1094,7 +1098,7 @@ fn tool_design_variables_are_checked() {
         0.5,
         "[[design]]\nname = \"x\"\nkind = \"tool.die.x\"\nfd_steps = [2e-3]\n",
     );
-    let base = dsa_run::base_design(&c);
+    let base = base_design(&c);
     let spec = c.dsa.unwrap();
     assert_eq!(spec.design[0].absolute_steps(&base), vec![2e-3]);
     let moved = spec.design[0].variable.perturbed(&base, 2e-3).unwrap();
@@ -1114,7 +1118,7 @@ fn tool_design_variables_are_checked() {
     assert_eq!(turned.tool_offset("die"), [0.0; 3]);
     assert_eq!(spec.design[0].variable.value(&turned), -1e-3);
     // The re-run's die is the case's rotated as built about its pivot: R(θ(t)) R_φ.
-    let analysis = dsa_run::CaseAnalysis { case: &c };
+    let analysis = CaseAnalysis { case: &c };
     let (_, _, contact) =
         shelldsa::sensitivity::fd::Analysis::build_with_contact(&analysis, &turned).unwrap();
     let contact = contact.unwrap();
@@ -1159,17 +1163,17 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
         .replace("{design}", design)
         .replace("penalty = 1000.0", "penalty_factor = 0.014285714285714285");
     let c = parse_shell_case(&text, Path::new("tests/dsa_contact.rs")).unwrap();
-    let spec = dsa_run::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
-    let r = dsa_run::run(&c, &spec, &mut |_| {}).unwrap();
+    let spec = dsa_study::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
+    let r = run_case(&c, &spec);
     for var in &r.variables {
         continuum_matches_dual(var);
         let last = var.fd.last().unwrap();
         let unflagged = last.flagged.iter().filter(|f| !**f).count();
-        let e = dsa_run::max_rel_diff(var, last).expect("comparable components");
+        let e = study::max_rel_diff(var, last).expect("comparable components");
         let all: Vec<String> = var
             .fd
             .iter()
-            .map(|c| format!("{:.2e}", dsa_run::max_rel_diff(var, c).unwrap_or(f64::NAN)))
+            .map(|c| format!("{:.2e}", study::max_rel_diff(var, c).unwrap_or(f64::NAN)))
             .collect();
         println!(
             "penalty_factor, `{}`: {unflagged} of {} steps unflagged, dual vs FD per h {all:?}, \
@@ -1186,7 +1190,7 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
         let best = var
             .fd
             .iter()
-            .filter_map(|c| dsa_run::max_rel_diff(var, c))
+            .filter_map(|c| study::max_rel_diff(var, c))
             .fold(f64::INFINITY, f64::min);
         assert!(
             best < 1e-5,
@@ -1215,8 +1219,8 @@ kind = "tool.die.rz"
 monitors = ["center.uz"]
 "#;
     let c = case(0.25, design);
-    let spec = dsa_run::validate(&c, &[DsaMethod::Continuum, DsaMethod::Dual]).unwrap();
-    let bs = dsa_run::terms(&c, &spec, 8).unwrap();
+    let spec = dsa_study::validate(&c, &[DsaMethod::Continuum, DsaMethod::Dual]).unwrap();
+    let bs = study::terms(&CaseAnalysis { case: &c }, &base_design(&c), &spec, 8).unwrap();
     assert_eq!(bs.len(), 3);
     for b in &bs {
         let scale = b.groups.iter().fold(0.0f64, |a, g| a.max(g.dual_max));
@@ -1543,9 +1547,9 @@ fd_steps = [4e-3, 2e-3, 1e-3, 5e-4]
 monitors = ["center.uz", "edge.ux", "edge.uz", "tool.punch.fz"]
 "#;
     let c = case(0.5, design);
-    let spec = dsa_run::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
+    let spec = dsa_study::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
     let t0 = std::time::Instant::now();
-    let r = dsa_run::run(&c, &spec, &mut |_| {}).unwrap();
+    let r = run_case(&c, &spec);
     println!(
         "radii: {} steps, total {:.1} s",
         r.nominal.loads.len(),
@@ -1573,9 +1577,9 @@ monitors = ["center.uz", "edge.ux", "edge.uz", "tool.punch.fz"]
         Path::new("tests/dsa_contact.rs"),
     )
     .unwrap();
-    let spec = dsa_run::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
+    let spec = dsa_study::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
     let t0 = std::time::Instant::now();
-    let r = dsa_run::run(&c, &spec, &mut |_| {}).unwrap();
+    let r = run_case(&c, &spec);
     println!(
         "NURBS die: {} steps, total {:.1} s",
         r.nominal.loads.len(),

@@ -12,9 +12,11 @@ use num_dual::Dual64;
 use shelldsa::geometry::{
     AnnulusSector, CylinderSector, NurbsSurface, Rectangle, SphereZone, Surface, SurfaceDerivs,
 };
+use shelldsa::io::dsa_study::{base_design, CaseAnalysis};
 use shelldsa::io::shell_build;
 use shelldsa::io::shell_case::{parse_shell_case, ShellCase};
 use shelldsa::sensitivity::shape::{dual_geometry, lamina_vectors_dot, ShapeVelocity};
+use shelldsa::sensitivity::study;
 use shelldsa::sensitivity::{DesignError, DesignKind, DesignVariable};
 use shelldsa::shell::model::{lamina_vectors, ShellModel};
 use shelldsa::shell::point::SurfacePoint;
@@ -563,7 +565,13 @@ monitors = ["C.uz", "Q.ux", "Q.uy", "Q.uz"]
 fn check_run(label: &str, case: &ShellCase, tol: f64, min_rates: usize) -> Vec<(f64, Vec<f64>)> {
     let spec = case.dsa.clone().unwrap();
     let t = std::time::Instant::now();
-    let r = shelldsa::io::dsa_run::run(case, &spec, &mut |_| {}).unwrap();
+    let r = study::run(
+        &CaseAnalysis { case },
+        &base_design(case),
+        &spec,
+        &mut |_| {},
+    )
+    .unwrap();
     let yielding: Vec<usize> = r
         .nominal
         .yielding
@@ -588,7 +596,7 @@ fn check_run(label: &str, case: &ShellCase, tol: f64, min_rates: usize) -> Vec<(
     for v in &r.variables {
         let name = &v.entry.variable.name;
         let smallest = v.fd.last().unwrap();
-        let diff = shelldsa::io::dsa_run::max_rel_diff(v, smallest).expect("compared");
+        let diff = study::max_rel_diff(v, smallest).expect("compared");
         let rates: Vec<f64> = v.taylor.iter().filter_map(|f| f.rate).collect();
         println!(
             "{label} {name}: dual vs central differences at h/τ = {:e}: {diff:.2e}; \
@@ -687,9 +695,14 @@ fn degenerate_shape_perturbations_are_rejected_before_the_analysis() {
     let case = hemisphere_case(5, 1, &design(0.25));
     let spec = case.dsa.clone().unwrap();
     let mut progress: Vec<String> = Vec::new();
-    let e = shelldsa::io::dsa_run::run(&case, &spec, &mut |l| progress.push(l.to_string()))
-        .unwrap_err()
-        .to_string();
+    let e = study::run(
+        &CaseAnalysis { case: &case },
+        &base_design(&case),
+        &spec,
+        &mut |l| progress.push(l.to_string()),
+    )
+    .unwrap_err()
+    .to_string();
     assert!(e.contains("phi1") && e.contains("normal"), "{e}");
     // Nothing was run: the error comes from the checks, before the analysis reports its
     // converged steps (its first progress line).

@@ -25,10 +25,12 @@ use nalgebra::Vector3;
 use num_dual::Dual64;
 use shelldsa::geometry::Surface;
 use shelldsa::io::dsa_case::DsaMethod;
-use shelldsa::io::dsa_run;
+use shelldsa::io::dsa_output;
+use shelldsa::io::dsa_study::{self, base_design, CaseAnalysis};
 use shelldsa::io::shell_build;
 use shelldsa::io::shell_case::parse_shell_case;
 use shelldsa::sensitivity::shape::{dual_geometry, ShapeVelocity};
+use shelldsa::sensitivity::study;
 use shelldsa::shell::contact::InitialGeometry;
 use shelldsa::shell::contact::{ContactFaces, ContactInputs, ShellContact};
 use shelldsa::shell::contact_sensitivity::ContactSeeds;
@@ -36,7 +38,9 @@ use shelldsa::shell::contact_sensitivity::ToolRate;
 use shelldsa::shell::model::ShellModel;
 use shelldsa::shell::point::{ParticleState, SurfacePoint};
 use shelldsa::solver::{LinearSolver, Method, SolverOptions};
-use small_bending::{assert_taylor_rates, case, max_abs, max_diff, zero_state, Lcg, CASE};
+use small_bending::{
+    assert_taylor_rates, case, max_abs, max_diff, run_case, zero_state, Lcg, CASE,
+};
 use std::path::Path;
 use std::sync::Arc;
 
@@ -435,7 +439,7 @@ fn contact_force_shape_sensitivity_matches_dual_and_rebuilt_contacts() {
 /// The continuum derivative equals the dual one: the three-way check asks 1e-8 relative on every
 /// component with |ψ'| ≥ 1e-6 max|ψ'| (both solve eq 65 with the same tangent; their
 /// right-hand sides differ by round-off). Returns the largest relative difference.
-fn continuum_matches_dual(var: &dsa_run::VariableResult) -> f64 {
+fn continuum_matches_dual(var: &study::VariableResult) -> f64 {
     let name = &var.entry.variable.name;
     let (c, d) = (var.continuum.as_ref().unwrap(), var.dual.as_ref().unwrap());
     let big = d.iter().flatten().fold(0.0f64, |a, x| a.max(x.abs()));
@@ -470,9 +474,9 @@ fd_steps = [4e-4, 2e-4, 1e-4]
 monitors = ["center.uz", "edge.ux", "edge.uz"]
 "#;
     let c = case(0.25, design);
-    let spec = dsa_run::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
+    let spec = dsa_study::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
     let t0 = std::time::Instant::now();
-    let r = dsa_run::run(&c, &spec, &mut |_| {}).unwrap();
+    let r = run_case(&c, &spec);
     println!(
         "{} steps; analysis {:.2} s, continuum {:.3} s, dual {:.2} s, fd {:.2} s (total {:.1} s); \
          dual state mismatch {:.1e}",
@@ -505,7 +509,7 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
         continuum_matches_dual(var);
         println!(
             "{}",
-            dsa_run::table(
+            dsa_output::table(
                 &r,
                 r.variables
                     .iter()
@@ -524,7 +528,7 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
                 let unflagged = col.flagged.iter().filter(|f| !**f).count();
                 format!(
                     "{:.2e} ({unflagged} of {} steps)",
-                    dsa_run::max_rel_diff(var, col).unwrap_or(f64::NAN),
+                    study::max_rel_diff(var, col).unwrap_or(f64::NAN),
                     col.flagged.len()
                 )
             })
@@ -543,7 +547,7 @@ monitors = ["center.uz", "edge.ux", "edge.uz"]
         // difference's truncation falls as h² (measured 4.1e-5, 1.0e-5, 2.6e-6 for the length
         // at h/τ = 1e-4, 5e-5, 2.5e-5; the width ≤ 1.3e-7, at the re-runs' noise ~1e-14 of
         // the responses over h) : 1e-5 leaves a factor 4 and is 100 times the issue's 0.1 %.
-        let e = dsa_run::max_rel_diff(var, last).expect("comparable components");
+        let e = study::max_rel_diff(var, last).expect("comparable components");
         assert!(e < 1e-5, "{name}: continuum vs central differences {e:e}");
         let fitted = assert_taylor_rates(var, name);
         println!("`{name}`: {fitted} steps with a Taylor rate");
@@ -575,9 +579,9 @@ kind = "shape.edge_v.y"
 monitors = ["center.uz"]
 "#;
     let c = case(0.25, design);
-    let spec = dsa_run::validate(&c, &[DsaMethod::Continuum, DsaMethod::Dual]).unwrap();
+    let spec = dsa_study::validate(&c, &[DsaMethod::Continuum, DsaMethod::Dual]).unwrap();
     // Step 12: plastic (61 yielding layer points), the punch and the die active.
-    let bs = dsa_run::terms(&c, &spec, 12).unwrap();
+    let bs = study::terms(&CaseAnalysis { case: &c }, &base_design(&c), &spec, 12).unwrap();
     assert_eq!(bs.len(), 2);
     for b in &bs {
         check_groups(b);

@@ -3,8 +3,9 @@
 //! carries it three ways (continuum, dual, central differences of re-runs).
 
 use shelldsa::io::dsa_case::DsaMethod;
-use shelldsa::io::dsa_run;
+use shelldsa::io::dsa_study::{self, base_design, CaseAnalysis};
 use shelldsa::io::shell_case::parse_shell_case;
+use shelldsa::sensitivity::study;
 use std::path::Path;
 
 /// A clamped cantilever strip (L = 12, b = 1, t = 0.1, E = 1.2e6, ν = 0, 13 × 3 particles,
@@ -80,8 +81,14 @@ fn self_weight_per_volume_follows_the_thickness_three_ways() {
     .unwrap();
     let methods = [DsaMethod::Continuum, DsaMethod::Dual, DsaMethod::Fd];
     let run = |case| {
-        let spec = dsa_run::validate(case, &methods).unwrap();
-        dsa_run::run(case, &spec, &mut |_| {}).unwrap()
+        let spec = dsa_study::validate(case, &methods).unwrap();
+        study::run(
+            &CaseAnalysis { case },
+            &base_design(case),
+            &spec,
+            &mut |_| {},
+        )
+        .unwrap()
     };
     let v = run(&per_volume);
     let a = run(&per_area);

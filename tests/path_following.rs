@@ -299,7 +299,7 @@ fn follower_edge_force_and_arc_length_with_dsa_are_refused_up_front() {
         "[steps]\ncontrol = \"arc-length\"\narc_length = 0.1\n",
     );
     let case = parse_shell_case(&text, Path::new("arc.toml")).unwrap();
-    let e = shelldsa::io::dsa_case::check_load_control(&case)
+    let e = shelldsa::io::dsa_study::check_load_control(&case)
         .unwrap_err()
         .to_string();
     assert!(

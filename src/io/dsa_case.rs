@@ -47,15 +47,16 @@
 //! [`CaseError::Invalid`] naming the dotted key (`design[1].kind`, `dsa.monitors[0]`), the
 //! value and the expectation; every `±h` of the finite-difference study must give an
 //! admissible design ([`DesignVariable::perturbed`]: `t ± h > 0`, material parameters in their
-//! ranges). [`check_dsa_loads`] checks that the sensitivity methods can carry the case's loads.
+//! ranges).
 
-use super::shell_case::{Load, Monitor as CaseMonitor, ShellCase};
-use super::CaseError;
+use super::{fmt_num, CaseError, Monitor as CaseMonitor};
 use crate::contact::RigidTool;
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
+pub use crate::sensitivity::study::{DesignEntry, DsaMethod, DsaSpec};
 use crate::sensitivity::{
-    check_tool_shapes, check_tools, Design, DesignKind, DesignVariable, Layers, Monitor, Quantity,
+    check_tool_shapes, check_tools, Design, DesignKind, DesignScope, DesignVariable, Layers,
+    Monitor, Quantity,
 };
 use serde::Deserialize;
 use std::path::Path;
@@ -139,77 +140,8 @@ pub(crate) struct DistanceFile {
     target: Vec<[f64; 3]>,
 }
 
-/// A sensitivity method.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum DsaMethod {
-    /// The hand-derived continuum DSA (`sensitivity::continuum`, eqs 37–65).
-    Continuum,
-    /// The dual-number reference (`sensitivity::dual`).
-    Dual,
-    /// Central differences of complete re-runs (`sensitivity::fd`).
-    Fd,
-}
-
-impl DsaMethod {
-    /// The name used in case files and on the command line.
-    pub fn name(self) -> &'static str {
-        match self {
-            DsaMethod::Continuum => "continuum",
-            DsaMethod::Dual => "dual",
-            DsaMethod::Fd => "fd",
-        }
-    }
-
-    /// Parse a method name; `key` names where it was written (for the error).
-    pub fn parse(s: &str, key: &str, path: &Path) -> Result<Self, CaseError> {
-        match s {
-            "continuum" => Ok(DsaMethod::Continuum),
-            "dual" => Ok(DsaMethod::Dual),
-            "fd" => Ok(DsaMethod::Fd),
-            _ => Err(invalid(
-                path,
-                key,
-                format!("{s:?}"),
-                "\"continuum\", \"dual\" or \"fd\"",
-            )),
-        }
-    }
-}
-
-/// One checked design variable with its finite-difference steps.
-#[derive(Clone, Debug, PartialEq)]
-pub struct DesignEntry {
-    /// The variable.
-    pub variable: DesignVariable,
-    /// Relative steps `h/|τ|` (each finite, > 0), in the order written.
-    pub fd_steps: Vec<f64>,
-}
-
-impl DesignEntry {
-    /// The absolute steps `h = (h/|τ|)·|τ|` at `design`; for a tool translation or rotation
-    /// (whose value, the offset, is 0 at the nominal design) `fd_steps` are absolute lengths
-    /// or angles (radians).
-    pub fn absolute_steps(&self, design: &Design) -> Vec<f64> {
-        if is_tool_kind(&self.variable.kind) {
-            return self.fd_steps.clone();
-        }
-        let tau = self.variable.value(design).abs();
-        self.fd_steps.iter().map(|r| r * tau).collect()
-    }
-}
-
-/// The checked design-sensitivity part of a shell case.
-#[derive(Clone, Debug, PartialEq)]
-pub struct DsaSpec {
-    /// The design variables (at least one).
-    pub design: Vec<DesignEntry>,
-    /// The methods to run (default: continuum, dual and fd).
-    pub methods: Vec<DsaMethod>,
-    /// The monitored components (default: every case monitor, ux, uy, uz).
-    pub monitors: Vec<Monitor>,
-}
-
-fn invalid(
+/// A [`CaseError::Invalid`] of the case file `path`.
+pub(super) fn invalid(
     path: &Path,
     key: impl Into<String>,
     value: impl Into<String>,
@@ -240,7 +172,14 @@ pub fn parse_methods(
     }
     let mut out = Vec::with_capacity(names.len());
     for (i, n) in names.iter().enumerate() {
-        let m = DsaMethod::parse(n.trim(), &format!("{key}[{i}]"), path)?;
+        let m = DsaMethod::from_name(n.trim()).ok_or_else(|| {
+            invalid(
+                path,
+                format!("{key}[{i}]"),
+                format!("{:?}", n.trim()),
+                "\"continuum\", \"dual\" or \"fd\"",
+            )
+        })?;
         if out.contains(&m) {
             return Err(invalid(
                 path,
@@ -336,7 +275,7 @@ pub(crate) fn check(
                 ),
             ));
         }
-        let is_tool = is_tool_kind(&kind);
+        let is_tool = kind.is_offset();
         let variable = DesignVariable::new(d.name.clone(), kind);
         let fd_steps = d
             .fd_steps
@@ -356,7 +295,7 @@ pub(crate) fn check(
                 return Err(invalid(
                     path,
                     format!("{steps_key}[{i}]"),
-                    super::shell_case::fmt_num(r),
+                    fmt_num(r),
                     "a finite relative step h/|τ| > 0",
                 ));
             }
@@ -364,7 +303,7 @@ pub(crate) fn check(
                 return Err(invalid(
                     path,
                     format!("{steps_key}[{i}]"),
-                    super::shell_case::fmt_num(r),
+                    fmt_num(r),
                     "a step not listed before",
                 ));
             }
@@ -407,7 +346,7 @@ pub(crate) fn check(
                 return Err(invalid(
                     path,
                     format!("{steps_key}[{i}]"),
-                    super::shell_case::fmt_num(r),
+                    fmt_num(r),
                     format!(
                         "a step h = {h:e} that changes {what} ({value:e}) in floating point \
                          (τ ± h ≠ τ; relative steps above ~1e-12 keep the difference above \
@@ -415,22 +354,24 @@ pub(crate) fn check(
                     ),
                 ));
             }
-            for delta in [h, -h] {
-                variable.perturbed(&base, delta).map_err(|e| {
-                    invalid(
-                        path,
-                        format!("{steps_key}[{i}]"),
-                        super::shell_case::fmt_num(r),
-                        format!("a step that keeps the design admissible: {e}"),
-                    )
-                })?;
-            }
+            let scope = DesignScope {
+                base: Some(&base),
+                ..DesignScope::default()
+            };
+            variable.check(&[h, -h], &scope).map_err(|e| {
+                invalid(
+                    path,
+                    format!("{steps_key}[{i}]"),
+                    fmt_num(r),
+                    format!("a step that keeps the design admissible: {e}"),
+                )
+            })?;
             // A tool shape: the perturbed tool must be a valid tool (RigidTool::reshaped).
             check_tool_shapes(std::slice::from_ref(&variable), tools, h).map_err(|e| {
                 invalid(
                     path,
                     format!("{steps_key}[{i}]"),
-                    super::shell_case::fmt_num(r),
+                    fmt_num(r),
                     format!("a step that keeps the tool valid: {e}"),
                 )
             })?;
@@ -503,7 +444,7 @@ pub(crate) fn check(
             return Err(invalid(
                 path,
                 format!("design[{k}].kind"),
-                format!("{:?}", super::dsa_run::kind_name(&e.variable)),
+                format!("{:?}", e.variable.kind.key()),
                 "a thickness, material or tool variable with [[dsa.angle]], [[dsa.distance]] or \
                  [[dsa.thinning]] responses (the initial geometry they read would move with a \
                  shape variable, whose design velocity these responses do not carry)",
@@ -737,15 +678,6 @@ fn monitor_selection(
     Ok(vec![sens_monitor(path, key, m, c, comp)?])
 }
 
-/// A tool translation, rotation or shape: its value (the offset from the case's tool) is 0 at
-/// the nominal design, so its finite-difference steps are absolute.
-pub fn is_tool_kind(kind: &DesignKind) -> bool {
-    matches!(
-        kind,
-        DesignKind::Tool { .. } | DesignKind::ToolRotation { .. } | DesignKind::ToolShape { .. }
-    )
-}
-
 fn design_kind(
     path: &Path,
     key: &str,
@@ -770,7 +702,7 @@ pub fn check_tool_names(path: &Path, tools: &[RigidTool], spec: &DsaSpec) -> Res
             invalid(
                 path,
                 format!("design[{k}].kind"),
-                format!("{:?}", super::dsa_run::kind_name(&e.variable)),
+                format!("{:?}", e.variable.kind.key()),
                 format!("a tool of the case's [[tool]] tables {names:?} ({err})"),
             )
         })?;
@@ -786,54 +718,6 @@ pub fn check_tool_names(path: &Path, tools: &[RigidTool], spec: &DsaSpec) -> Res
                 ));
             }
         }
-    }
-    Ok(())
-}
-
-/// Rejects, before any analysis, the loads the sensitivity methods cannot carry yet: edge
-/// moments (they act through the director) and edge forces (their design derivative through
-/// the edge's length element).
-pub fn check_dsa_loads(case: &ShellCase) -> Result<(), CaseError> {
-    for (k, l) in case.loads.iter().enumerate() {
-        let (value, why) = match l {
-            Load::Moment { .. } => (
-                "\"moment\"",
-                "for the dual-number reference (edge moments act through the director and \
-                 are not supported by it yet)",
-            ),
-            Load::EdgeForce { .. } => (
-                "\"edge-force\"",
-                "for the sensitivity methods (the design derivative of an edge force, through \
-                 the edge's length element, is not carried by them yet)",
-            ),
-            Load::PointForce { .. }
-            | Load::Gravity { .. }
-            | Load::GravityPerVolume { .. }
-            | Load::Pressure { .. } => continue,
-        };
-        return Err(invalid(
-            &case.path,
-            format!("load[{k}].kind"),
-            value,
-            format!("\"point-force\", \"pressure\" or \"gravity\" {why}"),
-        ));
-    }
-    Ok(())
-}
-
-/// Rejects, before any analysis, a case on an arc-length path (`[steps] control =
-/// "arc-length"`): the sensitivity methods differentiate at fixed load levels (and their
-/// finite-difference re-runs compare equal levels), which an arc-length path does not have
-/// (`docs/sensitivity.md`).
-pub fn check_load_control(case: &ShellCase) -> Result<(), CaseError> {
-    if case.steps.arc_length.is_some() {
-        return Err(invalid(
-            &case.path,
-            "steps.control",
-            "\"arc-length\"",
-            "\"load\" for shelldsa dsa (design derivatives are computed at fixed load \
-             factors; on an arc-length path the load factor is an unknown of every step)",
-        ));
     }
     Ok(())
 }

@@ -5,8 +5,8 @@
 //! `--terms STEP`, the term groups of the continuum right-hand side against the dual reference
 //! as bars (`terms_step<STEP>.png`).
 
-use super::dsa_run::{max_rel_diff, DsaResult, VariableResult};
 use super::plot::{bar_figure, figure, BarPanel, Panel, Scale, Series};
+use crate::sensitivity::study::{max_rel_diff, DsaResult, VariableResult};
 use crate::sensitivity::terms::TermBreakdown;
 use std::path::{Path, PathBuf};
 

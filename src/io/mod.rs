@@ -8,8 +8,9 @@
 //!   assembled by [`shell_build`] and written by [`shell_output`].
 
 pub mod dsa_case;
+pub mod dsa_output;
 pub mod dsa_plots;
-pub mod dsa_run;
+pub mod dsa_study;
 pub mod plot;
 pub mod shell_build;
 pub mod shell_case;
@@ -50,6 +51,14 @@ pub enum CaseError {
         /// Cause.
         source: crate::geometry::GeometryError,
     },
+    /// `shelldsa dsa` on a case without design variables.
+    #[error(
+        "case file {path}: no [[design]] table: `shelldsa dsa` needs at least one design variable"
+    )]
+    NoDesign {
+        /// File.
+        path: PathBuf,
+    },
     /// A value outside its admissible range.
     #[error("case file {path}: `{key}` = {value} is invalid: expected {expected}")]
     Invalid {
@@ -64,52 +73,22 @@ pub enum CaseError {
     },
 }
 
-/// When a results file (`results.json` with its PVD, `sensitivity.json`) is rewritten whole
-/// while a run goes on: after every converged step up to [`RewriteSchedule::EVERY_STEP_UP_TO`],
-/// then once the number of steps has grown by a sixteenth since the last rewrite, or once the
-/// last rewrite is older than [`RewriteSchedule::MIN_INTERVAL_S`] and 100 times its own
-/// duration. Each step record is then written about 17 times in all (a geometric series), and
-/// rewrites take at most about 1 % of the wall time, so the cost per step stays bounded however
-/// long the run. (`steps.jsonl` has every converged step as soon as it converges.)
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct RewriteSchedule {
-    /// Steps in the last rewrite.
-    steps: usize,
-    /// When it ended.
-    at: std::time::Instant,
-    /// How long it took.
-    took: std::time::Duration,
+/// A named point whose displacement is recorded at every converged step.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Monitor {
+    /// Name (unique).
+    pub name: String,
+    /// Parameter point.
+    pub at: [f64; 2],
 }
 
-impl RewriteSchedule {
-    pub(crate) const EVERY_STEP_UP_TO: usize = 32;
-    const GROWTH: usize = 16;
-    pub(crate) const MIN_INTERVAL_S: f64 = 10.0;
-
-    /// Nothing written yet, at `start`.
-    pub(crate) fn starting(start: std::time::Instant) -> Self {
-        Self {
-            steps: 0,
-            at: start,
-            took: std::time::Duration::ZERO,
-        }
-    }
-
-    /// Whether a rewrite with `steps` converged steps is due.
-    pub(crate) fn due(&self, steps: usize) -> bool {
-        let since = self.at.elapsed().as_secs_f64();
-        steps <= Self::EVERY_STEP_UP_TO
-            || steps >= self.steps + (self.steps / Self::GROWTH).max(1)
-            || since >= Self::MIN_INTERVAL_S.max(100.0 * self.took.as_secs_f64())
-    }
-
-    /// A rewrite with `steps` steps has just ended; it took `took`.
-    pub(crate) fn wrote(&mut self, steps: usize, took: std::time::Duration) {
-        *self = Self {
-            steps,
-            at: std::time::Instant::now(),
-            took,
-        };
+/// A number as a message shows it: plain between 1e-4 and 1e15, else in exponent form (`{}`
+/// writes 1e308 with 309 digits).
+pub(crate) fn fmt_num(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() || (1e-4..1e15).contains(&v.abs()) {
+        v.to_string()
+    } else {
+        format!("{v:e}")
     }
 }
 
@@ -463,11 +442,7 @@ fn material_path_case(f: MaterialPathFile, path: &Path) -> Result<Case, CaseErro
     }
     let h = f.design.fd_step;
     if !(h > 0.0 && h.is_finite()) {
-        return Err(invalid(
-            "design.fd_step",
-            shell_case::fmt_num(h),
-            "a finite step > 0",
-        ));
+        return Err(invalid("design.fd_step", fmt_num(h), "a finite step > 0"));
     }
     if !f.design.tau.is_finite() {
         return Err(invalid(
@@ -494,11 +469,7 @@ fn material_path_case(f: MaterialPathFile, path: &Path) -> Result<Case, CaseErro
         ("check.fd_floor", check.fd_floor),
     ] {
         if !(v > 0.0 && v < 1.0) {
-            return Err(invalid(
-                key,
-                shell_case::fmt_num(v),
-                "a relative tolerance in (0, 1)",
-            ));
+            return Err(invalid(key, fmt_num(v), "a relative tolerance in (0, 1)"));
         }
     }
     let mut mp = match (&f.path.generator, f.path.segment.is_empty()) {
@@ -581,7 +552,7 @@ fn material_path_case(f: MaterialPathFile, path: &Path) -> Result<Case, CaseErro
     if let Some(what) = mp.lost_in_step(h) {
         return Err(invalid(
             "design.fd_step",
-            shell_case::fmt_num(h),
+            fmt_num(h),
             &format!(
                 "a step that changes every τ-dependent value in floating point: with τ ± h, \
                  {what} is unchanged, so its central difference is 0"

@@ -35,6 +35,7 @@ use crate::shell::problem::ShellProblem;
 use crate::shell::symmetry::SymmetryPlane;
 use crate::shell::ShellError;
 use crate::solver::observe::{Observed, StepObserver};
+use crate::solver::Failure;
 use crate::solver::{
     ArcLength, ConvergedStep, LinearSolver, LoadStepping, Method, NewtonOptions, NewtonSolver,
     NonlinearProblem, Parallelism, Predictor, ProblemError, SolverError, SolverOptions,
@@ -669,8 +670,10 @@ where
     fn on_restore(&mut self) {
         self.record = None;
     }
-    fn failure(&self) -> Option<String> {
-        self.error.as_ref().map(|e| format!("writing results: {e}"))
+    fn failure(&self) -> Option<Failure> {
+        self.error
+            .as_ref()
+            .map(|e| Failure::new("writing results", e.to_string()))
     }
 }
 

@@ -9,7 +9,8 @@
 //!
 //! Nothing here builds the model: [`crate::io::shell_build`] does that from a [`ShellCase`].
 
-use super::{exact, exact_opt, material_from_spec, CaseError, MaterialSpec};
+pub use super::Monitor;
+use super::{exact, exact_opt, fmt_num, material_from_spec, CaseError, MaterialSpec};
 use crate::contact::{PathKey, RigidTool, Side, ToolPath};
 use crate::geometry::{Surface, SurfaceSpec};
 use crate::material::MaterialParams;
@@ -582,15 +583,6 @@ pub enum MonitorDirection {
     Normal,
 }
 
-/// A named point whose displacement is recorded at every converged step.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Monitor {
-    /// Name (unique).
-    pub name: String,
-    /// Parameter point.
-    pub at: [f64; 2],
-}
-
 /// `[output]`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct OutputSpec {
@@ -1050,16 +1042,6 @@ fn geometry_warnings(
         ));
     }
     out
-}
-
-/// A number as a message shows it: plain between 1e-4 and 1e15, else in exponent form (`{}`
-/// writes 1e308 with 309 digits).
-pub(crate) fn fmt_num(v: f64) -> String {
-    if v == 0.0 || !v.is_finite() || (1e-4..1e15).contains(&v.abs()) {
-        v.to_string()
-    } else {
-        format!("{v:e}")
-    }
 }
 
 fn fmt_arr(a: &[f64]) -> String {

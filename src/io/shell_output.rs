@@ -18,17 +18,8 @@
 //!
 //! Cell data (per visualisation quad, the values of its integration cell):
 //! - `N` = `[N11, N22, N12]`, `M` = `[M11, M22, M12]`, `Q` = `[Q1, Q2]`: stress resultants per
-//!   unit length, integrated through the thickness from the committed layer stresses
-//!   (`N = Σ_l w_l (t/2) σ_l`, `M = Σ_l w_l (t/2) (ζ_l t/2) σ_l`, `Q_α = Σ_l w_l (t/2) σ_α3,l`).
-//!   Each layer stress is first resolved (eq 26 twice, `σᶜ = Qᶜ Qᵀ σˡ Q Qᶜᵀ`) in one frame per
-//!   point, the **initial lamina frame carried by the director**: the initial frame `Q⁰` (rows
-//!   `e1 = x̄⁰,1/|x̄⁰,1|`, `e2 = n⁰ × e1`, `n⁰`) rotated by the shortest rotation taking `n⁰` to
-//!   the current director `d/|d|`. It is the initial lamina frame in the undeformed state and
-//!   follows the shell through large rotations, so that `N11` stays the membrane force along
-//!   the (rotated) first parametric direction, `Q1` the shear force on that section, and so
-//!   on; the layers' own frames differ from it only by their in-plane (drilling) rotation.
-//!   `M` is positive when the stress grows towards the director (`ζ = +1`). `t` is the initial
-//!   thickness (the shell model has no thickness change);
+//!   unit length in the initial lamina frame carried by the director
+//!   ([`crate::shell::resultants`]);
 //! - `eps_p_top`, `eps_p_mid`, `eps_p_bottom`: equivalent plastic strain `ē^p` (eq 15) of the
 //!   layer nearest `ζ = +1`, the layers nearest `ζ = 0` (averaged if two are equally near, as
 //!   for an even Gauss rule), and the layer nearest `ζ = −1`;
@@ -61,12 +52,14 @@
 use super::shell_case::{Monitor, OutputSpec};
 use super::vtu::{replace_file, PvdCollection, VtuError, VtuMesh, VtuWriter};
 use crate::geometry::Surface;
-use crate::kinematics::{global_stress, local_stress, stress_from_vec5};
-use crate::material::von_mises;
 use crate::meshfree::quadrature::CellQuadrature;
 use crate::meshfree::ParamBox;
 use crate::shell::contact::{ContactReport, ToolReport};
 use crate::shell::model::ShellModel;
+use crate::shell::resultants::layer_choice;
+pub use crate::shell::resultants::{
+    director_rotation, point_resultants, resultant_frame, CellResultants,
+};
 use crate::shell::ShellError;
 use crate::solver::{FactorisedAt, StepRecord, StepTiming};
 
@@ -79,7 +72,6 @@ fn timing_json(t: &StepTiming) -> Value {
         "solve": t.solve_s,
     })
 }
-use nalgebra::{Matrix3, Rotation3, Vector3};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -236,86 +228,6 @@ impl OutputGrid {
     }
 }
 
-/// Thickness-integrated results of one integration cell (see the module documentation).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct CellResultants {
-    /// Membrane forces `[N11, N22, N12]` per unit length, initial lamina frame.
-    pub n: [f64; 3],
-    /// Moments `[M11, M22, M12]` per unit length.
-    pub m: [f64; 3],
-    /// Transverse shear forces `[Q1, Q2]` per unit length.
-    pub q: [f64; 2],
-    /// Equivalent plastic strain at the top, middle and bottom layers.
-    pub eps_p: [f64; 3],
-    /// Von Mises stress at the top and bottom layers.
-    pub von_mises: [f64; 2],
-}
-
-/// Layers nearest `ζ = +1`, nearest `ζ = 0` (all equally near), nearest `ζ = −1`.
-fn layer_choice(rule: &[(f64, f64)]) -> (usize, Vec<usize>, usize) {
-    let by = |f: &dyn Fn(f64) -> f64| {
-        (0..rule.len())
-            .min_by(|&a, &b| f(rule[a].0).total_cmp(&f(rule[b].0)))
-            .unwrap_or(0)
-    };
-    let top = by(&|z| -z);
-    let bottom = by(&|z| z);
-    let zmin = rule.iter().map(|r| r.0.abs()).fold(f64::INFINITY, f64::min);
-    let mid = (0..rule.len())
-        .filter(|&l| rule[l].0.abs() <= zmin + 1e-12)
-        .collect();
-    (top, mid, bottom)
-}
-
-/// The frame of the resultants at in-plane quadrature point `k` (rows = basis vectors): the
-/// initial lamina frame rotated by the shortest rotation from `n⁰` to the committed director
-/// `d = n⁰ + Σ Ψ_I (d_I − d_I⁰)` (see the module documentation).
-pub fn resultant_frame(model: &ShellModel, k: usize) -> Matrix3<f64> {
-    let p = &model.points[k];
-    let n0 = p.surface.n;
-    let mut d = n0;
-    for (&j, s) in p.neighbours.iter().zip(&p.shape) {
-        let q = model.particle_state(j);
-        d += (q.d - q.d0) * s.psi;
-    }
-    let r = Rotation3::from_scaled_axis(director_rotation(&n0, &d));
-    p.surface.initial_frame() * r.matrix().transpose()
-}
-
-/// Thickness-integrated results at in-plane quadrature point `k` of the committed state.
-pub fn point_resultants(model: &ShellModel, k: usize) -> CellResultants {
-    let nl = model.thickness_rule.len();
-    let half_t = model.thickness * 0.5;
-    let q0 = resultant_frame(model, k);
-    let mut r = CellResultants::default();
-    let (top, mid, bottom) = layer_choice(&model.thickness_rule);
-    for (l, &(zeta, wz)) in model.thickness_rule.iter().enumerate() {
-        let h = &model.history[k * nl + l];
-        let s0 = local_stress(
-            &q0,
-            &global_stress(&h.frame, &stress_from_vec5(&h.material.stress)),
-        );
-        let w = wz * half_t;
-        let wm = w * zeta * half_t;
-        let comps = [s0[(0, 0)], s0[(1, 1)], s0[(0, 1)]];
-        for (c, s) in comps.iter().enumerate() {
-            r.n[c] += w * s;
-            r.m[c] += wm * s;
-        }
-        r.q[0] += w * s0[(0, 2)];
-        r.q[1] += w * s0[(1, 2)];
-    }
-    let eps = |l: usize| model.history[k * nl + l].material.eps_p;
-    let vm = |l: usize| von_mises(&model.history[k * nl + l].material.stress);
-    r.eps_p = [
-        eps(top),
-        mid.iter().map(|&l| eps(l)).sum::<f64>() / mid.len().max(1) as f64,
-        eps(bottom),
-    ];
-    r.von_mises = [vm(top), vm(bottom)];
-    r
-}
-
 /// Per integration cell, the area-weighted mean of [`point_resultants`] over its quadrature
 /// points (weights `w_k |x̄⁰,1 × x̄⁰,2|`). A cell without points (impossible for a
 /// [`CellQuadrature`]) is an error.
@@ -362,21 +274,6 @@ pub fn cell_resultants(
             })
         })
         .collect()
-}
-
-/// The rotation vector taking the unit vector `n0` to the direction of `d` by the shortest
-/// rotation (zero when they are parallel; also zero, i.e. undefined, when antiparallel).
-pub fn director_rotation(n0: &Vector3<f64>, d: &Vector3<f64>) -> Vector3<f64> {
-    let dh = d.normalize();
-    let axis = n0.cross(&dh);
-    let s = axis.norm();
-    let c = n0.dot(&dh);
-    let theta = s.atan2(c);
-    if s > 0.0 {
-        axis * (theta / s)
-    } else {
-        Vector3::zeros()
-    }
 }
 
 /// Contact pressure `[top, bottom]` per integration cell: the area-weighted mean (weights
@@ -705,7 +602,7 @@ pub struct ShellOutput {
     step_lines: Vec<String>,
     /// `steps.jsonl`, open for appending, and its length after the last whole line.
     step_log: Option<(std::fs::File, u64)>,
-    rewrites: super::RewriteSchedule,
+    rewrites: crate::solver::observe::RewriteSchedule,
     start: Instant,
     info: serde_json::Map<String, Value>,
     contact: Option<ContactTracking>,
@@ -780,7 +677,7 @@ impl ShellOutput {
             steps: Vec::new(),
             step_lines: Vec::new(),
             step_log: None,
-            rewrites: super::RewriteSchedule::starting(start),
+            rewrites: crate::solver::observe::RewriteSchedule::starting(start),
             start,
             info: serde_json::Map::new(),
             contact: None,

@@ -46,6 +46,7 @@ use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PA
 use crate::shell::point_sensitivity::{commit_particle_dot, ModelSeeds, StepLinearisation};
 use crate::shell::problem::ShellProblem;
 use crate::solver::observe::StepObserver;
+use crate::solver::Failure;
 use crate::solver::NonlinearProblem;
 use crate::solver::{
     ConvergedStep, ConvergedTangent, FactorisedAt, NewtonReport, NewtonSolver, ProblemError,
@@ -172,47 +173,24 @@ impl SensitivityState {
                 s.surface = Some(v.points);
                 s.position = Some(v.positions);
             }
-            DesignKind::Tool { tool, axis } => {
+            DesignKind::Tool { tool, axis } | DesignKind::ToolRotation { tool, axis } => {
                 let names = contact_tools(problem);
-                let i = names.iter().position(|n| n == tool).ok_or_else(|| {
-                    DesignError::UnknownTool {
-                        variable: var.name.clone(),
-                        tool: tool.clone(),
-                        expected: format!("{names:?}"),
-                    }
-                })?;
-                s.tools[i].translation[*axis] = 1.0;
-            }
-            DesignKind::ToolRotation { tool, axis } => {
-                let names = contact_tools(problem);
-                let i = names.iter().position(|n| n == tool).ok_or_else(|| {
-                    DesignError::UnknownTool {
-                        variable: var.name.clone(),
-                        tool: tool.clone(),
-                        expected: format!("{names:?}"),
-                    }
-                })?;
-                s.tools[i].rotation[*axis] = 1.0;
+                let names: Vec<&str> = names.iter().map(String::as_str).collect();
+                super::check_tools(std::slice::from_ref(var), &names)?;
+                let i = names.iter().position(|n| n == tool).unwrap_or_default();
+                match var.kind {
+                    DesignKind::Tool { .. } => s.tools[i].translation[*axis] = 1.0,
+                    _ => s.tools[i].rotation[*axis] = 1.0,
+                }
             }
             DesignKind::ToolShape {
                 tool, parameter, ..
             } => {
                 let names = contact_tools(problem);
-                let i = names.iter().position(|n| n == tool).ok_or_else(|| {
-                    DesignError::UnknownTool {
-                        variable: var.name.clone(),
-                        tool: tool.clone(),
-                        expected: format!("{names:?}"),
-                    }
-                })?;
+                let names: Vec<&str> = names.iter().map(String::as_str).collect();
+                super::check_tools(std::slice::from_ref(var), &names)?;
+                let i = names.iter().position(|n| n == tool).unwrap_or_default();
                 s.tools[i].shape = Some((*parameter, 1.0));
-            }
-            #[allow(unreachable_patterns)]
-            _ => {
-                return Err(DesignError::Unsupported {
-                    name: var.name.clone(),
-                    method: "continuum",
-                })
             }
         }
         Ok(s)
@@ -323,8 +301,8 @@ pub struct ContinuumDsa {
     failure: Option<String>,
 }
 
-fn fatal(e: impl std::fmt::Display) -> ProblemError {
-    ProblemError::Fatal(format!("continuum sensitivity: {e}"))
+fn fatal(e: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> ProblemError {
+    ProblemError::Failed(Failure::new("continuum sensitivity", e))
 }
 
 impl ContinuumDsa {
@@ -874,10 +852,10 @@ impl StepObserver<ShellProblem> for ContinuumDsa {
             self.spare = p.into_iter().map(|s| s.history).collect();
         }
     }
-    fn failure(&self) -> Option<String> {
+    fn failure(&self) -> Option<Failure> {
         self.failure
             .as_ref()
-            .map(|f| format!("continuum sensitivity: {f}"))
+            .map(|f| Failure::new("continuum sensitivity", f.clone()))
     }
 }
 

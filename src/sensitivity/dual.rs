@@ -89,60 +89,22 @@ use super::{
 };
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
-use crate::scalar::Real;
 use crate::shell::load::{ContactLoad, Load, LoadState};
 use crate::shell::model::commit_particle;
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
 use crate::shell::problem::ShellProblem;
 use crate::shell::ShellError;
 use crate::solver::observe::{Observed, StepObserver};
+use crate::solver::Failure;
 use crate::solver::{
     ConvergedStep, ConvergedTangent, FactorisedAt, NewtonFailure, NewtonReport, NewtonSolver,
     ProblemError, SolverOptions,
 };
 use nalgebra::Vector3;
-use num_dual::{Derivative, Dual64, DualSVec64};
 use std::time::{Duration, Instant};
 use thiserror::Error;
 
-/// A dual scalar that carries the derivatives of `DIRECTIONS` design variables.
-pub trait DesignDual: Real {
-    /// Number of directions per value.
-    const DIRECTIONS: usize;
-    /// The value `x` with derivative parts `parts` (length [`Self::DIRECTIONS`]).
-    fn from_parts(x: f64, parts: &[f64]) -> Self;
-    /// Derivative part `k`.
-    fn part(&self, k: usize) -> f64;
-}
-
-impl DesignDual for Dual64 {
-    const DIRECTIONS: usize = 1;
-    fn from_parts(x: f64, parts: &[f64]) -> Self {
-        Dual64::new(x, parts[0])
-    }
-    fn part(&self, k: usize) -> f64 {
-        debug_assert_eq!(k, 0);
-        self.eps
-    }
-}
-
-impl<const N: usize> DesignDual for DualSVec64<N> {
-    const DIRECTIONS: usize = N;
-    fn from_parts(x: f64, parts: &[f64]) -> Self {
-        if parts.iter().all(|p| *p == 0.0) {
-            // No derivative stored: constants stay cheap in num-dual's arithmetic.
-            DualSVec64::new(x, Derivative::none())
-        } else {
-            DualSVec64::new(
-                x,
-                Derivative::some(nalgebra::SVector::<f64, N>::from_column_slice(parts)),
-            )
-        }
-    }
-    fn part(&self, k: usize) -> f64 {
-        self.eps.0.as_ref().map_or(0.0, |v| v[k])
-    }
-}
+pub use crate::scalar::DesignDual;
 
 /// The dual state of one group of design variables, parallel to the model's f64 state.
 #[derive(Clone, Debug)]
@@ -258,6 +220,20 @@ pub enum SensitivityError {
     /// Shell evaluation.
     #[error(transparent)]
     Shell(#[from] ShellError),
+    /// An observer of the analysis' steps (a method's recording, a monitor) failed after a
+    /// commit.
+    #[error(transparent)]
+    Observer(Failure),
+    /// The analysis could not be built for a design (`context` names what was built: the case
+    /// file, a moved tool).
+    #[error("{context}: {source}")]
+    Build {
+        /// What was built.
+        context: String,
+        /// Why it failed.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
     /// Linear solver set-up.
     #[error(transparent)]
     Solver(#[from] crate::solver::SolverError),
@@ -296,8 +272,8 @@ pub struct DualDsa<D: DesignDual> {
 /// The shell problem with the dual-number reference in its convergence hook.
 pub type DualShellProblem<D> = Observed<ShellProblem, DualDsa<D>>;
 
-fn fatal(e: impl std::fmt::Display) -> ProblemError {
-    ProblemError::Fatal(format!("dual sensitivity reference: {e}"))
+fn fatal(e: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> ProblemError {
+    ProblemError::Failed(Failure::new("dual sensitivity reference", e))
 }
 
 impl<D: DesignDual> DualDsa<D> {
@@ -565,7 +541,6 @@ impl<D: DesignDual> DualDsa<D> {
         load: f64,
     ) -> Result<Vec<D>, ShellError> {
         let model = &problem.model;
-        let n_q = problem.n_generalised();
         let (f_int, _) = model.internal_force_with_surfaces(
             &g.particles,
             &g.history,
@@ -586,20 +561,7 @@ impl<D: DesignDual> DualDsa<D> {
             .zip(&g.unknowns)
             .map(|(&v, c)| *c + D::cst(v - c.value()))
             .collect();
-        for (c, (row, &k)) in problem
-            .constraints()
-            .iter()
-            .zip(problem.constraint_scales())
-            .enumerate()
-        {
-            let mu = ud[n_q + c];
-            let mut gc = D::cst(-load * row.value);
-            for &(d, a) in &row.terms {
-                r[d] += mu * (k * a);
-                gc += ud[d] * a;
-            }
-            r[n_q + c] = gc * k;
-        }
+        problem.add_constraint_rows(&ud, load, &mut r);
         Ok(r)
     }
 
@@ -867,7 +829,7 @@ impl<D: DesignDual> StepObserver<ShellProblem> for DualDsa<D> {
         step: &ConvergedStep<'_>,
     ) -> Result<(), ProblemError> {
         if let Some(f) = &self.failure {
-            return Err(fatal(f));
+            return Err(fatal(f.clone()));
         }
         let t0 = Instant::now();
         let out = self.hook(problem, step);
@@ -892,10 +854,10 @@ impl<D: DesignDual> StepObserver<ShellProblem> for DualDsa<D> {
     fn on_restore(&mut self) {
         self.pending = None;
     }
-    fn failure(&self) -> Option<String> {
+    fn failure(&self) -> Option<Failure> {
         self.failure
             .as_ref()
-            .map(|f| format!("dual sensitivity reference: {f}"))
+            .map(|f| Failure::new("dual sensitivity reference", f.clone()))
     }
 }
 

@@ -24,6 +24,7 @@ use super::{Design, DesignVariable, Monitor};
 use crate::shell::contact::ShellContact;
 use crate::shell::problem::ShellProblem;
 use crate::solver::observe::{Observed, StepObserver, Tapped};
+use crate::solver::Failure;
 use crate::solver::{LinearSolver, Method, NewtonSolver, SolverOptions};
 use std::sync::Arc;
 
@@ -49,7 +50,7 @@ struct Recording<'a> {
     out: RunResponse,
     /// `ē^p` of every layer point at the step start.
     before: Vec<f64>,
-    failure: Option<String>,
+    failure: Option<Failure>,
 }
 
 impl StepObserver<ShellProblem> for Recording<'_> {
@@ -81,12 +82,12 @@ impl StepObserver<ShellProblem> for Recording<'_> {
                 self.out.contact.push(c);
             }
             Err(e) => {
-                self.failure.get_or_insert(e.to_string());
+                self.failure.get_or_insert(Failure::new("monitor", e));
             }
         }
     }
-    fn failure(&self) -> Option<String> {
-        self.failure.as_ref().map(|f| format!("monitor: {f}"))
+    fn failure(&self) -> Option<Failure> {
+        self.failure.clone()
     }
 }
 
@@ -143,9 +144,7 @@ pub fn response_observed(
         .run(&mut p, &pattern, &mut linear, &u0)
         .map_err(SensitivityError::Newton)?;
     if let Some(f) = p.observer.failure() {
-        return Err(SensitivityError::Shell(
-            crate::shell::ShellError::InvalidInput(f),
-        ));
+        return Err(SensitivityError::Observer(f));
     }
     Ok(p.observer.observer.out)
 }
@@ -169,7 +168,8 @@ pub trait Analysis {
     }
 }
 
-fn run_at(
+/// One complete run of `analysis` at `design`, recording `monitors` (and the contact status).
+pub fn run_at(
     analysis: &dyn Analysis,
     design: &Design,
     monitors: &[Monitor],
@@ -263,19 +263,23 @@ pub fn central_differences(
         let minus = run_at(analysis, &variable.perturbed(base, -h)?, monitors)?;
         same_steps(variable, h, &nominal, &plus)?;
         same_steps(variable, -h, &nominal, &minus)?;
-        let derivatives = plus
-            .values
-            .iter()
-            .zip(&minus.values)
-            .map(|(p, m)| p.iter().zip(m).map(|(a, b)| (a - b) / (2.0 * h)).collect())
-            .collect();
         out.push(CentralDifference {
             h,
-            derivatives,
+            derivatives: central(&plus, &minus, h),
             flagged: flags(&[&minus, &nominal, &plus]),
         });
     }
     Ok((nominal, out))
+}
+
+/// The central differences `(ψ(τ + h) − ψ(τ − h)) / 2h` of the runs at `τ ± h`, per step and
+/// monitor.
+pub fn central(plus: &RunResponse, minus: &RunResponse, h: f64) -> Vec<Vec<f64>> {
+    plus.values
+        .iter()
+        .zip(&minus.values)
+        .map(|(p, m)| p.iter().zip(m).map(|(a, b)| (a - b) / (2.0 * h)).collect())
+        .collect()
 }
 
 /// The Taylor remainder for one step size.
@@ -304,26 +308,38 @@ pub fn taylor_remainders(
     for &h in hs {
         let plus = run_at(analysis, &variable.perturbed(base, h)?, monitors)?;
         same_steps(variable, h, nominal, &plus)?;
-        let remainder = plus
-            .values
-            .iter()
-            .zip(&nominal.values)
-            .zip(derivatives)
-            .map(|((p, n), d)| {
-                p.iter()
-                    .zip(n)
-                    .zip(d)
-                    .map(|((a, b), g)| (a - b - h * g).abs())
-                    .fold(0.0, f64::max)
-            })
-            .collect();
-        rows.push(TaylorRow {
-            h,
-            remainder,
-            flagged: flags(&[nominal, &plus]),
-        });
+        rows.push(taylor_row(&plus, nominal, derivatives, h));
     }
     Ok(rows)
+}
+
+/// The Taylor remainder `max_m |ψ_m(τ + h) − ψ_m(τ) − h ψ'_m|` per step of the run `plus` at
+/// `τ + h` against the `nominal` run and `derivatives[step][monitor]` (`ψ'`); flagged where
+/// the active set differs between the two runs.
+pub fn taylor_row(
+    plus: &RunResponse,
+    nominal: &RunResponse,
+    derivatives: &[Vec<f64>],
+    h: f64,
+) -> TaylorRow {
+    let remainder = plus
+        .values
+        .iter()
+        .zip(&nominal.values)
+        .zip(derivatives)
+        .map(|((p, n), d)| {
+            p.iter()
+                .zip(n)
+                .zip(d)
+                .map(|((a, b), g)| (a - b - h * g).abs())
+                .fold(0.0, f64::max)
+        })
+        .collect();
+    TaylorRow {
+        h,
+        remainder,
+        flagged: flags(&[nominal, plus]),
+    }
 }
 
 /// The observed rate of the Taylor remainder at one step.

@@ -23,6 +23,7 @@ pub mod continuum;
 pub mod dual;
 pub mod fd;
 pub mod shape;
+pub mod study;
 pub mod terms;
 
 use crate::geometry::Surface;
@@ -267,6 +268,34 @@ impl DesignKind {
             }),
         }
     }
+
+    /// The case-file key of the kind (the inverse of [`DesignKind::parse_on`]): `thickness`,
+    /// `material.<name>`, `shape.<surface parameter>`, `tool.<name>.<x|y|z>`,
+    /// `tool.<name>.<rx|ry|rz>` or `tool.<name>.shape.<tool surface parameter>`.
+    pub fn key(&self) -> String {
+        match self {
+            DesignKind::Thickness => "thickness".into(),
+            DesignKind::Material(p) => format!("material.{}", p.name()),
+            DesignKind::Shape { name, .. } => format!("shape.{name}"),
+            DesignKind::Tool { tool, axis } => format!("tool.{tool}.{}", TOOL_AXES[*axis.min(&2)]),
+            DesignKind::ToolRotation { tool, axis } => {
+                format!("tool.{tool}.{}", TOOL_ROTATION_AXES[*axis.min(&2)])
+            }
+            DesignKind::ToolShape { tool, name, .. } => format!("tool.{tool}.shape.{name}"),
+        }
+    }
+
+    /// Whether the variable's value is an offset from the case (0 at the nominal design: a
+    /// tool translation, rotation or shape parameter), so that its finite-difference steps are
+    /// absolute.
+    pub fn is_offset(&self) -> bool {
+        match self {
+            DesignKind::Thickness | DesignKind::Material(_) | DesignKind::Shape { .. } => false,
+            DesignKind::Tool { .. }
+            | DesignKind::ToolRotation { .. }
+            | DesignKind::ToolShape { .. } => true,
+        }
+    }
 }
 
 /// `tool.<name>.shape.<parameter>` split into the tool name and the parameter name (`None`
@@ -470,20 +499,43 @@ impl DesignVariable {
         Ok(d)
     }
 
-    /// Check the variable against `model` built on `surface`: the perturbations `±max_delta`
-    /// must give an admissible design; for a shape variable the perturbed surface must be
-    /// valid and have a regular normal at every particle and quadrature point of the model
-    /// (it is checked before any analysis, so a re-run cannot fail on a degenerate geometry).
-    pub fn validate_on(
-        &self,
-        model: &ShellModel,
-        surface: &Surface<f64>,
-        max_delta: f64,
-    ) -> Result<(), DesignError> {
-        let d = Design::of_shell(model, surface);
-        for delta in [0.0, max_delta, -max_delta] {
-            let p = self.perturbed(&d, delta)?;
-            if let (DesignKind::Shape { .. }, Some(s)) = (&self.kind, &p.surface) {
+    /// The one check of a design variable, against what `scope` gives: a tool variable must
+    /// name one of `scope.tools`; a shape variable needs the surface of `scope.base`; at
+    /// `scope.base` each perturbation in `deltas` must give an admissible design
+    /// ([`DesignVariable::perturbed`]) and, with `scope.model` (built on `scope.base`), a
+    /// shape variable's perturbed surface a regular normal at every particle and quadrature
+    /// point of the model (checked before any analysis, so that a re-run cannot fail on a
+    /// degenerate geometry).
+    pub fn check(&self, deltas: &[f64], scope: &DesignScope<'_>) -> Result<(), DesignError> {
+        match &self.kind {
+            DesignKind::Tool { tool, .. }
+            | DesignKind::ToolRotation { tool, .. }
+            | DesignKind::ToolShape { tool, .. } => {
+                if let Some(tools) = scope.tools {
+                    if !tools.contains(&tool.as_str()) {
+                        return Err(DesignError::UnknownTool {
+                            variable: self.name.clone(),
+                            tool: tool.clone(),
+                            expected: format!("{tools:?}"),
+                        });
+                    }
+                }
+            }
+            DesignKind::Shape { name, .. } => {
+                if scope.base.is_some_and(|b| b.surface.is_none()) {
+                    return Err(DesignError::ShapeWithoutSurface { name: name.clone() });
+                }
+            }
+            DesignKind::Thickness | DesignKind::Material(_) => {}
+        }
+        let Some(base) = scope.base else {
+            return Ok(());
+        };
+        for &delta in deltas {
+            let p = self.perturbed(base, delta)?;
+            if let (DesignKind::Shape { .. }, Some(s), Some(model)) =
+                (&self.kind, &p.surface, scope.model)
+            {
                 check_normals(s, model).map_err(|detail| DesignError::InvalidPerturbation {
                     variable: self.name.clone(),
                     delta,
@@ -494,18 +546,76 @@ impl DesignVariable {
         Ok(())
     }
 
-    /// Check the variable against `model`: the perturbations `±max_delta` (the largest finite
-    /// difference step that will be used, 0 for the dual reference alone) must give an
-    /// admissible design.
-    pub fn validate(&self, model: &ShellModel, max_delta: f64) -> Result<(), DesignError> {
-        if let DesignKind::Shape { name, .. } = &self.kind {
-            return Err(DesignError::ShapeWithoutSurface { name: name.clone() });
-        }
-        let d = Design::of(model);
-        self.perturbed(&d, max_delta)?;
-        self.perturbed(&d, -max_delta)?;
-        Ok(())
+    /// [`DesignVariable::check`] against `model` built on `surface` with the perturbations
+    /// `0, ±max_delta`.
+    pub fn validate_on(
+        &self,
+        model: &ShellModel,
+        surface: &Surface<f64>,
+        max_delta: f64,
+    ) -> Result<(), DesignError> {
+        let base = Design::of_shell(model, surface);
+        let scope = DesignScope {
+            base: Some(&base),
+            model: Some(model),
+            tools: None,
+        };
+        self.check(&[0.0, max_delta, -max_delta], &scope)
     }
+
+    /// [`DesignVariable::check`] against `model` (no surface: a shape variable is an error)
+    /// with the perturbations `0, ±max_delta` (the largest finite difference step that will be
+    /// used, 0 for the dual reference alone).
+    pub fn validate(&self, model: &ShellModel, max_delta: f64) -> Result<(), DesignError> {
+        let base = Design::of(model);
+        let scope = DesignScope {
+            base: Some(&base),
+            model: Some(model),
+            tools: None,
+        };
+        self.check(&[0.0, max_delta, -max_delta], &scope)
+    }
+}
+
+/// What design variables are checked against ([`DesignVariable::check`], [`check_design`]);
+/// each part given is checked.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct DesignScope<'a> {
+    /// The nominal design, at which the perturbations are checked.
+    pub base: Option<&'a Design>,
+    /// The model built on `base` (shape variables: the perturbed surface's normals).
+    pub model: Option<&'a ShellModel>,
+    /// The names of the tools a tool variable may name.
+    pub tools: Option<&'a [&'a str]>,
+}
+
+/// The one check of a list of design variables: at least one, names not empty and unique, no
+/// kind listed twice (two columns of the same derivative), and each variable
+/// [`DesignVariable::check`]ed with its perturbations `deltas(index)` against `scope`.
+pub fn check_design(
+    variables: &[DesignVariable],
+    deltas: &dyn Fn(usize) -> Vec<f64>,
+    scope: &DesignScope<'_>,
+) -> Result<(), DesignError> {
+    if variables.is_empty() {
+        return Err(DesignError::NoVariables);
+    }
+    for (i, v) in variables.iter().enumerate() {
+        if v.name.trim().is_empty() {
+            return Err(DesignError::EmptyName { index: i });
+        }
+        if let Some(w) = variables[..i]
+            .iter()
+            .find(|w| w.name == v.name || w.kind == v.kind)
+        {
+            return Err(DesignError::Duplicate {
+                first: w.name.clone(),
+                second: v.name.clone(),
+            });
+        }
+        v.check(&deltas(i), scope)?;
+    }
+    Ok(())
 }
 
 /// A regular normal of `surface` at every particle and quadrature point of `model`.
@@ -552,28 +662,16 @@ fn validate_list(
     surface: Option<&Surface<f64>>,
     max_delta: f64,
 ) -> Result<(), DesignError> {
-    if variables.is_empty() {
-        return Err(DesignError::NoVariables);
-    }
-    for (i, v) in variables.iter().enumerate() {
-        if v.name.trim().is_empty() {
-            return Err(DesignError::EmptyName { index: i });
-        }
-        if let Some(w) = variables[..i]
-            .iter()
-            .find(|w| w.name == v.name || w.kind == v.kind)
-        {
-            return Err(DesignError::Duplicate {
-                first: w.name.clone(),
-                second: v.name.clone(),
-            });
-        }
-        match surface {
-            Some(s) => v.validate_on(model, s, max_delta)?,
-            None => v.validate(model, max_delta)?,
-        }
-    }
-    Ok(())
+    let base = match surface {
+        Some(s) => Design::of_shell(model, s),
+        None => Design::of(model),
+    };
+    let scope = DesignScope {
+        base: Some(&base),
+        model: Some(model),
+        tools: None,
+    };
+    check_design(variables, &|_| vec![0.0, max_delta, -max_delta], &scope)
 }
 
 /// The placement and shape of one rigid tool relative to the case's
@@ -658,23 +756,13 @@ impl Design {
 }
 
 /// Check that every tool variable names one of `tools` (the case's `[[tool]]` names):
-/// [`DesignError::UnknownTool`] listing them otherwise.
+/// [`DesignError::UnknownTool`] listing them otherwise ([`DesignVariable::check`]).
 pub fn check_tools(variables: &[DesignVariable], tools: &[&str]) -> Result<(), DesignError> {
-    for v in variables {
-        if let DesignKind::Tool { tool, .. }
-        | DesignKind::ToolRotation { tool, .. }
-        | DesignKind::ToolShape { tool, .. } = &v.kind
-        {
-            if !tools.contains(&tool.as_str()) {
-                return Err(DesignError::UnknownTool {
-                    variable: v.name.clone(),
-                    tool: tool.clone(),
-                    expected: format!("{tools:?}"),
-                });
-            }
-        }
-    }
-    Ok(())
+    let scope = DesignScope {
+        tools: Some(tools),
+        ..DesignScope::default()
+    };
+    variables.iter().try_for_each(|v| v.check(&[], &scope))
 }
 
 /// Check every tool-shape variable against `tools` (the case's tools): the tool exists and
@@ -1637,7 +1725,7 @@ pub fn run_hooked(
             .run(&mut obs, &pattern, &mut linear, &u0)
             .map_err(dual::SensitivityError::Newton)?;
         if let Some(f) = obs.observer.failure() {
-            return Err(dual::SensitivityError::Shell(ShellError::InvalidInput(f)));
+            return Err(dual::SensitivityError::Observer(f));
         }
         let total = t0.elapsed();
         let (c, d) = obs.observer.observer;

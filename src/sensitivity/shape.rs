@@ -23,10 +23,10 @@
 //! [`dual_geometry`] builds the same quantities in a dual scalar for the dual reference
 //! (`super::dual`), exactly as `ShellModel::new` builds them in `f64`.
 
-use super::dual::DesignDual;
 use crate::geometry::{GeometryError, Surface, SurfaceDerivs};
 use crate::kinematics::M3;
 use crate::material::MaterialState;
+use crate::scalar::DesignDual;
 use crate::shell::model::{initial_histories, initial_particle, ShellModel};
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint};
 use nalgebra::Vector3;

@@ -27,6 +27,7 @@ use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PA
 use crate::shell::point_sensitivity::{commit_particle_dot, ModelSeeds};
 use crate::shell::problem::ShellProblem;
 use crate::solver::observe::{Observed, StepObserver};
+use crate::solver::Failure;
 use crate::solver::{
     ConvergedStep, ConvergedTangent, LinearSolver, NewtonSolver, NonlinearProblem, ProblemError,
     SolverOptions,
@@ -277,11 +278,10 @@ struct Breakdown {
     /// The continuum's end-of-step sensitivities, per variable (set at the step).
     pending: Option<(f64, Vec<SensitivityState>)>,
     out: Vec<TermBreakdown>,
-    failure: Option<String>,
 }
 
-fn fatal(e: impl std::fmt::Display) -> ProblemError {
-    ProblemError::Fatal(format!("term breakdown: {e}"))
+fn fatal(e: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> ProblemError {
+    ProblemError::Failed(Failure::new("term breakdown", e))
 }
 
 impl Breakdown {
@@ -518,8 +518,8 @@ impl StepObserver<ShellProblem> for Breakdown {
             self.out.retain(|b| b.step != self.step + 1);
         }
     }
-    fn failure(&self) -> Option<String> {
-        self.failure.clone().or_else(|| self.dual.failure())
+    fn failure(&self) -> Option<Failure> {
+        self.dual.failure()
     }
 }
 
@@ -549,7 +549,6 @@ pub fn breakdown(
         step: step - 1,
         pending: None,
         out: Vec::new(),
-        failure: None,
     };
     let mut p = Observed::new(problem, obs);
     let u0 = vec![0.0; p.n_dofs()];

@@ -20,6 +20,7 @@ pub mod model;
 pub mod point;
 pub mod point_sensitivity;
 pub mod problem;
+pub mod resultants;
 pub mod stabilisation;
 pub mod symmetry;
 pub mod tangent;

@@ -310,6 +310,24 @@ impl ShellProblem {
         &self.constraints
     }
 
+    /// The constraint rows' part of the residual at the unknowns `u` (generalised displacements
+    /// then one multiplier `μ_c` per row) and load factor `load`, over any scalar: each row
+    /// `g_c = Σ a u_d − λ ḡ_c` (scaled by `k_c`) adds `k_c a μ_c` to the residual of each of its
+    /// DOFs `d` and sets its own entry `r[n_q + c] = k_c g_c`. The analysis evaluates it in f64,
+    /// the dual reference with the unknowns' design sensitivities.
+    pub fn add_constraint_rows<T: crate::scalar::Real>(&self, u: &[T], load: f64, r: &mut [T]) {
+        let n_q = self.n_q;
+        for (c, (row, &k)) in self.constraints.iter().zip(&self.scales).enumerate() {
+            let mu = u[n_q + c];
+            let mut g = T::cst(-load * row.value);
+            for &(d, a) in &row.terms {
+                r[d] += mu * (k * a);
+                g += u[d] * a;
+            }
+            r[n_q + c] = g * k;
+        }
+    }
+
     /// The row scales `k_c` (`E t` or `E t³/12`).
     pub fn constraint_scales(&self) -> &[f64] {
         &self.scales
@@ -493,15 +511,7 @@ impl ShellProblem {
             *ri -= f;
         }
         self.prescribed_norm = prescribed.iter().map(|v| v * v).sum::<f64>().sqrt();
-        for (c, (row, &k)) in self.constraints.iter().zip(&self.scales).enumerate() {
-            let mu = u[n_q + c];
-            let mut g = -load * row.value;
-            for &(d, a) in &row.terms {
-                r[d] += k * a * mu;
-                g += a * u[d];
-            }
-            r[n_q + c] = k * g;
-        }
+        self.add_constraint_rows(u, load, r);
         self.cache = Some((u.to_vec(), histories));
         Ok(())
     }

@@ -33,7 +33,7 @@ pub use dirichlet::EssentialBc;
 pub use linear::{LinearSolver, Method, Parallelism, SolverOptions};
 pub use newton::{
     Acceptance, ArcLength, ArcLengthReport, Backtrack, ConvergedStep, ConvergedTangent,
-    CriticalKind, CriticalPoint, FactorisedAt, FailureReason, LineSearch, LinearUpdates,
+    CriticalKind, CriticalPoint, FactorisedAt, Failure, FailureReason, LineSearch, LinearUpdates,
     LoadStepping, NewtonFailure, NewtonOptions, NewtonReport, NewtonSolver, NonlinearProblem,
     Predictor, ProblemError, StepRecord, StepTiming, StopFailure, BACKTRACK_BUDGET,
     BACKTRACK_LENGTHS,

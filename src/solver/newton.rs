@@ -103,6 +103,53 @@ pub enum ProblemError {
     /// No step size can help: stop the run.
     #[error("fatal: {0}")]
     Fatal(String),
+    /// No step size can help: a part of the problem or an observer of its steps failed
+    /// (what and why, the error kept as the source).
+    #[error("fatal: {0}")]
+    Failed(#[source] Failure),
+}
+
+/// A failure with its context: what failed (a sensitivity method, a monitor, the results
+/// writer, a convergence hook) and the error itself, kept as the source (shared, so that a
+/// recorded failure can be reported more than once).
+#[derive(Debug, Clone)]
+pub struct Failure {
+    /// What failed.
+    pub context: String,
+    /// Why.
+    pub source: std::sync::Arc<dyn std::error::Error + Send + Sync>,
+}
+
+impl Failure {
+    /// `source` (an error, or a message) in `context`.
+    pub fn new(
+        context: impl Into<String>,
+        source: impl Into<Box<dyn std::error::Error + Send + Sync>>,
+    ) -> Self {
+        Failure {
+            context: context.into(),
+            source: std::sync::Arc::from(source.into()),
+        }
+    }
+}
+
+impl fmt::Display for Failure {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}: {}", self.context, self.source)
+    }
+}
+
+impl std::error::Error for Failure {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        Some(&*self.source)
+    }
+}
+
+/// Failures compare by context and message (the sources are shared trait objects).
+impl PartialEq for Failure {
+    fn eq(&self, other: &Self) -> bool {
+        self.context == other.context && self.source.to_string() == other.source.to_string()
+    }
 }
 
 /// A nonlinear system `r(u, λ) = 0` with explicit history (committed and trial state).
@@ -606,7 +653,7 @@ impl FailureReason {
     fn retryable(&self) -> bool {
         !matches!(
             self,
-            FailureReason::Problem(ProblemError::Fatal(_))
+            FailureReason::Problem(ProblemError::Fatal(_) | ProblemError::Failed(_))
                 | FailureReason::Setup(_)
                 | FailureReason::TooManyAttempts(_)
         )
@@ -990,8 +1037,9 @@ impl NewtonSolver {
                     if let Err(e) = hook {
                         problem.restore();
                         rec.converged = false;
-                        let reason = FailureReason::Problem(ProblemError::Fatal(format!(
-                            "on_converged: {e}"
+                        let reason = FailureReason::Problem(ProblemError::Failed(Failure::new(
+                            "on_converged",
+                            e,
                         )));
                         rec.failure = Some(reason.clone());
                         let res = rec.residual_norms.clone();
@@ -1928,8 +1976,9 @@ impl NewtonSolver {
                     if let Err(e) = hook {
                         problem.restore();
                         rec.converged = false;
-                        let reason = FailureReason::Problem(ProblemError::Fatal(format!(
-                            "on_converged: {e}"
+                        let reason = FailureReason::Problem(ProblemError::Failed(Failure::new(
+                            "on_converged",
+                            e,
                         )));
                         rec.failure = Some(reason.clone());
                         let res = rec.residual_norms.clone();

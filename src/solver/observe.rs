@@ -10,7 +10,7 @@
 //! that fails after a commit (which cannot return an error) reports it through
 //! [`StepObserver::failure`]; the next evaluation stops the run with it.
 
-use super::newton::{ConvergedStep, ConvergedTangent, NonlinearProblem, ProblemError};
+use super::newton::{ConvergedStep, ConvergedTangent, Failure, NonlinearProblem, ProblemError};
 
 /// What an observer of converged steps does (all hooks default to nothing).
 pub trait StepObserver<P: ?Sized> {
@@ -33,8 +33,9 @@ pub trait StepObserver<P: ?Sized> {
     fn after_commit(&mut self, _problem: &P, _u: &[f64], _load: f64) {}
     /// The trial state was rejected.
     fn on_restore(&mut self) {}
-    /// A failure recorded after a commit: stops the run at the next evaluation.
-    fn failure(&self) -> Option<String> {
+    /// A failure recorded after a commit (what failed and why): stops the run at the next
+    /// evaluation.
+    fn failure(&self) -> Option<Failure> {
         None
     }
 }
@@ -64,7 +65,7 @@ impl<P: ?Sized, A: StepObserver<P>, B: StepObserver<P>> StepObserver<P> for (A, 
         self.0.on_restore();
         self.1.on_restore();
     }
-    fn failure(&self) -> Option<String> {
+    fn failure(&self) -> Option<Failure> {
         self.0.failure().or_else(|| self.1.failure())
     }
 }
@@ -95,7 +96,7 @@ impl<P: ?Sized, A: StepObserver<P>> StepObserver<P> for Option<A> {
             a.on_restore();
         }
     }
-    fn failure(&self) -> Option<String> {
+    fn failure(&self) -> Option<Failure> {
         self.as_ref().and_then(|a| a.failure())
     }
 }
@@ -141,7 +142,7 @@ impl<P: ?Sized, O: StepObserver<P>> StepObserver<P> for Tapped<'_, P, O> {
     fn on_restore(&mut self) {
         self.observer.on_restore();
     }
-    fn failure(&self) -> Option<String> {
+    fn failure(&self) -> Option<Failure> {
         self.observer.failure()
     }
 }
@@ -165,7 +166,7 @@ impl<P, O> Observed<P, O> {
 impl<P: NonlinearProblem, O: StepObserver<P>> Observed<P, O> {
     fn check(&self) -> Result<(), ProblemError> {
         match self.observer.failure() {
-            Some(f) => Err(ProblemError::Fatal(f)),
+            Some(f) => Err(ProblemError::Failed(f)),
             None => Ok(()),
         }
     }
@@ -291,5 +292,54 @@ impl<P: NonlinearProblem + ?Sized> NonlinearProblem for &mut P {
     }
     fn restore(&mut self) {
         (**self).restore()
+    }
+}
+
+/// When a results file (`results.json` with its PVD, `sensitivity.json`) is rewritten whole
+/// while a run goes on: after every converged step up to [`RewriteSchedule::EVERY_STEP_UP_TO`],
+/// then once the number of steps has grown by a sixteenth since the last rewrite, or once the
+/// last rewrite is older than [`RewriteSchedule::MIN_INTERVAL_S`] and 100 times its own
+/// duration. Each step record is then written about 17 times in all (a geometric series), and
+/// rewrites take at most about 1 % of the wall time, so the cost per step stays bounded however
+/// long the run. (`steps.jsonl` has every converged step as soon as it converges.)
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct RewriteSchedule {
+    /// Steps in the last rewrite.
+    steps: usize,
+    /// When it ended.
+    at: std::time::Instant,
+    /// How long it took.
+    took: std::time::Duration,
+}
+
+impl RewriteSchedule {
+    pub(crate) const EVERY_STEP_UP_TO: usize = 32;
+    const GROWTH: usize = 16;
+    pub(crate) const MIN_INTERVAL_S: f64 = 10.0;
+
+    /// Nothing written yet, at `start`.
+    pub(crate) fn starting(start: std::time::Instant) -> Self {
+        Self {
+            steps: 0,
+            at: start,
+            took: std::time::Duration::ZERO,
+        }
+    }
+
+    /// Whether a rewrite with `steps` converged steps is due.
+    pub(crate) fn due(&self, steps: usize) -> bool {
+        let since = self.at.elapsed().as_secs_f64();
+        steps <= Self::EVERY_STEP_UP_TO
+            || steps >= self.steps + (self.steps / Self::GROWTH).max(1)
+            || since >= Self::MIN_INTERVAL_S.max(100.0 * self.took.as_secs_f64())
+    }
+
+    /// A rewrite with `steps` steps has just ended; it took `took`.
+    pub(crate) fn wrote(&mut self, steps: usize, took: std::time::Duration) {
+        *self = Self {
+            steps,
+            at: std::time::Instant::now(),
+            took,
+        };
     }
 }

@@ -6,8 +6,10 @@
 #![allow(dead_code)]
 
 use nalgebra::Vector3;
-use shelldsa::io::dsa_run;
+use shelldsa::io::dsa_case::DsaSpec;
+use shelldsa::io::dsa_study::{base_design, CaseAnalysis};
 use shelldsa::io::shell_case::{parse_shell_case, ShellCase};
+use shelldsa::sensitivity::study;
 use shelldsa::shell::point::ParticleState;
 use std::path::Path;
 
@@ -150,7 +152,7 @@ pub fn max_diff(a: &[f64], b: &[f64]) -> f64 {
 /// Asserts the Taylor remainder's rate `2 ± 0.1` (the derivative of the discrete response) at
 /// every step of `var` with at least three unflagged step sizes; returns how many steps were
 /// fitted.
-pub fn assert_taylor_rates(var: &dsa_run::VariableResult, name: &str) -> usize {
+pub fn assert_taylor_rates(var: &study::VariableResult, name: &str) -> usize {
     let mut fitted = 0;
     for f in &var.taylor {
         if f.used.len() >= 3 {
@@ -164,4 +166,15 @@ pub fn assert_taylor_rates(var: &dsa_run::VariableResult, name: &str) -> usize {
         }
     }
     fitted
+}
+
+/// The study of case `c` with `spec` (no progress lines).
+pub fn run_case(c: &ShellCase, spec: &DsaSpec) -> study::DsaResult {
+    study::run(
+        &CaseAnalysis { case: c },
+        &base_design(c),
+        spec,
+        &mut |_| {},
+    )
+    .unwrap()
 }

@@ -1,0 +1,161 @@
+//! A shell case as a design sensitivity study: its analysis for any design
+//! ([`CaseAnalysis`], the study's [`Analysis`]), its nominal design, and the checks of a
+//! `shelldsa dsa` run before any analysis (the loads the sensitivity methods carry, load
+//! control, the design variables' tools).
+
+use super::dsa_case::{check_tool_names, invalid, DsaMethod, DsaSpec};
+use super::shell_build;
+use super::shell_case::{Load, ShellCase};
+use super::CaseError;
+use crate::sensitivity::dual::SensitivityError;
+use crate::sensitivity::fd::Analysis;
+use crate::sensitivity::Design;
+use crate::shell::contact::ShellContact;
+use crate::shell::problem::ShellProblem;
+use crate::solver::NewtonSolver;
+use std::sync::Arc;
+
+/// Rejects, before any analysis, the loads the sensitivity methods cannot carry yet: edge
+/// moments (they act through the director) and edge forces (their design derivative through
+/// the edge's length element).
+pub fn check_dsa_loads(case: &ShellCase) -> Result<(), CaseError> {
+    for (k, l) in case.loads.iter().enumerate() {
+        let (value, why) = match l {
+            Load::Moment { .. } => (
+                "\"moment\"",
+                "for the dual-number reference (edge moments act through the director and \
+                 are not supported by it yet)",
+            ),
+            Load::EdgeForce { .. } => (
+                "\"edge-force\"",
+                "for the sensitivity methods (the design derivative of an edge force, through \
+                 the edge's length element, is not carried by them yet)",
+            ),
+            Load::PointForce { .. }
+            | Load::Gravity { .. }
+            | Load::GravityPerVolume { .. }
+            | Load::Pressure { .. } => continue,
+        };
+        return Err(invalid(
+            &case.path,
+            format!("load[{k}].kind"),
+            value,
+            format!("\"point-force\", \"pressure\" or \"gravity\" {why}"),
+        ));
+    }
+    Ok(())
+}
+
+/// Rejects, before any analysis, a case on an arc-length path (`[steps] control =
+/// "arc-length"`): the sensitivity methods differentiate at fixed load levels (and their
+/// finite-difference re-runs compare equal levels), which an arc-length path does not have
+/// (`docs/sensitivity.md`).
+pub fn check_load_control(case: &ShellCase) -> Result<(), CaseError> {
+    if case.steps.arc_length.is_some() {
+        return Err(invalid(
+            &case.path,
+            "steps.control",
+            "\"arc-length\"",
+            "\"load\" for shelldsa dsa (design derivatives are computed at fixed load \
+             factors; on an arc-length path the load factor is an unknown of every step)",
+        ));
+    }
+    Ok(())
+}
+
+/// The case's analysis for any design ([`Analysis`]): the case with the design's thickness,
+/// material, surface and tool placements.
+pub struct CaseAnalysis<'a> {
+    /// The case.
+    pub case: &'a ShellCase,
+}
+
+impl Analysis for CaseAnalysis<'_> {
+    fn build(&self, design: &Design) -> Result<(ShellProblem, NewtonSolver), SensitivityError> {
+        self.build_with_contact(design).map(|(p, n, _)| (p, n))
+    }
+
+    /// The case with the design's thickness, material and tool offsets (each tool's whole path
+    /// translated, [`crate::contact::ToolPath::translated`], and the tool as built rotated
+    /// about its pivot, [`crate::contact::ToolPath::rotated`]), and its contact.
+    fn build_with_contact(
+        &self,
+        design: &Design,
+    ) -> Result<(ShellProblem, NewtonSolver, Option<Arc<ShellContact>>), SensitivityError> {
+        let mut c = self.case.clone();
+        c.thickness = design.thickness;
+        c.material = design.material;
+        if let Some(surface) = &design.surface {
+            // A shape design: the same case on the perturbed surface (the discretisation,
+            // boundaries, loads and monitors live on the parameter domain and stay).
+            c.surface = surface.clone();
+        }
+        for (name, offset) in &design.tool_offsets {
+            let tool = c
+                .tools
+                .iter_mut()
+                .find(|t| &t.name == name)
+                .ok_or_else(|| {
+                    SensitivityError::Design(crate::sensitivity::DesignError::UnknownTool {
+                        variable: name.clone(),
+                        tool: name.clone(),
+                        expected: format!(
+                            "{:?}",
+                            self.case.tools.iter().map(|t| &t.name).collect::<Vec<_>>()
+                        ),
+                    })
+                })?;
+            tool.path = tool
+                .path
+                .translated(offset.translation)
+                .and_then(|p| p.rotated(offset.rotation))
+                .map_err(|e| SensitivityError::Build {
+                    context: format!(
+                        "tool `{name}` moved by {:?} and rotated by {:?}",
+                        offset.translation, offset.rotation
+                    ),
+                    source: Box::new(e),
+                })?;
+            if !offset.shape.is_empty() {
+                let shape: Vec<(usize, f64)> = offset.shape.iter().map(|(&k, &d)| (k, d)).collect();
+                *tool = tool.reshaped(&shape).map_err(|e| SensitivityError::Build {
+                    context: format!("tool `{name}` reshaped by {shape:?}"),
+                    source: Box::new(e),
+                })?;
+            }
+        }
+        let b = shell_build::build(&c).map_err(|e| SensitivityError::Build {
+            context: self.case.path.display().to_string(),
+            source: Box::new(e),
+        })?;
+        Ok((b.problem, b.newton, b.contact))
+    }
+}
+
+/// The case's nominal design: thickness, material and surface.
+pub fn base_design(case: &ShellCase) -> Design {
+    Design {
+        thickness: case.thickness,
+        material: case.material,
+        surface: Some(case.surface.clone()),
+        tool_offsets: Default::default(),
+    }
+}
+
+/// Check everything a `dsa` run of `case` with `methods` needs, before any analysis: design
+/// variables present and admissible, loads the dual reference can carry, and, on the built
+/// model, [`validate_design`](crate::sensitivity::validate_design).
+pub fn validate(case: &ShellCase, methods: &[DsaMethod]) -> Result<DsaSpec, CaseError> {
+    let mut spec = case.dsa.clone().ok_or_else(|| CaseError::NoDesign {
+        path: case.path.clone(),
+    })?;
+    spec.methods = methods.to_vec();
+    check_load_control(case)?;
+    check_tool_names(&case.path, &case.tools, &spec)?;
+    if methods.contains(&DsaMethod::Dual) || methods.contains(&DsaMethod::Continuum) {
+        // Shape variables with contact are carried by both methods: the slave sites take the
+        // design velocity of the initial geometry (`shell::contact::InitialGeometry`).
+        check_dsa_loads(case)?;
+    }
+    Ok(spec)
+}
