@@ -331,20 +331,9 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
         },
     ];
     for seed in &seeds {
-        let cs = ContactSeeds {
-            tools: &seed.tools,
-            thickness: seed.thickness,
-            penalty: seed.penalty,
-            particles: &seed.particles,
-            increment: &seed.increment,
-            initial: None,
-        };
-        let hand = contact.force_dot(&model, &q, t, &cs).unwrap();
-        let dual = force_dual(&model, &contact, &q, t, seed);
         let h = 1e-6;
-        let fp = force_f64(&model, &contact, &q, t, seed, h);
-        let fm = force_f64(&model, &contact, &q, t, seed, -h);
-        let (scale, e_dual, e_cd) = three_way(&hand, &dual, &fp, &fm, h);
+        let rates = ContactRates::new(&model, &contact, &q, t, seed, h);
+        let (scale, e_dual, e_cd) = rates.force;
         println!(
             "{:<20} max|ḟ| {scale:.4e}  |hand − dual| {e_dual:.2e}  |hand − central| {e_cd:.2e}",
             seed.name
@@ -364,16 +353,7 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
         );
 
         // The forces on the tools (the punch force): the same three ways.
-        let hand = contact
-            .tool_force_dots(&model, &q, t, std::slice::from_ref(&cs))
-            .unwrap()
-            .pop()
-            .unwrap();
-        let hand: Vec<f64> = hand.iter().flatten().copied().collect();
-        let dual = tool_forces_dual(&model, &contact, &q, t, seed);
-        let fp = tool_forces_f64(&model, &contact, &q, t, seed, h);
-        let fm = tool_forces_f64(&model, &contact, &q, t, seed, -h);
-        let (scale, e_dual, e_cd) = three_way(&hand, &dual, &fp, &fm, h);
+        let (scale, e_dual, e_cd) = rates.tool_forces;
         println!(
             "{:<20} tool forces: max|Ḟ| {scale:.4e}  |hand − dual| {e_dual:.2e}  \
              |hand − central| {e_cd:.2e}",
@@ -419,6 +399,57 @@ fn three_way(hand: &[f64], dual: &[f64], fp: &[f64], fm: &[f64], h: f64) -> (f64
         max_diff(hand, dual) / scale,
         max_diff(hand, &cd) / scale,
     )
+}
+
+/// The contact force rate and the tool-force rates of `seed` at `(q, t)` three ways
+/// ([`three_way`] with the central step `h`): hand-derived (`ShellContact::force_dot`,
+/// `tool_force_dots`), dual, and central differences of the f64 evaluations.
+struct ContactRates {
+    /// `(max|ḟ|, |hand − dual|, |hand − central|)` of the generalised contact force.
+    force: (f64, f64, f64),
+    /// The same for the forces on the tools.
+    tool_forces: (f64, f64, f64),
+    /// The force at `+h`.
+    force_plus: Vec<f64>,
+}
+
+impl ContactRates {
+    fn new(
+        model: &ShellModel,
+        contact: &ShellContact,
+        q: &[f64],
+        t: f64,
+        seed: &Seed,
+        h: f64,
+    ) -> Self {
+        let cs = ContactSeeds {
+            tools: &seed.tools,
+            thickness: seed.thickness,
+            penalty: seed.penalty,
+            particles: &seed.particles,
+            increment: &seed.increment,
+            initial: None,
+        };
+        let hand = contact.force_dot(model, q, t, &cs).unwrap();
+        let dual = force_dual(model, contact, q, t, seed);
+        let fp = force_f64(model, contact, q, t, seed, h);
+        let fm = force_f64(model, contact, q, t, seed, -h);
+        let force = three_way(&hand, &dual, &fp, &fm, h);
+        let hand = contact
+            .tool_force_dots(model, q, t, std::slice::from_ref(&cs))
+            .unwrap()
+            .pop()
+            .unwrap();
+        let hand: Vec<f64> = hand.iter().flatten().copied().collect();
+        let dual = tool_forces_dual(model, contact, q, t, seed);
+        let tp = tool_forces_f64(model, contact, q, t, seed, h);
+        let tm = tool_forces_f64(model, contact, q, t, seed, -h);
+        ContactRates {
+            force,
+            tool_forces: three_way(&hand, &dual, &tp, &tm, h),
+            force_plus: fp,
+        }
+    }
 }
 
 /// The forces on the tools, flattened `[tool][component]`, with every input shifted by
@@ -1402,20 +1433,10 @@ fn tool_shape_sensitivity_matches_dual_and_central_differences() {
         ),
     ];
     for (contact, seed) in &cases {
-        let cs = ContactSeeds {
-            tools: &seed.tools,
-            thickness: 0.0,
-            penalty: 0.0,
-            particles: &seed.particles,
-            increment: &seed.increment,
-            initial: None,
-        };
-        let hand = contact.force_dot(&model, &q, t, &cs).unwrap();
-        let dual = force_dual(&model, contact, &q, t, seed);
         let h = 1e-4;
-        let fp = force_f64(&model, contact, &q, t, seed, h);
-        let fm = force_f64(&model, contact, &q, t, seed, -h);
-        let (scale, e_dual, e_cd) = three_way(&hand, &dual, &fp, &fm, h);
+        let rates = ContactRates::new(&model, contact, &q, t, seed, h);
+        let (scale, e_dual, e_cd) = rates.force;
+        let fp = &rates.force_plus;
         // The tool rebuilt as a re-run rebuilds it (RigidTool::reshaped): the same surface,
         // so the same force to round-off (1e-12 of max|f|).
         let tools: Vec<RigidTool> = contact
@@ -1436,7 +1457,7 @@ fn tool_shape_sensitivity_matches_dual_and_central_differences() {
         )
         .unwrap();
         let fr = force_f64(&model, &rebuilt, &q, t, &zero, 0.0);
-        let e_rebuilt = max_diff(&fr, &fp) / max_abs(&fp);
+        let e_rebuilt = max_diff(&fr, fp) / max_abs(fp);
         println!(
             "{:<20} max|ḟ| {scale:.4e}  |hand − dual| {e_dual:.2e}  |hand − central| {e_cd:.2e}  \
              rebuilt tool vs inputs {e_rebuilt:.1e}",
@@ -1462,16 +1483,7 @@ fn tool_shape_sensitivity_matches_dual_and_central_differences() {
         );
 
         // The forces on the tools, the same three ways.
-        let hand = contact
-            .tool_force_dots(&model, &q, t, std::slice::from_ref(&cs))
-            .unwrap()
-            .pop()
-            .unwrap();
-        let hand: Vec<f64> = hand.iter().flatten().copied().collect();
-        let dual = tool_forces_dual(&model, contact, &q, t, seed);
-        let fp = tool_forces_f64(&model, contact, &q, t, seed, h);
-        let fm = tool_forces_f64(&model, contact, &q, t, seed, -h);
-        let (scale, e_dual, e_cd) = three_way(&hand, &dual, &fp, &fm, h);
+        let (scale, e_dual, e_cd) = rates.tool_forces;
         assert!(scale > 0.0, "{}: tool forces", seed.name);
         assert!(
             e_dual < 1e-10,

@@ -727,6 +727,32 @@ pub struct StepRecord {
     pub continuation: Vec<f64>,
 }
 
+impl StepRecord {
+    /// A record of an attempt from `load_start` to `load` of step size `step_size`, started
+    /// from `predictor`, with nothing evaluated yet.
+    pub fn new(load_start: f64, load: f64, step_size: f64, predictor: Predictor) -> Self {
+        StepRecord {
+            load_start,
+            load,
+            step_size,
+            iterations: 0,
+            residual_norms: Vec::new(),
+            energy_norms: Vec::new(),
+            converged: false,
+            predictor,
+            acceptance: None,
+            roundoff_floors: Vec::new(),
+            residual_only: Vec::new(),
+            factorised_at: None,
+            timing: StepTiming::default(),
+            krylov: Vec::new(),
+            failure: None,
+            backtracks: Vec::new(),
+            continuation: Vec::new(),
+        }
+    }
+}
+
 /// Wall time of one step attempt by part, in seconds.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct StepTiming {
@@ -977,25 +1003,7 @@ impl NewtonSolver {
                 }
                 _ => Predictor::Zero,
             };
-            let mut rec = StepRecord {
-                load_start: report.load,
-                load: target,
-                step_size: dl,
-                iterations: 0,
-                residual_norms: Vec::new(),
-                energy_norms: Vec::new(),
-                converged: false,
-                predictor,
-                acceptance: None,
-                roundoff_floors: Vec::new(),
-                residual_only: Vec::new(),
-                factorised_at: None,
-                timing: StepTiming::default(),
-                krylov: Vec::new(),
-                failure: None,
-                backtracks: Vec::new(),
-                continuation: Vec::new(),
-            };
+            let mut rec = StepRecord::new(report.load, target, dl, predictor);
             let factorisations = solver.n_factorizations();
             let start = (st.stop_failure == StopFailure::Continuation && reach).then(|| u.clone());
             let mut outcome = self.attempt(
@@ -1409,25 +1417,8 @@ impl NewtonSolver {
         failed: &mut Vec<StepRecord>,
     ) -> Result<(EssentialBc, Acceptance, FactorisedAt), FailureReason> {
         let st = &self.stepping;
-        let fresh = |load: f64, predictor: Predictor| StepRecord {
-            load_start: l_n,
-            load,
-            step_size: load - l_n,
-            iterations: 0,
-            residual_norms: Vec::new(),
-            energy_norms: Vec::new(),
-            converged: false,
-            predictor,
-            acceptance: None,
-            roundoff_floors: Vec::new(),
-            residual_only: Vec::new(),
-            factorised_at: None,
-            timing: StepTiming::default(),
-            krylov: Vec::new(),
-            failure: None,
-            backtracks: Vec::new(),
-            continuation: Vec::new(),
-        };
+        let fresh =
+            |load: f64, predictor: Predictor| StepRecord::new(l_n, load, load - l_n, predictor);
         let predictor = rec.predictor;
         rec.failure = Some(first);
         // Where the copy of the failed attempt at the stop in `rec` went in `failed` (the
@@ -1927,25 +1918,7 @@ impl NewtonSolver {
             }
             let u_n = out.report.u.clone();
             let l_n = out.report.load;
-            let mut rec = StepRecord {
-                load_start: l_n,
-                load: l_n,
-                step_size: ds,
-                iterations: 0,
-                residual_norms: Vec::new(),
-                energy_norms: Vec::new(),
-                converged: false,
-                predictor: Predictor::Zero,
-                acceptance: None,
-                roundoff_floors: Vec::new(),
-                residual_only: Vec::new(),
-                factorised_at: None,
-                timing: StepTiming::default(),
-                krylov: Vec::new(),
-                failure: None,
-                backtracks: Vec::new(),
-                continuation: Vec::new(),
-            };
+            let mut rec = StepRecord::new(l_n, l_n, ds, Predictor::Zero);
             let outcome = self.arc_attempt(
                 problem,
                 pattern,
