@@ -160,18 +160,23 @@ fn sign_of_l_d_u_products_is_the_sign_of_d() {
         }
         seen[(exact < 0.0) as usize] += 1;
         let values = values_of(&p, n, &a);
-        for method in PIVOTED {
-            for threads in [1, 2] {
-                let got = sign_with(&p, &values, method, threads);
-                assert_eq!(
-                    got,
-                    Some(exact),
-                    "trial {trial}, {method:?}, {threads} threads"
-                );
-            }
-        }
+        assert_sign_everywhere(&p, &values, exact, trial);
     }
     assert!(seen[0] > 0 && seen[1] > 0, "both signs tested: {seen:?}");
+}
+
+/// Every pivoted method, with 1 and 2 threads, gives the sign `exact` of the matrix `values`.
+fn assert_sign_everywhere(p: &SparsityPattern, values: &[f64], exact: f64, trial: usize) {
+    for method in PIVOTED {
+        for threads in [1, 2] {
+            let got = sign_with(p, values, method, threads);
+            assert_eq!(
+                got,
+                Some(exact),
+                "trial {trial}, {method:?}, {threads} threads"
+            );
+        }
+    }
 }
 
 #[test]
@@ -204,16 +209,7 @@ fn sign_of_diagonally_dominant_matrices_is_the_sign_of_the_diagonal_product() {
             }
         }
         seen[(exact < 0.0) as usize] += 1;
-        for method in PIVOTED {
-            for threads in [1, 2] {
-                let got = sign_with(&p, &values, method, threads);
-                assert_eq!(
-                    got,
-                    Some(exact),
-                    "trial {trial}, {method:?}, {threads} threads"
-                );
-            }
-        }
+        assert_sign_everywhere(&p, &values, exact, trial);
     }
     assert!(seen[0] > 0 && seen[1] > 0, "both signs tested: {seen:?}");
 }

@@ -86,6 +86,13 @@ impl Seed {
     }
 }
 
+/// The kernel tests' evaluation point: a random increment from the bent state's committed
+/// state (translations ≤ 0.02 mm, rotations ≤ 0.02 rad) at t = 0.505 (the punch 0.03 mm further
+/// down than at the commit).
+fn kernel_point(n: usize, rng: &mut Lcg) -> (Vec<f64>, f64) {
+    ((0..n).map(|_| rng.next() * 0.02).collect(), 0.505)
+}
+
 /// `x + s ẋ` for every input.
 fn shifted(model: &ShellModel, seed: &Seed, s: f64) -> Vec<ParticleState<f64>> {
     model
@@ -262,10 +269,7 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
     let n = model.n_dofs();
     let np = model.particles.len();
     let mut rng = Lcg(0x5eed_c0de);
-    // A random increment from the committed state (translations ≤ 0.02 mm, rotations
-    // ≤ 0.02 rad) at t = 0.505 (the punch 0.03 mm further down).
-    let q: Vec<f64> = (0..n).map(|_| rng.next() * 0.02).collect();
-    let t = 0.505;
+    let (q, t) = kernel_point(n, &mut rng);
     let report = contact.report(&model, &q, t).unwrap();
     let active: Vec<usize> = report.tools.iter().map(|r| r.active_points).collect();
     let off_tool = report.slaves.iter().filter(|s| s.tool.is_none()).count();
@@ -566,9 +570,7 @@ fn tool_rotation_sensitivity_matches_dual_and_central_differences() {
         };
         ToolPath::new(pivot, vec![key(0.0, [0.0; 3], [0.0; 3]), key(1.0, a1, th1)]).unwrap()
     });
-    let mut rng = Lcg(0x0dd_ba11);
-    let q: Vec<f64> = (0..n).map(|_| rng.next() * 0.02).collect();
-    let t = 0.505;
+    let (q, t) = kernel_point(n, &mut Lcg(0x0dd_ba11));
     // The rotating paths give the bent case's geometry (each cylinder turned about its own
     // axis): the same force to round-off of positions ~30 mm (ε·30·ω·w ≪ 1e-9 max|f|).
     let zero = Seed::none(np, n);
@@ -598,10 +600,7 @@ fn tool_rotation_sensitivity_matches_dual_and_central_differences() {
     let seed = |name, tools| Seed {
         name,
         tools,
-        thickness: 0.0,
-        penalty: 0.0,
-        particles: vec![zero_state(); np],
-        increment: vec![0.0; n],
+        ..Seed::none(np, n)
     };
     let seeds = vec![
         seed("die rx", vec![none, rotation([1.0, 0.0, 0.0])]),
@@ -1360,9 +1359,7 @@ fn tool_shape_sensitivity_matches_dual_and_central_differences() {
         contact.penalty(),
     )
     .unwrap();
-    let mut rng = Lcg(0x7001_5ba9e);
-    let q: Vec<f64> = (0..n).map(|_| rng.next() * 0.02).collect();
-    let t = 0.505;
+    let (q, t) = kernel_point(n, &mut Lcg(0x7001_5ba9e));
     // The NURBS die is the cylinder: the same force to round-off of the projection
     // (positions ~30 mm, Newton to ~1e-14 in ξ): 1e-9 of max|f|.
     let zero = Seed::none(np, n);
