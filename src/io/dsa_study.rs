@@ -142,9 +142,10 @@ pub fn base_design(case: &ShellCase) -> Design {
     }
 }
 
-/// Check everything a `dsa` run of `case` with `methods` needs, before any analysis: design
-/// variables present and admissible, loads the dual reference can carry, and, on the built
-/// model, [`validate_design`](crate::sensitivity::validate_design).
+/// Check everything a `dsa` run of `case` with `methods` needs before any analysis, as far as
+/// the case tells: design variables present and naming the case's tools, loads the methods
+/// can carry (the study checks the variables on the built model,
+/// [`check_design`](crate::sensitivity::check_design)).
 pub fn validate(case: &ShellCase, methods: &[DsaMethod]) -> Result<DsaSpec, CaseError> {
     let mut spec = case.dsa.clone().ok_or_else(|| CaseError::NoDesign {
         path: case.path.clone(),

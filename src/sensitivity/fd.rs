@@ -74,7 +74,8 @@ impl StepObserver<ShellProblem> for Recording<'_> {
                 .report(model, &vec![0.0; model.n_dofs()], load)
                 .map(|r| r.slaves.iter().map(|s| s.pressure > 0.0).collect()),
         };
-        match values.and_then(|v| contact.map(|c| (v, c))) {
+        type Error = Box<dyn std::error::Error + Send + Sync>;
+        match (|| -> Result<_, Error> { Ok((values?, contact?)) })() {
             Ok((v, c)) => {
                 self.out.loads.push(load);
                 self.out.values.push(v);

@@ -106,14 +106,6 @@ pub enum DsaError {
         /// The plain analysis'.
         nominal: Vec<f64>,
     },
-    /// `--terms STEP` beyond the converged steps of the plain analysis.
-    #[error("--terms {step}: expected a converged load step in 1..={steps}")]
-    StepOutOfRange {
-        /// The step asked for.
-        step: usize,
-        /// Converged steps of the plain analysis.
-        steps: usize,
-    },
 }
 
 /// The analysis replaying given load levels: every level is a stop of the load stepping and
@@ -370,7 +362,7 @@ pub fn run(
 /// [`RewriteSchedule`]), after each of those runs, after every finite-difference step size of
 /// every variable, and before an error of the plain analysis is returned (with its converged
 /// steps). With `need_step`, a plain analysis with fewer converged steps is an error
-/// before the methods run ([`DsaError::StepOutOfRange`]).
+/// before the methods run ([`SensitivityError::StepOutOfRange`]).
 ///
 /// The checks and the plain analysis are all or nothing: an error there is returned. After it,
 /// a failed method or re-run is recorded in [`DsaResult::failures`] (naming the method, the
@@ -406,8 +398,8 @@ pub fn run_with_output(
     let (problem, newton, contact) = analysis.build_with_contact(base)?;
     let with_contact = contact.is_some();
     // The design variables at the nominal design and every finite-difference design (shape:
-    // the perturbed surface with a regular normal at every particle and point of the model)
-    // are checked before the analysis.
+    // the perturbed surface with a regular normal at every particle and point of the model;
+    // tool shape: a valid perturbed tool) are checked before the analysis.
     let fd = spec.methods.contains(&DsaMethod::Fd);
     let deltas = |i: usize| {
         let steps = match fd {
@@ -421,7 +413,7 @@ pub fn run_with_output(
     let scope = DesignScope {
         base: Some(base),
         model: Some(&problem.model),
-        tools: None,
+        tools: Some(super::dual::contact_tools(&problem)),
     };
     check_design(&vars, &deltas, &scope).map_err(SensitivityError::from)?;
     let mut result = DsaResult {
@@ -486,10 +478,8 @@ pub fn run_with_output(
         result.time_analysis
     ));
     if let Some(step) = need_step.filter(|&s| s == 0 || s > result.nominal.loads.len()) {
-        return Err(DsaError::StepOutOfRange {
-            step,
-            steps: result.nominal.loads.len(),
-        });
+        let steps = Some(result.nominal.loads.len());
+        return Err(SensitivityError::StepOutOfRange { step, steps }.into());
     }
     update(&result);
     let nominal = result.nominal.clone();
