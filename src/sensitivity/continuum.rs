@@ -34,7 +34,8 @@
 //! [`TermGroup::Filter`] (the director-filter stabilisation's whole derivative). Each can be
 //! compared with the dual-number reference seeded with that group only ([`super::terms`]).
 
-use super::dual::{contact_tools, SensitivityError};
+use super::contact_tools;
+use super::dual::SensitivityError;
 use super::shape::ShapeVelocity;
 use super::{record_monitors, DesignError, DesignKind, DesignVariable, Monitor, SensitivityFields};
 use crate::geometry::Surface;
@@ -625,7 +626,7 @@ fn tool_force_dots(
     load: f64,
 ) -> Result<Vec<Vec<[f64; 3]>>, SensitivityError> {
     let model = &problem.model;
-    let Some(c) = problem.loads().iter().find_map(|l| l.contact()) else {
+    let Some(c) = super::contact_load(problem) else {
         return Ok(vec![Vec::new(); states.len()]);
     };
     let q = vec![0.0; model.n_dofs()];

@@ -88,7 +88,6 @@ use super::{
     check_design, Design, DesignError, DesignKind, DesignScope, DesignVariable, Monitor,
     MonitorError, SensitivityFields,
 };
-use crate::contact::RigidTool;
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
 use crate::shell::load::{Load, LoadState};
@@ -342,7 +341,7 @@ impl<D: DesignDual> DualDsa<D> {
         if contacts > 1 {
             return Err(SensitivityError::ContactLoads { count: contacts });
         }
-        let tool_list = contact_tools(problem);
+        let tool_list = super::contact_tools(problem);
         let tool_names: Vec<&str> = tool_list.iter().map(|t| t.name.as_str()).collect();
         let model = &problem.model;
         let design = Design::of(model);
@@ -505,15 +504,6 @@ impl<D: DesignDual> DualDsa<D> {
             total,
             reference: self.time,
         }
-    }
-
-    /// The sensitivity `du/dτ_v` of the committed unknowns `[q, μ]` for variable `v`.
-    pub fn unknown_sensitivity(&self, v: usize) -> Option<Vec<f64>> {
-        let g = self
-            .groups
-            .iter()
-            .find(|g| (g.first..g.first + g.count).contains(&v))?;
-        Some(g.unknowns.iter().map(|x| x.part(v - g.first)).collect())
     }
 
     /// The dual external force of group `g` (generalised rows) at the increment `dq` and load
@@ -746,7 +736,7 @@ impl<D: DesignDual> SensitivityFields for DualDsa<D> {
         load: f64,
     ) -> Result<Vec<Vec<[f64; 3]>>, SensitivityError> {
         let mut out = vec![Vec::new(); self.variables.len()];
-        let Some(c) = problem.loads().iter().find_map(|l| l.contact()) else {
+        let Some(c) = super::contact_load(problem) else {
             return Ok(out);
         };
         let q = vec![D::zero(); problem.model.n_dofs()];
@@ -781,7 +771,7 @@ pub(crate) fn check_method_inputs(
     let scope = DesignScope {
         base: Some(&base),
         model: Some(model),
-        tools: Some(contact_tools(problem)),
+        tools: Some(super::contact_tools(problem)),
     };
     check_design(variables, &|_| vec![0.0], &scope)?;
     if let Some((index, &value)) = problem.state().iter().enumerate().find(|(_, v)| **v != 0.0) {
@@ -800,12 +790,6 @@ pub(crate) fn check_method_inputs(
         m.value(problem, 0.0)?;
     }
     Ok(())
-}
-
-/// The tools of the problem's (first) contact load, none without one.
-pub(crate) fn contact_tools(problem: &ShellProblem) -> &[RigidTool] {
-    let mut contacts = problem.loads().iter().filter_map(|l| l.contact());
-    contacts.next().map_or(&[], |c| c.contact.tools())
 }
 
 /// Largest difference between the value parts of a dual state and the model, relative to the

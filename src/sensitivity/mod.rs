@@ -29,6 +29,7 @@ pub mod terms;
 use crate::contact::RigidTool;
 use crate::geometry::Surface;
 use crate::material::{MaterialError, MaterialParams, PARAM_NAMES};
+use crate::shell::load::ContactLoad;
 use crate::shell::model::ShellModel;
 use crate::shell::problem::ShellProblem;
 use crate::shell::ShellError;
@@ -661,14 +662,6 @@ impl Design {
         }
     }
 
-    /// The surface's design parameter values (empty without a surface).
-    pub fn surface_parameters(&self) -> Vec<f64> {
-        self.surface
-            .as_ref()
-            .map(|s| s.parameter_values())
-            .unwrap_or_default()
-    }
-
     /// The translation offset of tool `name` (zero when not set).
     pub fn tool_offset(&self, name: &str) -> [f64; 3] {
         self.tool_offsets
@@ -1231,7 +1224,7 @@ impl Monitor {
     /// The index of the tool `name` in the problem's contact load.
     fn tool_index(&self, problem: &ShellProblem, name: &str) -> Result<usize, MonitorError> {
         let (label, tool) = (self.label.clone(), name.to_string());
-        let Some(contact) = problem.loads().iter().find_map(|l| l.contact()) else {
+        let Some(contact) = contact_load(problem) else {
             return Err(MonitorError::NoContact { label, tool });
         };
         let names = contact.contact.tools().iter().map(|t| t.name.as_str());
@@ -1319,6 +1312,16 @@ impl Monitor {
     }
 }
 
+/// The problem's (first) contact load, the one the methods carry.
+pub(crate) fn contact_load(problem: &ShellProblem) -> Option<&ContactLoad> {
+    problem.loads().iter().find_map(|l| l.contact())
+}
+
+/// The tools of [`contact_load`], none without one.
+pub(crate) fn contact_tools(problem: &ShellProblem) -> &[RigidTool] {
+    contact_load(problem).map_or(&[], |c| c.contact.tools())
+}
+
 /// The committed values of `monitors` in `problem` at pseudo-time `load` (the contact
 /// evaluated once for all tool-force monitors).
 pub fn monitor_values(
@@ -1337,7 +1340,7 @@ pub fn monitor_values(
 /// and pseudo-time `load` (`[tool][component]`, empty without contact).
 fn tool_forces(problem: &ShellProblem, load: f64) -> Result<Vec<[f64; 3]>, ShellError> {
     let model = &problem.model;
-    match problem.loads().iter().find_map(|l| l.contact()) {
+    match contact_load(problem) {
         None => Ok(Vec::new()),
         Some(c) => Ok(c
             .contact

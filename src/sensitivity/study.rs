@@ -24,7 +24,7 @@ use crate::shell::contact::ShellContact;
 use crate::shell::model::ShellModel;
 use crate::shell::problem::ShellProblem;
 use crate::solver::observe::RewriteSchedule;
-use crate::solver::NewtonSolver;
+use crate::solver::{Failure, NewtonSolver};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use thiserror::Error;
@@ -119,20 +119,14 @@ struct Replay<'a> {
 
 impl Analysis for Replay<'_> {
     fn build(&self, design: &Design) -> Result<(ShellProblem, NewtonSolver), SensitivityError> {
-        self.build_with_contact(design).map(|(p, n, _)| (p, n))
-    }
-    fn solver(&self) -> crate::solver::SolverOptions {
-        self.analysis.solver()
-    }
-    fn build_with_contact(
-        &self,
-        design: &Design,
-    ) -> Result<(ShellProblem, NewtonSolver, Option<Arc<ShellContact>>), SensitivityError> {
-        let (problem, mut newton, contact) = self.analysis.build_with_contact(design)?;
+        let (problem, mut newton) = self.analysis.build(design)?;
         newton.stepping.stops = self.levels.clone();
         newton.stepping.initial_step = newton.stepping.max_step;
         newton.stepping.stop_failure = crate::solver::StopFailure::Continuation;
-        Ok((problem, newton, contact))
+        Ok((problem, newton))
+    }
+    fn solver(&self) -> crate::solver::SolverOptions {
+        self.analysis.solver()
     }
 }
 
@@ -148,7 +142,7 @@ pub trait StepWriter {
         &mut self,
         contact: Option<Arc<ShellContact>>,
         variables: Vec<String>,
-    ) -> Result<(), String>;
+    ) -> Result<(), Failure>;
     /// Whether converged step `step` (1-based) at `load` is written.
     fn due(&self, step: usize, load: f64) -> bool;
     /// Write step `step` at `load` of `model` with the methods' committed sensitivities
@@ -157,7 +151,7 @@ pub trait StepWriter {
     /// Time spent writing so far.
     fn time(&self) -> Duration;
     /// The first error writing, if any.
-    fn error(&self) -> Option<&str>;
+    fn error(&self) -> Option<&Failure>;
     /// The files written so far.
     fn written(&self) -> &[VtuStep];
 }
@@ -395,8 +389,8 @@ pub fn run_with_output(
 
     // (1) The plain analysis.
     let t = Instant::now();
-    let (problem, newton, contact) = analysis.build_with_contact(base)?;
-    let with_contact = contact.is_some();
+    let (problem, newton) = analysis.build(base)?;
+    let with_contact = super::contact_load(&problem).is_some();
     // The design variables at the nominal design and every finite-difference design (shape:
     // the perturbed surface with a regular normal at every particle and point of the model;
     // tool shape: a valid perturbed tool) are checked before the analysis.
@@ -413,7 +407,7 @@ pub fn run_with_output(
     let scope = DesignScope {
         base: Some(base),
         model: Some(&problem.model),
-        tools: Some(super::dual::contact_tools(&problem)),
+        tools: Some(super::contact_tools(&problem)),
     };
     check_design(&vars, &deltas, &scope).map_err(SensitivityError::from)?;
     let mut result = DsaResult {
@@ -452,17 +446,10 @@ pub fn run_with_output(
         vtu_error: None,
     };
     let mut schedule = RewriteSchedule::starting(Instant::now());
-    let run = fd::response_observed(
-        problem,
-        contact,
-        &newton,
-        analysis.solver(),
-        monitors,
-        &mut |r| {
-            extend_response(&mut result.nominal, r);
-            update_if_due(update, &mut schedule, &result, r.loads.len());
-        },
-    );
+    let run = fd::response_observed(problem, &newton, analysis.solver(), monitors, &mut |r| {
+        extend_response(&mut result.nominal, r);
+        update_if_due(update, &mut schedule, &result, r.loads.len());
+    });
     result.time_analysis = t.elapsed().as_secs_f64();
     match run {
         Ok(nominal) => result.nominal = nominal,
@@ -534,10 +521,11 @@ pub fn run_with_output(
     let mut vtu_before_run = 0.0;
     let (continuum_run, dual_run) = if want_continuum || want_dual {
         let mut schedule = RewriteSchedule::starting(Instant::now());
-        let built = analysis.build_with_contact(base).map_err(DsaError::from);
-        if let (Some(w), Ok((problem, _, contact))) = (writer, &built) {
+        let built = analysis.build(base).map_err(DsaError::from);
+        if let (Some(w), Ok((problem, _))) = (writer, &built) {
             let names = vars.iter().map(|v| v.name.clone()).collect();
-            match w.open(contact.clone(), names) {
+            let contact = super::contact_load(problem).map(|c| c.contact.clone());
+            match w.open(contact, names) {
                 Ok(()) => {
                     let zero: Vec<_> = method_names.iter().map(|m| (*m, None)).collect();
                     w.write(0, 0.0, &problem.model, &zero);
@@ -545,10 +533,10 @@ pub fn run_with_output(
                     vtu_before_run = w.time().as_secs_f64();
                     vtu = Some(w);
                 }
-                Err(e) => result.vtu_error = Some(e),
+                Err(e) => result.vtu_error = Some(e.to_string()),
             }
         }
-        let runs = built.and_then(|(problem, newton, _)| {
+        let runs = built.and_then(|(problem, newton)| {
             run_hooked(
                 problem,
                 surface,
@@ -615,7 +603,7 @@ pub fn run_with_output(
         .map_or(0.0, |w| w.time().as_secs_f64() - vtu_before_run);
     if let Some(w) = vtu {
         result.time_vtu = Some(w.time().as_secs_f64());
-        result.vtu_error = w.error().map(str::to_string);
+        result.vtu_error = w.error().map(Failure::to_string);
         result.vtu = w.written().to_vec();
     }
 
@@ -894,7 +882,7 @@ pub fn terms(
     spec: &DsaSpec,
     step: usize,
 ) -> Result<Vec<TermBreakdown>, DsaError> {
-    let (problem, newton, _) = analysis.build_with_contact(base)?;
+    let (problem, newton) = analysis.build(base)?;
     let vars: Vec<DesignVariable> = spec.design.iter().map(|d| d.variable.clone()).collect();
     Ok(breakdown(
         problem,
