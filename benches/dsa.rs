@@ -65,8 +65,7 @@ impl Setup {
     /// The problem (with its loads) and its driver.
     fn problem(&self) -> (ShellProblem, NewtonSolver) {
         let a = CaseAnalysis { case: &self.case };
-        let (p, n, _) = a.build_with_contact(&self.base()).unwrap();
-        (p, n)
+        a.build(&self.base()).unwrap()
     }
     /// (method time, whole run time) in seconds.
     fn continuum(&self) -> (f64, f64) {

@@ -1149,10 +1149,9 @@ fn tool_design_variables_are_checked() {
     assert_eq!(spec.design[0].variable.value(&turned), -1e-3);
     // The re-run's die is the case's rotated as built about its pivot: R(θ(t)) R_φ.
     let analysis = CaseAnalysis { case: &c };
-    let (_, _, contact) =
-        shelldsa::sensitivity::fd::Analysis::build_with_contact(&analysis, &turned).unwrap();
-    let contact = contact.unwrap();
-    let die = &contact.tools()[1];
+    let (problem, _) = shelldsa::sensitivity::fd::Analysis::build(&analysis, &turned).unwrap();
+    let contact = problem.loads().iter().find_map(|l| l.contact()).unwrap();
+    let die = &contact.contact.tools()[1];
     let expected = ToolPath::fixed().rotated([0.0, -1e-3, 0.0]).unwrap();
     assert_eq!(die.path.orientation(), expected.orientation());
     assert!((die.path.orientation()[(0, 2)] + (1e-3f64).sin()).abs() < 1e-15);

@@ -19,7 +19,8 @@ use shelldsa::meshfree::{regular_grid, Basis, ParamBox};
 use shelldsa::sensitivity::dual::{run_dual, DualMode, DualRun, SensitivityError};
 use shelldsa::sensitivity::fd::{central_differences, fit_rate, response, taylor_remainders};
 use shelldsa::sensitivity::{
-    validate_design, Design, DesignError, DesignKind, DesignVariable, MaterialParameter, Monitor,
+    check_design, Design, DesignError, DesignKind, DesignScope, DesignVariable, MaterialParameter,
+    Monitor,
 };
 use shelldsa::shell::constraints::{edge_constraints, EdgeCondition};
 use shelldsa::shell::load::{Moment, PointForce};
@@ -320,26 +321,32 @@ fn design_variables_are_validated() {
         DesignKind::parse("thickness").unwrap(),
         DesignKind::Thickness
     );
+    // The one check of a design variable, at the model's design with the steps 0, ±h.
+    let base = Design::of(&model);
+    let scope = DesignScope {
+        base: Some(&base),
+        model: Some(&model),
+        tools: None,
+    };
+    let check = |v: &DesignVariable, h: f64| v.check(&[0.0, h, -h], &scope);
     // t = 0.05 perturbed by ±0.06 reaches −0.01.
-    let e = DesignVariable::thickness()
-        .validate(&model, 0.06)
-        .unwrap_err();
+    let e = check(&DesignVariable::thickness(), 0.06).unwrap_err();
     assert!(matches!(e, DesignError::InvalidPerturbation { ref variable, .. } if variable == "t"));
     // ν = 0.3 + 0.25 leaves (−1, 0.5).
     let nu = DesignVariable::material(MaterialParameter::Poisson);
-    let e = nu.validate(&model, 0.25).unwrap_err();
+    let e = check(&nu, 0.25).unwrap_err();
     assert!(e.to_string().contains("poisson"), "{e}");
-    assert!(nu.validate(&model, 0.1).is_ok());
+    assert!(check(&nu, 0.1).is_ok());
     let dup = vec![
         DesignVariable::thickness(),
         DesignVariable::new("t2", DesignKind::Thickness),
     ];
     assert!(matches!(
-        validate_design(&dup, &model, 0.0),
+        check_design(&dup, &|_| vec![0.0], &scope),
         Err(DesignError::Duplicate { .. })
     ));
     assert!(matches!(
-        validate_design(&[], &model, 0.0),
+        check_design(&[], &|_| vec![0.0], &scope),
         Err(DesignError::NoVariables)
     ));
     assert!(Monitor::new("bad", [0.5, 0.5], 3).is_err());

@@ -17,7 +17,7 @@ use shelldsa::io::shell_build;
 use shelldsa::io::shell_case::{parse_shell_case, ShellCase};
 use shelldsa::sensitivity::shape::{dual_geometry, lamina_vectors_dot, ShapeVelocity};
 use shelldsa::sensitivity::study;
-use shelldsa::sensitivity::{DesignError, DesignKind, DesignVariable};
+use shelldsa::sensitivity::{Design, DesignError, DesignKind, DesignScope, DesignVariable};
 use shelldsa::shell::model::{lamina_vectors, ShellModel};
 use shelldsa::shell::point::SurfacePoint;
 use std::f64::consts::FRAC_PI_2;
@@ -439,19 +439,30 @@ fn shape_design_variable_errors() {
             name: "radius".into()
         }
     );
+    // The one check of a design variable, with the steps 0, ±h, at the model's design without
+    // and with its surface.
+    let (plain, shell) = (Design::of(&model), Design::of_shell(&model, s));
+    let check = |v: &DesignVariable, base: &Design, h: f64| {
+        let scope = DesignScope {
+            base: Some(base),
+            model: Some(&model),
+            tools: None,
+        };
+        v.check(&[0.0, h, -h], &scope)
+    };
     // Without the surface: rejected by the plain validation.
     assert!(matches!(
-        r.validate(&model, 0.0),
+        check(&r, &plain, 0.0),
         Err(DesignError::ShapeWithoutSurface { .. })
     ));
-    r.validate_on(&model, s, 1.0).unwrap();
+    check(&r, &shell, 1.0).unwrap();
     // A radius step of −10 leaves no surface.
-    let e = r.validate_on(&model, s, 10.0).unwrap_err().to_string();
+    let e = check(&r, &shell, 10.0).unwrap_err().to_string();
     assert!(e.contains("radius") && e.contains("-10"), "{e}");
     // Moving the hole's latitude to the pole puts a particle on the singular pole.
     let lat = DesignVariable::shape(s, "latitude_end").unwrap();
     let to_pole = FRAC_PI_2 - s.parameter_values()[5];
-    let e = lat.validate_on(&model, s, to_pole).unwrap_err().to_string();
+    let e = check(&lat, &shell, to_pole).unwrap_err().to_string();
     assert!(e.contains("normal"), "{e}");
 }
 

@@ -55,8 +55,7 @@ use crate::geometry::Surface;
 use crate::material::MaterialParams;
 pub use crate::sensitivity::study::{DesignEntry, DsaMethod, DsaSpec};
 use crate::sensitivity::{
-    check_tool_shapes, check_tools, Design, DesignKind, DesignScope, DesignVariable, Layers,
-    Monitor, Quantity,
+    Design, DesignKind, DesignScope, DesignVariable, Layers, Monitor, Quantity,
 };
 use serde::Deserialize;
 use std::path::Path;
@@ -277,6 +276,7 @@ pub(crate) fn check(
         }
         let is_tool = kind.is_offset();
         let variable = DesignVariable::new(d.name.clone(), kind);
+        check_tool_name(path, k, &variable, tools)?;
         let fd_steps = d
             .fd_steps
             .clone()
@@ -356,7 +356,8 @@ pub(crate) fn check(
             }
             let scope = DesignScope {
                 base: Some(&base),
-                ..DesignScope::default()
+                model: None,
+                tools: Some(tools),
             };
             variable.check(&[h, -h], &scope).map_err(|e| {
                 invalid(
@@ -364,15 +365,6 @@ pub(crate) fn check(
                     format!("{steps_key}[{i}]"),
                     fmt_num(r),
                     format!("a step that keeps the design admissible: {e}"),
-                )
-            })?;
-            // A tool shape: the perturbed tool must be a valid tool (RigidTool::reshaped).
-            check_tool_shapes(std::slice::from_ref(&variable), tools, h).map_err(|e| {
-                invalid(
-                    path,
-                    format!("{steps_key}[{i}]"),
-                    fmt_num(r),
-                    format!("a step that keeps the tool valid: {e}"),
                 )
             })?;
         }
@@ -693,19 +685,36 @@ fn design_kind(
         .map_err(|e| invalid(path, key, format!("{s:?}"), format!("{EXPECTED} ({e})")))
 }
 
-/// Check that every `tool.<name>.<axis>` design variable of `spec` names one of the case's
-/// `tools`: a [`CaseError::Invalid`] at `design[k].kind` listing the tools otherwise.
+/// Check that the design variable `design[k]` names a tool of the case's `tools` if it is a
+/// tool variable ([`DesignVariable::check`]): a [`CaseError::Invalid`] at `design[k].kind`
+/// listing the tools otherwise.
+fn check_tool_name(
+    path: &Path,
+    k: usize,
+    variable: &DesignVariable,
+    tools: &[RigidTool],
+) -> Result<(), CaseError> {
+    let scope = DesignScope {
+        tools: Some(tools),
+        ..DesignScope::default()
+    };
+    variable.check(&[], &scope).map_err(|err| {
+        let names: Vec<&str> = tools.iter().map(|t| t.name.as_str()).collect();
+        invalid(
+            path,
+            format!("design[{k}].kind"),
+            format!("{:?}", variable.kind.key()),
+            format!("a tool of the case's [[tool]] tables {names:?} ({err})"),
+        )
+    })
+}
+
+/// Check that every tool variable and every tool-force monitor of `spec` names one of the
+/// case's `tools`: a [`CaseError::Invalid`] at its key listing the tools otherwise.
 pub fn check_tool_names(path: &Path, tools: &[RigidTool], spec: &DsaSpec) -> Result<(), CaseError> {
     let names: Vec<&str> = tools.iter().map(|t| t.name.as_str()).collect();
     for (k, e) in spec.design.iter().enumerate() {
-        check_tools(std::slice::from_ref(&e.variable), &names).map_err(|err| {
-            invalid(
-                path,
-                format!("design[{k}].kind"),
-                format!("{:?}", e.variable.kind.key()),
-                format!("a tool of the case's [[tool]] tables {names:?} ({err})"),
-            )
-        })?;
+        check_tool_name(path, k, &e.variable, tools)?;
     }
     for m in &spec.monitors {
         if let Quantity::ToolForce { tool, .. } = &m.quantity {

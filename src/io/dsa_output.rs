@@ -15,6 +15,7 @@ use crate::sensitivity::terms::TermBreakdown;
 use crate::sensitivity::{Quantity, SensitivityFields};
 use crate::shell::contact::ShellContact;
 use crate::shell::model::ShellModel;
+use crate::solver::Failure;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -35,7 +36,7 @@ pub struct StepVtu<'a> {
     pvd: PvdCollection,
     time: Duration,
     written: Vec<VtuStep>,
-    error: Option<String>,
+    error: Option<Failure>,
 }
 
 impl<'a> StepVtu<'a> {
@@ -62,14 +63,16 @@ impl StepWriter for StepVtu<'_> {
         &mut self,
         contact: Option<Arc<ShellContact>>,
         variables: Vec<String>,
-    ) -> Result<(), String> {
+    ) -> Result<(), Failure> {
         let case = self.case;
         let cq = shell_build::particle_grid(case);
-        let cq = shell_build::cell_quadrature(case, &cq).map_err(|e| e.to_string())?;
-        let grid = OutputGrid::new(&cq, case.output.subdivide).map_err(|e| e.to_string())?;
+        let cq = shell_build::cell_quadrature(case, &cq)
+            .map_err(|e| Failure::new("the VTU files' grid", e))?;
+        let grid = OutputGrid::new(&cq, case.output.subdivide)
+            .map_err(|e| Failure::new("the VTU files' grid", e))?;
         let steps = self.dir.join("steps");
         std::fs::create_dir_all(&steps)
-            .map_err(|e| format!("cannot create {}: {e}", steps.display()))?;
+            .map_err(|e| Failure::new(format!("cannot create {}", steps.display()), e))?;
         self.grid = Some(grid);
         self.contact = contact;
         self.variables = variables;
@@ -104,8 +107,8 @@ impl StepWriter for StepVtu<'_> {
         self.time
     }
 
-    fn error(&self) -> Option<&str> {
-        self.error.as_deref()
+    fn error(&self) -> Option<&Failure> {
+        self.error.as_ref()
     }
 
     fn written(&self) -> &[VtuStep] {
@@ -120,11 +123,11 @@ impl StepVtu<'_> {
         load: f64,
         model: &ShellModel,
         methods: &[(&str, Option<&dyn SensitivityFields>)],
-    ) -> Result<(), String> {
+    ) -> Result<(), Failure> {
         let pressure = match &self.contact {
             Some(c) => Some(
                 c.report(model, &vec![0.0; model.n_dofs()], load)
-                    .map_err(|e| format!("contact at step {step}: {e}"))?
+                    .map_err(|e| Failure::new(format!("contact at step {step}"), e))?
                     .pressure,
             ),
             None => None,
@@ -146,14 +149,17 @@ impl StepVtu<'_> {
         }
         let rel = format!("steps/step_{step:04}.vtu");
         let path = self.dir.join(&rel);
-        let grid = self.grid.as_ref().ok_or("the VTU writer was not opened")?;
+        type Error = Box<dyn std::error::Error + Send + Sync>;
+        let in_file = |e: Error| Failure::new(path.display().to_string(), e);
+        let grid =
+            (self.grid.as_ref()).ok_or_else(|| in_file("the writer was not opened".into()))?;
         let w = shell_vtu_with_contact(model, &self.case.surface, grid, pressure.as_deref())
             .and_then(|w| add_sensitivity_fields(w, model, grid, &fields))
-            .map_err(|e| format!("{}: {e}", path.display()))?;
-        w.write(&path).map_err(|e| e.to_string())?;
+            .map_err(|e| in_file(e.into()))?;
+        w.write(&path).map_err(|e| in_file(e.into()))?;
         self.pvd
             .add_and_write(load, &rel)
-            .map_err(|e| e.to_string())?;
+            .map_err(|e| Failure::new(PVD_FILE, e))?;
         self.written.push(VtuStep {
             step,
             load,

@@ -10,10 +10,8 @@ use super::CaseError;
 use crate::sensitivity::dual::SensitivityError;
 use crate::sensitivity::fd::Analysis;
 use crate::sensitivity::Design;
-use crate::shell::contact::ShellContact;
 use crate::shell::problem::ShellProblem;
 use crate::solver::NewtonSolver;
-use std::sync::Arc;
 
 /// Rejects, before any analysis, the loads the sensitivity methods cannot carry yet: edge
 /// moments (they act through the director) and edge forces (their design derivative through
@@ -71,17 +69,11 @@ pub struct CaseAnalysis<'a> {
 }
 
 impl Analysis for CaseAnalysis<'_> {
+    /// The case with the design's thickness, material, surface and tool offsets (each tool's
+    /// whole path translated, [`crate::contact::ToolPath::translated`], the tool as built
+    /// rotated about its pivot, [`crate::contact::ToolPath::rotated`], and reshaped,
+    /// [`crate::contact::RigidTool::reshaped`]).
     fn build(&self, design: &Design) -> Result<(ShellProblem, NewtonSolver), SensitivityError> {
-        self.build_with_contact(design).map(|(p, n, _)| (p, n))
-    }
-
-    /// The case with the design's thickness, material and tool offsets (each tool's whole path
-    /// translated, [`crate::contact::ToolPath::translated`], and the tool as built rotated
-    /// about its pivot, [`crate::contact::ToolPath::rotated`]), and its contact.
-    fn build_with_contact(
-        &self,
-        design: &Design,
-    ) -> Result<(ShellProblem, NewtonSolver, Option<Arc<ShellContact>>), SensitivityError> {
         let mut c = self.case.clone();
         c.thickness = design.thickness;
         c.material = design.material;
@@ -128,7 +120,7 @@ impl Analysis for CaseAnalysis<'_> {
             context: self.case.path.display().to_string(),
             source: Box::new(e),
         })?;
-        Ok((b.problem, b.newton, b.contact))
+        Ok((b.problem, b.newton))
     }
 }
 
@@ -142,9 +134,10 @@ pub fn base_design(case: &ShellCase) -> Design {
     }
 }
 
-/// Check everything a `dsa` run of `case` with `methods` needs, before any analysis: design
-/// variables present and admissible, loads the dual reference can carry, and, on the built
-/// model, [`validate_design`](crate::sensitivity::validate_design).
+/// Check everything a `dsa` run of `case` with `methods` needs before any analysis, as far as
+/// the case tells: design variables present and naming the case's tools, loads the methods
+/// can carry (the study checks the variables on the built model,
+/// [`check_design`](crate::sensitivity::check_design)).
 pub fn validate(case: &ShellCase, methods: &[DsaMethod]) -> Result<DsaSpec, CaseError> {
     let mut spec = case.dsa.clone().ok_or_else(|| CaseError::NoDesign {
         path: case.path.clone(),

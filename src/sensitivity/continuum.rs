@@ -34,9 +34,10 @@
 //! [`TermGroup::Filter`] (the director-filter stabilisation's whole derivative). Each can be
 //! compared with the dual-number reference seeded with that group only ([`super::terms`]).
 
+use super::contact_tools;
 use super::dual::SensitivityError;
 use super::shape::ShapeVelocity;
-use super::{record_monitors, DesignError, DesignKind, DesignVariable, Monitor};
+use super::{record_monitors, DesignError, DesignKind, DesignVariable, Monitor, SensitivityFields};
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
 use crate::shell::contact_sensitivity::ContactSeeds;
@@ -149,7 +150,7 @@ impl SensitivityState {
         problem: &ShellProblem,
         var: &DesignVariable,
         surface: Option<&Surface<f64>>,
-    ) -> Result<Self, DesignError> {
+    ) -> Result<Self, SensitivityError> {
         let mut s = Self::zero(problem);
         match &var.kind {
             DesignKind::Thickness => s.thickness = 1.0,
@@ -161,36 +162,33 @@ impl SensitivityState {
             DesignKind::Shape { parameter, name } => {
                 let surface = surface
                     .ok_or_else(|| DesignError::ShapeWithoutSurface { name: name.clone() })?;
-                let v = ShapeVelocity::new(&problem.model, surface, *parameter).map_err(|e| {
-                    DesignError::InvalidPerturbation {
-                        variable: var.name.clone(),
-                        delta: 0.0,
-                        detail: format!("design velocity: {e}"),
-                    }
-                })?;
+                let v =
+                    ShapeVelocity::new(&problem.model, surface, *parameter).map_err(|source| {
+                        SensitivityError::Geometry {
+                            what: format!("design velocity of `{}`", var.name),
+                            source,
+                        }
+                    })?;
                 s.particles = v.particles;
                 s.history = v.history;
                 s.surface = Some(v.points);
                 s.position = Some(v.positions);
             }
+            // The one check (`check_method_inputs`) found the tool.
             DesignKind::Tool { tool, axis } | DesignKind::ToolRotation { tool, axis } => {
-                let names = contact_tools(problem);
-                let names: Vec<&str> = names.iter().map(String::as_str).collect();
-                super::check_tools(std::slice::from_ref(var), &names)?;
-                let i = names.iter().position(|n| n == tool).unwrap_or_default();
-                match var.kind {
-                    DesignKind::Tool { .. } => s.tools[i].translation[*axis] = 1.0,
-                    _ => s.tools[i].rotation[*axis] = 1.0,
+                if let Some(t) = tool_index(problem, tool).and_then(|i| s.tools.get_mut(i)) {
+                    match var.kind {
+                        DesignKind::Tool { .. } => t.translation[*axis] = 1.0,
+                        _ => t.rotation[*axis] = 1.0,
+                    }
                 }
             }
             DesignKind::ToolShape {
                 tool, parameter, ..
             } => {
-                let names = contact_tools(problem);
-                let names: Vec<&str> = names.iter().map(String::as_str).collect();
-                super::check_tools(std::slice::from_ref(var), &names)?;
-                let i = names.iter().position(|n| n == tool).unwrap_or_default();
-                s.tools[i].shape = Some((*parameter, 1.0));
+                if let Some(t) = tool_index(problem, tool).and_then(|i| s.tools.get_mut(i)) {
+                    t.shape = Some((*parameter, 1.0));
+                }
             }
         }
         Ok(s)
@@ -244,15 +242,9 @@ impl SensitivityState {
     }
 }
 
-/// The names of the tools of the contact among the loads of `problem` (its order; empty
-/// without contact).
-pub fn contact_tools(problem: &ShellProblem) -> Vec<String> {
-    problem
-        .loads()
-        .iter()
-        .find_map(|l| l.contact())
-        .map(|c| c.contact.tools().iter().map(|t| t.name.clone()).collect())
-        .unwrap_or_default()
+/// The index of the tool `name` among the tools of the problem's contact.
+fn tool_index(problem: &ShellProblem, name: &str) -> Option<usize> {
+    contact_tools(problem).iter().position(|t| t.name == name)
 }
 
 /// The sensitivities recorded at one converged step.
@@ -298,11 +290,14 @@ pub struct ContinuumDsa {
     records: Vec<ContinuumStepRecord>,
     time: Duration,
     timing: ContinuumTiming,
-    failure: Option<String>,
+    failure: Option<Failure>,
 }
 
+/// What the continuum DSA's failures are reported as.
+const CONTEXT: &str = "continuum sensitivity";
+
 fn fatal(e: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> ProblemError {
-    ProblemError::Failed(Failure::new("continuum sensitivity", e))
+    ProblemError::Failed(Failure::new(CONTEXT, e))
 }
 
 impl ContinuumDsa {
@@ -475,41 +470,16 @@ impl ContinuumDsa {
         Ok(())
     }
 
-    fn record(&mut self, problem: &ShellProblem, load: f64) -> Result<(), String> {
+    /// After the analysis' commit: adopt the pending sensitivities and record the monitors.
+    fn record(&mut self, problem: &ShellProblem, load: f64) -> Result<(), Failure> {
         let next = self
             .pending
             .take()
-            .ok_or("commit without a converged-step hook")?;
+            .ok_or_else(|| Failure::new(CONTEXT, "commit without a converged-step hook"))?;
         let old = std::mem::replace(&mut self.states, next);
         self.spare = old.into_iter().map(|s| s.history).collect();
-        let n_q = problem.n_generalised();
-        let udot: Vec<Vec<f64>> = self
-            .states
-            .iter()
-            .map(|s| {
-                let mut g = vec![0.0; n_q];
-                for (i, p) in s.particles.iter().enumerate() {
-                    for c in 0..3 {
-                        g[DOFS_PER_PARTICLE * i + c] = p.u[c];
-                    }
-                }
-                g
-            })
-            .collect();
-        let (states, zero) = (&self.states, &self.zero);
-        let (values, derivatives) = record_monitors(
-            problem,
-            load,
-            &self.monitors,
-            &udot,
-            &mut || tool_force_dots(problem, states, zero, load).map_err(|e| e.to_string()),
-            &mut || {
-                states
-                    .iter()
-                    .map(|s| s.history.iter().map(|h| h.material.eps_p).collect())
-                    .collect()
-            },
-        )?;
+        let (values, derivatives) = record_monitors(problem, load, &self.monitors, &*self)
+            .map_err(|e| Failure::new(CONTEXT, e))?;
         self.records.push(ContinuumStepRecord {
             step: self.records.len(),
             load,
@@ -517,6 +487,32 @@ impl ContinuumDsa {
             derivatives,
         });
         Ok(())
+    }
+}
+
+impl SensitivityFields for ContinuumDsa {
+    fn n_variables(&self) -> usize {
+        self.states.len()
+    }
+    fn translations(&self, model: &ShellModel, v: usize) -> Vec<f64> {
+        let mut q = vec![0.0; model.n_dofs()];
+        for (i, p) in self.states[v].particles.iter().enumerate() {
+            for c in 0..3 {
+                q[DOFS_PER_PARTICLE * i + c] = p.u[c];
+            }
+        }
+        q
+    }
+    fn plastic_strain(&self, v: usize) -> Vec<f64> {
+        let history = &self.states[v].history;
+        history.iter().map(|h| h.material.eps_p).collect()
+    }
+    fn tool_force_dots(
+        &self,
+        problem: &ShellProblem,
+        load: f64,
+    ) -> Result<Vec<Vec<[f64; 3]>>, SensitivityError> {
+        tool_force_dots(problem, &self.states, &self.zero, load)
     }
 }
 
@@ -630,7 +626,7 @@ fn tool_force_dots(
     load: f64,
 ) -> Result<Vec<Vec<[f64; 3]>>, SensitivityError> {
     let model = &problem.model;
-    let Some(c) = problem.loads().iter().find_map(|l| l.contact()) else {
+    let Some(c) = super::contact_load(problem) else {
         return Ok(vec![Vec::new(); states.len()]);
     };
     let q = vec![0.0; model.n_dofs()];
@@ -687,13 +683,10 @@ fn add_load_dot(
         Load::Constant(inner) => add_load_dot(model, inner, s, group, dq, 1.0, f)?,
         // The contact is evaluated for all variables at once (`contact_dots`).
         Load::Contact(_) => {
-            return Err(SensitivityError::Shell(
-                crate::shell::ShellError::InvalidInput(
-                    "continuum sensitivity: a contact inside a constant load: expected the \
-                 contact as a load of its own"
-                        .into(),
-                ),
-            ))
+            return Err(SensitivityError::LoadNotCarried {
+                load: "a contact inside a constant load".into(),
+                expected: "the contact as a load of its own",
+            })
         }
         Load::DirectorFilter(l) => {
             if on(TermGroup::Filter) {
@@ -707,12 +700,10 @@ fn add_load_dot(
         }
         // Refused before the analysis (`check_method_inputs`).
         Load::Moment(_) | Load::EdgeForce(_) => {
-            return Err(SensitivityError::Shell(
-                crate::shell::ShellError::InvalidInput(format!(
-                    "continuum sensitivity: a {} load is not carried",
-                    l.kind()
-                )),
-            ))
+            return Err(SensitivityError::LoadNotCarried {
+                load: format!("a {} load", l.kind()),
+                expected: "point forces, gravity, pressure, contact or the director filter",
+            })
         }
     }
     Ok(())
@@ -853,9 +844,7 @@ impl StepObserver<ShellProblem> for ContinuumDsa {
         }
     }
     fn failure(&self) -> Option<Failure> {
-        self.failure
-            .as_ref()
-            .map(|f| Failure::new("continuum sensitivity", f.clone()))
+        self.failure.clone()
     }
 }
 

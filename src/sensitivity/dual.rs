@@ -85,11 +85,12 @@
 
 use super::shape::dual_geometry;
 use super::{
-    validate_design, validate_design_on, Design, DesignError, DesignKind, DesignVariable, Monitor,
+    check_design, Design, DesignError, DesignKind, DesignScope, DesignVariable, Monitor,
+    MonitorError, SensitivityFields,
 };
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
-use crate::shell::load::{ContactLoad, Load, LoadState};
+use crate::shell::load::{Load, LoadState};
 use crate::shell::model::commit_particle;
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
 use crate::shell::problem::ShellProblem;
@@ -217,6 +218,43 @@ pub enum SensitivityError {
         /// Its kind.
         kind: &'static str,
     },
+    /// More than one contact load (the dual reference seeds the tools of one).
+    #[error("dual sensitivity reference: {count} contact loads given, expected at most one")]
+    ContactLoads {
+        /// Contact loads of the problem.
+        count: usize,
+    },
+    /// A geometry the methods build could not be built (the initial geometry or a tool's
+    /// surface in the dual scalar, a shape variable's design velocity).
+    #[error("{what}: {source}")]
+    Geometry {
+        /// What was built.
+        what: String,
+        /// Why it failed.
+        #[source]
+        source: crate::geometry::GeometryError,
+    },
+    /// A load met during the run that the continuum DSA does not carry (the kinds refused
+    /// before the analysis, [`crate::shell::load::Load::takes_state`], or a contact held
+    /// constant).
+    #[error("continuum sensitivity: {load}: expected {expected}")]
+    LoadNotCarried {
+        /// The load.
+        load: String,
+        /// What the method carries.
+        expected: &'static str,
+    },
+    /// A converged step asked for (`--terms`, 1-based) that the analysis does not have.
+    #[error("--terms {step}: expected a converged load step {}", step_range(*.steps))]
+    StepOutOfRange {
+        /// The step asked for.
+        step: usize,
+        /// The analysis' converged steps (`None`: not run yet).
+        steps: Option<usize>,
+    },
+    /// A monitor.
+    #[error(transparent)]
+    Monitor(#[from] MonitorError),
     /// Shell evaluation.
     #[error(transparent)]
     Shell(#[from] ShellError),
@@ -253,6 +291,11 @@ pub enum SensitivityError {
     },
 }
 
+/// The converged steps a step number must lie in: `in 1..=N`, `≥ 1` before the run.
+fn step_range(steps: Option<usize>) -> String {
+    steps.map_or("≥ 1".into(), |n| format!("in 1..={n}"))
+}
+
 /// The dual-number sensitivity reference as an observer of the analysis' converged steps
 /// ([`StepObserver`]): at each converged step it forms the dual residual's right-hand sides,
 /// solves them with the converged tangent and carries its dual states to the next step.
@@ -264,7 +307,7 @@ pub struct DualDsa<D: DesignDual> {
     pending: Option<Vec<DualState<D>>>,
     records: Vec<DualStepRecord>,
     time: Duration,
-    failure: Option<String>,
+    failure: Option<Failure>,
     /// The model's histories at the start of the step being committed (the yielding count).
     before: Option<Vec<PointHistory<f64>>>,
 }
@@ -272,8 +315,11 @@ pub struct DualDsa<D: DesignDual> {
 /// The shell problem with the dual-number reference in its convergence hook.
 pub type DualShellProblem<D> = Observed<ShellProblem, DualDsa<D>>;
 
+/// What the dual reference's failures are reported as.
+const CONTEXT: &str = "dual sensitivity reference";
+
 fn fatal(e: impl Into<Box<dyn std::error::Error + Send + Sync>>) -> ProblemError {
-    ProblemError::Failed(Failure::new("dual sensitivity reference", e))
+    ProblemError::Failed(Failure::new(CONTEXT, e))
 }
 
 impl<D: DesignDual> DualDsa<D> {
@@ -291,20 +337,12 @@ impl<D: DesignDual> DualDsa<D> {
         monitors: Vec<Monitor>,
     ) -> Result<Self, SensitivityError> {
         check_method_inputs(problem, surface, &variables, &monitors)?;
-        let contacts: Vec<&ContactLoad> =
-            problem.loads().iter().filter_map(|l| l.contact()).collect();
-        if contacts.len() > 1 {
-            return Err(SensitivityError::Shell(ShellError::InvalidInput(format!(
-                "dual sensitivity reference: {} contact loads given, expected at most one",
-                contacts.len()
-            ))));
+        let contacts = problem.loads().iter().filter_map(|l| l.contact()).count();
+        if contacts > 1 {
+            return Err(SensitivityError::ContactLoads { count: contacts });
         }
-        let tool_names: Vec<&str> = contacts
-            .first()
-            .map(|c| c.contact.tools().iter().map(|t| t.name.as_str()).collect())
-            .unwrap_or_default();
-        let tool_list = contacts.first().map_or(&[][..], |c| c.contact.tools());
-        super::check_tools(&variables, &tool_names)?;
+        let tool_list = super::contact_tools(problem);
+        let tool_names: Vec<&str> = tool_list.iter().map(|t| t.name.as_str()).collect();
         let model = &problem.model;
         let design = Design::of(model);
         let nd = D::DIRECTIONS;
@@ -330,19 +368,18 @@ impl<D: DesignDual> DualDsa<D> {
                     match &v.kind {
                         DesignKind::Thickness => t_parts[k] = 1.0,
                         DesignKind::Material(p) => m_parts[p.index()][k] = 1.0,
+                        // The one check (`check_method_inputs`) found the surface
+                        // parameter, the tool and the tool's surface parameter.
                         DesignKind::Shape { parameter, .. } => {
-                            // validate_design_on checked the index against the surface.
                             s_parts[*parameter][k] = 1.0;
                             shape = true;
                         }
                         DesignKind::Tool { tool, axis } => {
-                            // check_tools above: the tool exists.
                             if let Some(i) = tool_names.iter().position(|n| n == tool) {
                                 tool_parts[i][*axis][k] = 1.0;
                             }
                         }
                         DesignKind::ToolRotation { tool, axis } => {
-                            // check_tools above: the tool exists.
                             if let Some(i) = tool_names.iter().position(|n| n == tool) {
                                 rotation_parts[i][*axis][k] = 1.0;
                             }
@@ -350,23 +387,13 @@ impl<D: DesignDual> DualDsa<D> {
                         DesignKind::ToolShape {
                             tool, parameter, ..
                         } => {
-                            // check_tools above: the tool exists.
                             let i = tool_names.iter().position(|n| n == tool);
-                            let slot = i.and_then(|i| tool_shape_parts[i].get_mut(*parameter));
-                            let Some(slot) = slot else {
-                                return Err(SensitivityError::Design(
-                                    DesignError::InvalidPerturbation {
-                                        variable: v.name.clone(),
-                                        delta: 0.0,
-                                        detail: format!(
-                                            "tool `{tool}` surface parameter index {parameter}: \
-                                             expected one of the tool surface's parameters"
-                                        ),
-                                    },
-                                ));
-                            };
-                            slot[k] = 1.0;
-                            tool_shape = true;
+                            if let Some(slot) =
+                                i.and_then(|i| tool_shape_parts[i].get_mut(*parameter))
+                            {
+                                slot[k] = 1.0;
+                                tool_shape = true;
+                            }
                         }
                     }
                 }
@@ -382,11 +409,11 @@ impl<D: DesignDual> DualDsa<D> {
                                 .zip(parts)
                                 .map(|(&v, e)| D::from_parts(v, e))
                                 .collect();
-                            t.surface.with_design_parameters::<D>(&p).map_err(|e| {
-                                SensitivityError::Shell(ShellError::InvalidInput(format!(
-                                    "dual surface of tool `{}`: {e}",
-                                    t.name
-                                )))
+                            t.surface.with_design_parameters::<D>(&p).map_err(|source| {
+                                SensitivityError::Geometry {
+                                    what: format!("dual surface of tool `{}`", t.name),
+                                    source,
+                                }
                             })
                         })
                         .collect::<Result<Vec<_>, _>>()?;
@@ -397,10 +424,11 @@ impl<D: DesignDual> DualDsa<D> {
                 let m = design.material.to_array();
                 let (particles, history, surfaces, positions) = match surface {
                     Some(s) if shape => {
-                        let g = dual_geometry::<D>(model, s, &s_parts).map_err(|e| {
-                            SensitivityError::Shell(ShellError::InvalidInput(format!(
-                                "dual geometry of the shape design variables: {e}"
-                            )))
+                        let g = dual_geometry::<D>(model, s, &s_parts).map_err(|source| {
+                            SensitivityError::Geometry {
+                                what: "dual geometry of the shape design variables".into(),
+                                source,
+                            }
                         })?;
                         (g.particles, g.history, g.points, Some(g.positions))
                     }
@@ -476,15 +504,6 @@ impl<D: DesignDual> DualDsa<D> {
             total,
             reference: self.time,
         }
-    }
-
-    /// The sensitivity `du/dτ_v` of the committed unknowns `[q, μ]` for variable `v`.
-    pub fn unknown_sensitivity(&self, v: usize) -> Option<Vec<f64>> {
-        let g = self
-            .groups
-            .iter()
-            .find(|g| (g.first..g.first + g.count).contains(&v))?;
-        Some(g.unknowns.iter().map(|x| x.part(v - g.first)).collect())
     }
 
     /// The dual external force of group `g` (generalised rows) at the increment `dq` and load
@@ -655,48 +674,19 @@ impl<D: DesignDual> DualDsa<D> {
         problem: &ShellProblem,
         load: f64,
         plastic_points: usize,
-    ) -> Result<(), String> {
+    ) -> Result<(), Failure> {
         let next = self
             .pending
             .take()
-            .ok_or("commit without a converged-step hook")?;
+            .ok_or_else(|| Failure::new(CONTEXT, "commit without a converged-step hook"))?;
         self.groups = next;
         let model = &problem.model;
         let mut mismatch = 0.0_f64;
         for g in &self.groups {
             mismatch = mismatch.max(value_mismatch(model, g));
         }
-        let nv = self.variables.len();
-        let n_q = problem.n_generalised();
-        // ū̇ of the real particles as generalised vectors, one per variable.
-        let mut udot = vec![vec![0.0; n_q]; nv];
-        for g in &self.groups {
-            for (i, p) in g.particles.iter().enumerate() {
-                for c in 0..3 {
-                    for k in 0..g.count {
-                        udot[g.first + k][DOFS_PER_PARTICLE * i + c] = p.u[c].part(k);
-                    }
-                }
-            }
-        }
-        let groups = &self.groups;
-        let (values, derivatives) = super::record_monitors(
-            problem,
-            load,
-            &self.monitors,
-            &udot,
-            &mut || dual_tool_force_dots(problem, groups, nv, load),
-            &mut || {
-                let mut out = vec![Vec::new(); nv];
-                for g in groups {
-                    for k in 0..g.count {
-                        out[g.first + k] =
-                            g.history.iter().map(|h| h.material.eps_p.part(k)).collect();
-                    }
-                }
-                out
-            },
-        )?;
+        let (values, derivatives) = super::record_monitors(problem, load, &self.monitors, &*self)
+            .map_err(|e| Failure::new(CONTEXT, e))?;
         self.records.push(DualStepRecord {
             step: self.records.len(),
             load,
@@ -707,34 +697,60 @@ impl<D: DesignDual> DualDsa<D> {
         });
         Ok(())
     }
+
+    /// The group that carries design variable `v`.
+    fn group_of(&self, v: usize) -> Option<&DualState<D>> {
+        let mut groups = self.groups.iter();
+        groups.find(|g| (g.first..g.first + g.count).contains(&v))
+    }
 }
 
-/// The derivatives of the forces on the tools at the committed state (pseudo-time `load`),
-/// `[variable][tool]`: the contact's tool forces evaluated on every group's dual state
-/// ([`crate::shell::load::ContactLoad::tool_forces`]), their derivative parts.
-fn dual_tool_force_dots<D: DesignDual>(
-    problem: &ShellProblem,
-    groups: &[DualState<D>],
-    nv: usize,
-    load: f64,
-) -> Result<Vec<Vec<[f64; 3]>>, String> {
-    let mut out = vec![Vec::new(); nv];
-    let Some(c) = problem.loads().iter().find_map(|l| l.contact()) else {
-        return Ok(out);
-    };
-    let q = vec![D::zero(); problem.model.n_dofs()];
-    for g in groups {
-        let forces = c
-            .tool_forces(&problem.model, &g.load_state(), &q, load)
-            .map_err(|e| e.to_string())?;
-        for k in 0..g.count {
-            out[g.first + k] = forces
-                .iter()
-                .map(|f| [f[0].part(k), f[1].part(k), f[2].part(k)])
-                .collect();
-        }
+impl<D: DesignDual> SensitivityFields for DualDsa<D> {
+    fn n_variables(&self) -> usize {
+        self.variables.len()
     }
-    Ok(out)
+    fn translations(&self, model: &crate::shell::model::ShellModel, v: usize) -> Vec<f64> {
+        let mut q = vec![0.0; model.n_dofs()];
+        if let Some(g) = self.group_of(v) {
+            for (i, p) in g.particles.iter().enumerate() {
+                for c in 0..3 {
+                    q[DOFS_PER_PARTICLE * i + c] = p.u[c].part(v - g.first);
+                }
+            }
+        }
+        q
+    }
+    fn plastic_strain(&self, v: usize) -> Vec<f64> {
+        self.group_of(v).map_or_else(Vec::new, |g| {
+            let history = g.history.iter();
+            history
+                .map(|h| h.material.eps_p.part(v - g.first))
+                .collect()
+        })
+    }
+    /// The contact's tool forces evaluated on every group's dual state
+    /// ([`crate::shell::load::ContactLoad::tool_forces`]), their derivative parts.
+    fn tool_force_dots(
+        &self,
+        problem: &ShellProblem,
+        load: f64,
+    ) -> Result<Vec<Vec<[f64; 3]>>, SensitivityError> {
+        let mut out = vec![Vec::new(); self.variables.len()];
+        let Some(c) = super::contact_load(problem) else {
+            return Ok(out);
+        };
+        let q = vec![D::zero(); problem.model.n_dofs()];
+        for g in &self.groups {
+            let forces = c.tool_forces(&problem.model, &g.load_state(), &q, load)?;
+            for k in 0..g.count {
+                out[g.first + k] = forces
+                    .iter()
+                    .map(|f| [f[0].part(k), f[1].part(k), f[2].part(k)])
+                    .collect();
+            }
+        }
+        Ok(out)
+    }
 }
 
 /// What both sensitivity methods check before the analysis: the design variables are
@@ -747,10 +763,17 @@ pub(crate) fn check_method_inputs(
     variables: &[DesignVariable],
     monitors: &[Monitor],
 ) -> Result<(), SensitivityError> {
-    match surface {
-        Some(s) => validate_design_on(variables, &problem.model, s, 0.0)?,
-        None => validate_design(variables, &problem.model, 0.0)?,
-    }
+    let model = &problem.model;
+    let base = match surface {
+        Some(s) => Design::of_shell(model, s),
+        None => Design::of(model),
+    };
+    let scope = DesignScope {
+        base: Some(&base),
+        model: Some(model),
+        tools: Some(super::contact_tools(problem)),
+    };
+    check_design(variables, &|_| vec![0.0], &scope)?;
     if let Some((index, &value)) = problem.state().iter().enumerate().find(|(_, v)| **v != 0.0) {
         return Err(SensitivityError::NotInitial { index, value });
     }
@@ -764,11 +787,7 @@ pub(crate) fn check_method_inputs(
         return Err(SensitivityError::UnsupportedLoad { index, kind });
     }
     for m in monitors {
-        m.value(problem, 0.0)
-            .map_err(|e| DesignError::InvalidMonitor {
-                label: m.label.clone(),
-                detail: e.to_string(),
-            })?;
+        m.value(problem, 0.0)?;
     }
     Ok(())
 }
@@ -829,7 +848,7 @@ impl<D: DesignDual> StepObserver<ShellProblem> for DualDsa<D> {
         step: &ConvergedStep<'_>,
     ) -> Result<(), ProblemError> {
         if let Some(f) = &self.failure {
-            return Err(fatal(f.clone()));
+            return Err(ProblemError::Failed(f.clone()));
         }
         let t0 = Instant::now();
         let out = self.hook(problem, step);
@@ -855,9 +874,7 @@ impl<D: DesignDual> StepObserver<ShellProblem> for DualDsa<D> {
         self.pending = None;
     }
     fn failure(&self) -> Option<Failure> {
-        self.failure
-            .as_ref()
-            .map(|f| Failure::new("dual sensitivity reference", f.clone()))
+        self.failure.clone()
     }
 }
 

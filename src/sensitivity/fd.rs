@@ -15,18 +15,16 @@
 //! yields at a step in one run and not in another (the yield status changes within `±h`) puts
 //! a kink between them; so does a contact slave point that penetrates a tool at a converged
 //! step in one run and not in another (the penalty force switches on at `g = 0`, eq 69;
-//! recorded when the analysis hands its contact over, [`Analysis::build_with_contact`]). Such a
-//! step, and every later one (the history carries the kink), is *flagged*: its difference is reported but left out of comparisons and of the rate fit, never
-//! silently ([`CentralDifference::flagged`], [`TaylorFit::excluded`]).
+//! recorded for the problem's contact load, [`response`]). Such a step, and every later one
+//! (the history carries the kink), is *flagged*: its difference is reported but left out of
+//! comparisons and of the rate fit, never silently ([`CentralDifference::flagged`], [`TaylorFit::excluded`]).
 
 use super::dual::SensitivityError;
 use super::{Design, DesignVariable, Monitor};
-use crate::shell::contact::ShellContact;
 use crate::shell::problem::ShellProblem;
 use crate::solver::observe::{Observed, StepObserver, Tapped};
 use crate::solver::Failure;
 use crate::solver::{LinearSolver, Method, NewtonSolver, SolverOptions};
-use std::sync::Arc;
 
 /// The monitored responses of one complete run.
 #[derive(Clone, Debug, PartialEq)]
@@ -45,7 +43,6 @@ pub struct RunResponse {
 /// The recorder of the monitors, yield and contact status after every commit (an observer of
 /// the problem's converged steps).
 struct Recording<'a> {
-    contact: Option<Arc<ShellContact>>,
     monitors: &'a [Monitor],
     out: RunResponse,
     /// `ē^p` of every layer point at the step start.
@@ -68,13 +65,15 @@ impl StepObserver<ShellProblem> for Recording<'_> {
             .map(|(a, h)| h.material.eps_p > *a)
             .collect();
         let values = super::monitor_values(problem, load, self.monitors);
-        let contact = match &self.contact {
+        let contact = match super::contact_load(problem) {
             None => Ok(Vec::new()),
             Some(c) => c
+                .contact
                 .report(model, &vec![0.0; model.n_dofs()], load)
                 .map(|r| r.slaves.iter().map(|s| s.pressure > 0.0).collect()),
         };
-        match values.and_then(|v| contact.map(|c| (v, c))) {
+        type Error = Box<dyn std::error::Error + Send + Sync>;
+        match (|| -> Result<_, Error> { Ok((values?, contact?)) })() {
             Ok((v, c)) => {
                 self.out.loads.push(load);
                 self.out.values.push(v);
@@ -91,33 +90,21 @@ impl StepObserver<ShellProblem> for Recording<'_> {
     }
 }
 
-/// Run `problem` with `newton` and record `monitors` at every converged step.
+/// Run `problem` with `newton` and record `monitors` (and the contact status of every slave
+/// point of the problem's contact) at every converged step.
 pub fn response(
     problem: ShellProblem,
     newton: &NewtonSolver,
     solver: SolverOptions,
     monitors: &[Monitor],
 ) -> Result<RunResponse, SensitivityError> {
-    response_with_contact(problem, None, newton, solver, monitors)
+    response_observed(problem, newton, solver, monitors, &mut |_| {})
 }
 
-/// As [`response`], also recording the contact status of every slave point of `contact` (the
-/// problem's own contact load) at every converged step.
-pub fn response_with_contact(
-    problem: ShellProblem,
-    contact: Option<Arc<ShellContact>>,
-    newton: &NewtonSolver,
-    solver: SolverOptions,
-    monitors: &[Monitor],
-) -> Result<RunResponse, SensitivityError> {
-    response_observed(problem, contact, newton, solver, monitors, &mut |_| {})
-}
-
-/// As [`response_with_contact`]; `on_step` sees the responses so far after every converged
-/// step (to write them as the run goes).
+/// As [`response`]; `on_step` sees the responses so far after every converged step (to write
+/// them as the run goes).
 pub fn response_observed(
     problem: ShellProblem,
-    contact: Option<Arc<ShellContact>>,
     newton: &NewtonSolver,
     solver: SolverOptions,
     monitors: &[Monitor],
@@ -127,7 +114,6 @@ pub fn response_observed(
     let mut linear = LinearSolver::new(&pattern, Method::auto(&pattern), solver)?;
     let u0 = problem.state().to_vec();
     let rec = Recording {
-        contact,
         monitors,
         out: RunResponse {
             loads: Vec::new(),
@@ -157,15 +143,6 @@ pub trait Analysis {
     fn solver(&self) -> SolverOptions {
         SolverOptions::default()
     }
-    /// As [`Analysis::build`], with a handle on the problem's contact load (when there is one)
-    /// so that the runs record the contact status. Default: no contact.
-    #[allow(clippy::type_complexity)]
-    fn build_with_contact(
-        &self,
-        design: &Design,
-    ) -> Result<(ShellProblem, NewtonSolver, Option<Arc<ShellContact>>), SensitivityError> {
-        self.build(design).map(|(p, n)| (p, n, None))
-    }
 }
 
 /// One complete run of `analysis` at `design`, recording `monitors` (and the contact status).
@@ -174,8 +151,8 @@ pub fn run_at(
     design: &Design,
     monitors: &[Monitor],
 ) -> Result<RunResponse, SensitivityError> {
-    let (problem, newton, contact) = analysis.build_with_contact(design)?;
-    response_with_contact(problem, contact, &newton, analysis.solver(), monitors)
+    let (problem, newton) = analysis.build(design)?;
+    response(problem, &newton, analysis.solver(), monitors)
 }
 
 /// A re-run at `τ + h` is comparable with the nominal run only on the same load levels

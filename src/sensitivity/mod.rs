@@ -26,8 +26,10 @@ pub mod shape;
 pub mod study;
 pub mod terms;
 
+use crate::contact::RigidTool;
 use crate::geometry::Surface;
 use crate::material::{MaterialError, MaterialParams, PARAM_NAMES};
+use crate::shell::load::ContactLoad;
 use crate::shell::model::ShellModel;
 use crate::shell::problem::ShellProblem;
 use crate::shell::ShellError;
@@ -159,7 +161,8 @@ pub const TOOL_ROTATION_AXES: [&str; 3] = ["rx", "ry", "rz"];
 impl DesignKind {
     /// From a case-file key: `thickness`, `material.<name>` with `<name>` one of
     /// [`PARAM_NAMES`], `tool.<name>.<x|y|z>` (translation) or `tool.<name>.<rx|ry|rz>`
-    /// (rotation; the tool name is checked against the case's tools by [`check_tools`]).
+    /// (rotation; the tool name is checked against the case's tools by
+    /// [`DesignVariable::check`]).
     /// A `shape.<parameter>` or `tool.<name>.shape.<parameter>` key needs its surface
     /// ([`DesignKind::parse_on`], [`DesignKind::parse_with_tools`]).
     pub fn parse(key: &str) -> Result<Self, DesignError> {
@@ -215,7 +218,7 @@ impl DesignKind {
     pub fn parse_with_tools(
         key: &str,
         surface: &Surface<f64>,
-        tools: &[crate::contact::RigidTool],
+        tools: &[RigidTool],
     ) -> Result<Self, DesignError> {
         match split_tool_shape(key) {
             Some((tool, name)) => {
@@ -237,7 +240,7 @@ impl DesignKind {
 
     /// The tool-shape design variable of `tool`'s surface parameter `name` (`radius`,
     /// `cp[1][2].z`, …); an unknown name is an error listing the valid ones.
-    pub fn tool_shape(tool: &crate::contact::RigidTool, name: &str) -> Result<Self, DesignError> {
+    pub fn tool_shape(tool: &RigidTool, name: &str) -> Result<Self, DesignError> {
         match tool.surface.parameter_index(name) {
             Some(parameter) => Ok(DesignKind::ToolShape {
                 tool: tool.name.clone(),
@@ -365,7 +368,7 @@ impl DesignVariable {
 
     /// A tool-shape design variable: `tool`'s surface parameter `name`, named
     /// `<tool>.<name>` (`die.radius`).
-    pub fn tool_shape(tool: &crate::contact::RigidTool, name: &str) -> Result<Self, DesignError> {
+    pub fn tool_shape(tool: &RigidTool, name: &str) -> Result<Self, DesignError> {
         Ok(Self::new(
             format!("{}.{name}", tool.name),
             DesignKind::tool_shape(tool, name)?,
@@ -374,7 +377,7 @@ impl DesignVariable {
 
     /// Its value at `design` (a shape variable of a design without a surface, or with an
     /// index beyond its parameters, is NaN: [`DesignVariable::perturbed`] and
-    /// [`DesignVariable::validate_on`] report it as an error).
+    /// [`DesignVariable::check`] report it as an error).
     pub fn value(&self, design: &Design) -> f64 {
         match &self.kind {
             DesignKind::Thickness => design.thickness,
@@ -486,8 +489,8 @@ impl DesignVariable {
             DesignKind::ToolShape {
                 tool, parameter, ..
             } => {
-                // The perturbed surface is checked where the tool is rebuilt
-                // (`RigidTool::reshaped`, before any analysis: `check_tool_shapes`).
+                // The perturbed tool is checked where it is rebuilt (`RigidTool::reshaped`,
+                // before any analysis: `DesignVariable::check` with the tools).
                 *d.tool_offsets
                     .entry(tool.clone())
                     .or_default()
@@ -500,23 +503,27 @@ impl DesignVariable {
     }
 
     /// The one check of a design variable, against what `scope` gives: a tool variable must
-    /// name one of `scope.tools`; a shape variable needs the surface of `scope.base`; at
-    /// `scope.base` each perturbation in `deltas` must give an admissible design
-    /// ([`DesignVariable::perturbed`]) and, with `scope.model` (built on `scope.base`), a
-    /// shape variable's perturbed surface a regular normal at every particle and quadrature
-    /// point of the model (checked before any analysis, so that a re-run cannot fail on a
-    /// degenerate geometry).
+    /// name one of `scope.tools`; a shape variable needs the surface of `scope.base`; each
+    /// perturbation in `deltas` must give an admissible design at `scope.base`
+    /// ([`DesignVariable::perturbed`]), with `scope.model` (built on `scope.base`) a shape
+    /// variable's perturbed surface a regular normal at every particle and quadrature point of
+    /// the model, and a tool shape's perturbed tool a valid tool
+    /// ([`crate::contact::RigidTool::reshaped`]): checked before any analysis, so that no
+    /// re-run can fail on a degenerate geometry or tool.
     pub fn check(&self, deltas: &[f64], scope: &DesignScope<'_>) -> Result<(), DesignError> {
+        let mut tool = None;
         match &self.kind {
-            DesignKind::Tool { tool, .. }
-            | DesignKind::ToolRotation { tool, .. }
-            | DesignKind::ToolShape { tool, .. } => {
+            DesignKind::Tool { tool: name, .. }
+            | DesignKind::ToolRotation { tool: name, .. }
+            | DesignKind::ToolShape { tool: name, .. } => {
                 if let Some(tools) = scope.tools {
-                    if !tools.contains(&tool.as_str()) {
+                    tool = tools.iter().find(|t| &t.name == name);
+                    if tool.is_none() {
+                        let names: Vec<&str> = tools.iter().map(|t| t.name.as_str()).collect();
                         return Err(DesignError::UnknownTool {
                             variable: self.name.clone(),
-                            tool: tool.clone(),
-                            expected: format!("{tools:?}"),
+                            tool: name.clone(),
+                            expected: format!("{names:?}"),
                         });
                     }
                 }
@@ -528,52 +535,36 @@ impl DesignVariable {
             }
             DesignKind::Thickness | DesignKind::Material(_) => {}
         }
-        let Some(base) = scope.base else {
-            return Ok(());
-        };
+        let variable = || self.name.clone();
         for &delta in deltas {
-            let p = self.perturbed(base, delta)?;
-            if let (DesignKind::Shape { .. }, Some(s), Some(model)) =
-                (&self.kind, &p.surface, scope.model)
-            {
-                check_normals(s, model).map_err(|detail| DesignError::InvalidPerturbation {
-                    variable: self.name.clone(),
-                    delta,
-                    detail,
-                })?;
+            if let Some(base) = scope.base {
+                let p = self.perturbed(base, delta)?;
+                if let (DesignKind::Shape { .. }, Some(s), Some(model)) =
+                    (&self.kind, &p.surface, scope.model)
+                {
+                    let points = model.points.iter().map(|p| &p.uv);
+                    for uv in model.particle_uv.iter().chain(points) {
+                        s.eval(uv[0], uv[1]).normal().map_err(|source| {
+                            DesignError::DegenerateSurface {
+                                variable: variable(),
+                                delta,
+                                uv: *uv,
+                                source: Box::new(source),
+                            }
+                        })?;
+                    }
+                }
+            }
+            if let (DesignKind::ToolShape { parameter, .. }, Some(t)) = (&self.kind, tool) {
+                t.reshaped(&[(*parameter, delta)])
+                    .map_err(|source| DesignError::InvalidTool {
+                        variable: variable(),
+                        delta,
+                        source: Box::new(source),
+                    })?;
             }
         }
         Ok(())
-    }
-
-    /// [`DesignVariable::check`] against `model` built on `surface` with the perturbations
-    /// `0, ±max_delta`.
-    pub fn validate_on(
-        &self,
-        model: &ShellModel,
-        surface: &Surface<f64>,
-        max_delta: f64,
-    ) -> Result<(), DesignError> {
-        let base = Design::of_shell(model, surface);
-        let scope = DesignScope {
-            base: Some(&base),
-            model: Some(model),
-            tools: None,
-        };
-        self.check(&[0.0, max_delta, -max_delta], &scope)
-    }
-
-    /// [`DesignVariable::check`] against `model` (no surface: a shape variable is an error)
-    /// with the perturbations `0, ±max_delta` (the largest finite difference step that will be
-    /// used, 0 for the dual reference alone).
-    pub fn validate(&self, model: &ShellModel, max_delta: f64) -> Result<(), DesignError> {
-        let base = Design::of(model);
-        let scope = DesignScope {
-            base: Some(&base),
-            model: Some(model),
-            tools: None,
-        };
-        self.check(&[0.0, max_delta, -max_delta], &scope)
     }
 }
 
@@ -585,8 +576,9 @@ pub struct DesignScope<'a> {
     pub base: Option<&'a Design>,
     /// The model built on `base` (shape variables: the perturbed surface's normals).
     pub model: Option<&'a ShellModel>,
-    /// The names of the tools a tool variable may name.
-    pub tools: Option<&'a [&'a str]>,
+    /// The tools a tool variable may name, as built at `base` (the case's `[[tool]]` tables
+    /// or the problem's contact; tool shapes: the perturbed tools).
+    pub tools: Option<&'a [RigidTool]>,
 }
 
 /// The one check of a list of design variables: at least one, names not empty and unique, no
@@ -616,62 +608,6 @@ pub fn check_design(
         v.check(&deltas(i), scope)?;
     }
     Ok(())
-}
-
-/// A regular normal of `surface` at every particle and quadrature point of `model`.
-fn check_normals(surface: &Surface<f64>, model: &ShellModel) -> Result<(), String> {
-    let uvs = model
-        .particle_uv
-        .iter()
-        .chain(model.points.iter().map(|p| &p.uv));
-    for uv in uvs {
-        surface
-            .eval(uv[0], uv[1])
-            .normal()
-            .map_err(|e| format!("the perturbed surface at (u, v) = {uv:?}: {e}"))?;
-    }
-    Ok(())
-}
-
-/// [`validate_design`] for a model built on `surface` (needed by shape variables, which
-/// [`validate_design`] rejects): shape variables are checked with
-/// [`DesignVariable::validate_on`].
-pub fn validate_design_on(
-    variables: &[DesignVariable],
-    model: &ShellModel,
-    surface: &Surface<f64>,
-    max_delta: f64,
-) -> Result<(), DesignError> {
-    validate_list(variables, model, Some(surface), max_delta)
-}
-
-/// Check a list of design variables against `model`: names unique and not empty, every
-/// variable admissible under `±max_delta`, no kind listed twice (two columns of the same
-/// derivative).
-pub fn validate_design(
-    variables: &[DesignVariable],
-    model: &ShellModel,
-    max_delta: f64,
-) -> Result<(), DesignError> {
-    validate_list(variables, model, None, max_delta)
-}
-
-fn validate_list(
-    variables: &[DesignVariable],
-    model: &ShellModel,
-    surface: Option<&Surface<f64>>,
-    max_delta: f64,
-) -> Result<(), DesignError> {
-    let base = match surface {
-        Some(s) => Design::of_shell(model, s),
-        None => Design::of(model),
-    };
-    let scope = DesignScope {
-        base: Some(&base),
-        model: Some(model),
-        tools: None,
-    };
-    check_design(variables, &|_| vec![0.0, max_delta, -max_delta], &scope)
 }
 
 /// The placement and shape of one rigid tool relative to the case's
@@ -726,14 +662,6 @@ impl Design {
         }
     }
 
-    /// The surface's design parameter values (empty without a surface).
-    pub fn surface_parameters(&self) -> Vec<f64> {
-        self.surface
-            .as_ref()
-            .map(|s| s.parameter_values())
-            .unwrap_or_default()
-    }
-
     /// The translation offset of tool `name` (zero when not set).
     pub fn tool_offset(&self, name: &str) -> [f64; 3] {
         self.tool_offsets
@@ -755,84 +683,41 @@ impl Design {
     }
 }
 
-/// Check that every tool variable names one of `tools` (the case's `[[tool]]` names):
-/// [`DesignError::UnknownTool`] listing them otherwise ([`DesignVariable::check`]).
-pub fn check_tools(variables: &[DesignVariable], tools: &[&str]) -> Result<(), DesignError> {
-    let scope = DesignScope {
-        tools: Some(tools),
-        ..DesignScope::default()
-    };
-    variables.iter().try_for_each(|v| v.check(&[], &scope))
-}
-
-/// Check every tool-shape variable against `tools` (the case's tools): the tool exists and
-/// its surface, with the parameter moved by `±max_delta` (the largest finite-difference step,
-/// 0 for the derivative methods alone), is a valid tool ([`crate::contact::RigidTool::reshaped`]),
-/// so that no re-run can fail on a degenerate tool.
-pub fn check_tool_shapes(
-    variables: &[DesignVariable],
-    tools: &[crate::contact::RigidTool],
-    max_delta: f64,
-) -> Result<(), DesignError> {
-    for v in variables {
-        let DesignKind::ToolShape {
-            tool, parameter, ..
-        } = &v.kind
-        else {
-            continue;
-        };
-        let Some(t) = tools.iter().find(|t| &t.name == tool) else {
-            return Err(DesignError::UnknownTool {
-                variable: v.name.clone(),
-                tool: tool.clone(),
-                expected: format!(
-                    "{:?}",
-                    tools.iter().map(|t| t.name.as_str()).collect::<Vec<_>>()
-                ),
-            });
-        };
-        for delta in [max_delta, -max_delta] {
-            t.reshaped(&[(*parameter, delta)])
-                .map_err(|e| DesignError::InvalidPerturbation {
-                    variable: v.name.clone(),
-                    delta,
-                    detail: e.to_string(),
-                })?;
-        }
-    }
-    Ok(())
-}
-
 /// The monitors' values at the committed state of `problem` (pseudo-time `load`) and their
-/// derivatives: a displacement from the generalised displacement sensitivities `udot` (one
-/// vector per design variable, translations used), a tool force from `tool_dots`
-/// (`tool_dots()[v][tool]`, the method's derivative of the force on each tool, asked for only
-/// when a monitor needs it): `(values[m], derivatives[m][v])`.
+/// derivatives from a method's committed sensitivities `fields`: a displacement or a position
+/// functional from the displacement sensitivities `ū̇_J`, a plastic strain from `ė^p`, a tool
+/// force from the method's derivative of the forces on the tools (asked for only when a
+/// monitor needs it): `(values[m], derivatives[m][v])`.
 pub fn record_monitors(
     problem: &ShellProblem,
     load: f64,
     monitors: &[Monitor],
-    udot: &[Vec<f64>],
-    tool_dots: &mut dyn FnMut() -> Result<Vec<Vec<[f64; 3]>>, String>,
-    plastic_dots: &mut dyn FnMut() -> Vec<Vec<f64>>,
-) -> Result<(Vec<f64>, Vec<Vec<f64>>), String> {
+    fields: &dyn SensitivityFields,
+) -> Result<(Vec<f64>, Vec<Vec<f64>>), MonitorError> {
     let model = &problem.model;
+    let nv = fields.n_variables();
+    let udot: Vec<Vec<f64>> = (0..nv).map(|v| fields.translations(model, v)).collect();
     let mut values = Vec::with_capacity(monitors.len());
-    let mut derivatives = vec![vec![0.0; udot.len()]; monitors.len()];
+    let mut derivatives = vec![vec![0.0; nv]; monitors.len()];
     let mut tools: Option<Vec<Vec<[f64; 3]>>> = None;
     let mut plastic: Option<Vec<Vec<f64>>> = None;
     let mut forces = None;
     for (mi, m) in monitors.iter().enumerate() {
-        values.push(
-            m.value_with(problem, load, &mut forces)
-                .map_err(|e| e.to_string())?,
-        );
+        values.push(m.value_with(problem, load, &mut forces)?);
+        let model_err = |source| MonitorError::Model {
+            label: m.label.clone(),
+            source,
+        };
+        let missing = |what: &str, variable| MonitorError::NoDerivative {
+            label: m.label.clone(),
+            what: what.to_string(),
+            variable,
+        };
         match &m.quantity {
             Quantity::Displacement { uv, component } => {
                 for (v, ud) in udot.iter().enumerate() {
-                    derivatives[mi][v] = model
-                        .interpolate_translation(*uv, ud)
-                        .map_err(|e| e.to_string())?[*component];
+                    derivatives[mi][v] =
+                        model.interpolate_translation(*uv, ud).map_err(model_err)?[*component];
                 }
             }
             q @ (Quantity::ChordAngle { .. } | Quantity::TargetDistance { .. }) => {
@@ -841,7 +726,7 @@ pub fn record_monitors(
                     .iter()
                     .map(|uv| model.displacement_at(*uv))
                     .collect::<Result<_, _>>()
-                    .map_err(|e| e.to_string())?;
+                    .map_err(model_err)?;
                 for (v, ud) in udot.iter().enumerate() {
                     let seeded: Vec<Vector3<crate::scalar::Dual>> = pts
                         .iter()
@@ -851,8 +736,8 @@ pub fn record_monitors(
                             Ok(ui.zip_map(&d, crate::scalar::Dual::new))
                         })
                         .collect::<Result<_, ShellError>>()
-                        .map_err(|e| e.to_string())?;
-                    derivatives[mi][v] = position_functional(q, &seeded).map_or(0.0, |x| x.eps);
+                        .map_err(model_err)?;
+                    derivatives[mi][v] = m.functional(&seeded)?.eps;
                 }
             }
             Quantity::PlasticStrain {
@@ -861,14 +746,12 @@ pub fn record_monitors(
                 rho,
             } => {
                 let idx = layer_points(model, region, *layers);
-                let dots = plastic.get_or_insert_with(&mut *plastic_dots);
+                let dots = plastic
+                    .get_or_insert_with(|| (0..nv).map(|v| fields.plastic_strain(v)).collect());
                 for (v, d) in derivatives[mi].iter_mut().enumerate() {
-                    let ev = dots.get(v).ok_or_else(|| {
-                        format!(
-                            "monitor `{}`: no plastic strain rates for design variable {v}",
-                            m.label
-                        )
-                    })?;
+                    let ev = dots
+                        .get(v)
+                        .ok_or_else(|| missing("plastic strain rates", v))?;
                     let x: Vec<crate::scalar::Dual> = idx
                         .iter()
                         .map(|&k| crate::scalar::Dual::new(model.history[k].material.eps_p, ev[k]))
@@ -877,7 +760,7 @@ pub fn record_monitors(
                 }
             }
             Quantity::Thinning { region, rho } => {
-                let idx = m.region_points(model, region).map_err(|e| e.to_string())?;
+                let idx = m.region_points(model, region)?;
                 for (v, ud) in udot.iter().enumerate() {
                     let x: Vec<crate::scalar::Dual> = idx
                         .iter()
@@ -892,52 +775,28 @@ pub fn record_monitors(
                 }
             }
             Quantity::ToolForce { tool, component } => {
-                let i = tool_index(problem, tool).map_err(|e| e.to_string())?;
+                let i = m.tool_index(problem, tool)?;
                 if tools.is_none() {
-                    tools = Some(tool_dots()?);
+                    let dots = fields.tool_force_dots(problem, load).map_err(|e| {
+                        MonitorError::ToolRates {
+                            label: m.label.clone(),
+                            source: Box::new(e),
+                        }
+                    })?;
+                    tools = Some(dots);
                 }
                 let dots = tools.as_deref().unwrap_or_default();
                 for (v, d) in derivatives[mi].iter_mut().enumerate() {
                     *d = dots
                         .get(v)
                         .and_then(|per_tool| per_tool.get(i))
-                        .ok_or_else(|| {
-                            format!(
-                                "monitor `{}`: no force derivative of tool `{tool}` for design \
-                                 variable {v}",
-                                m.label
-                            )
-                        })?[*component];
+                        .ok_or_else(|| missing(&format!("force derivative of tool `{tool}`"), v))?
+                        [*component];
                 }
             }
         }
     }
     Ok((values, derivatives))
-}
-
-/// The index of the tool `name` in the problem's contact load.
-fn tool_index(problem: &ShellProblem, name: &str) -> Result<usize, ShellError> {
-    let contact = problem
-        .loads()
-        .iter()
-        .find_map(|l| l.contact())
-        .ok_or_else(|| {
-            ShellError::InvalidInput(format!(
-                "the force on tool `{name}`: the problem has no contact (expected a case with \
-                 [[tool]] tables)"
-            ))
-        })?;
-    let names: Vec<&str> = contact
-        .contact
-        .tools()
-        .iter()
-        .map(|t| t.name.as_str())
-        .collect();
-    names.iter().position(|n| *n == name).ok_or_else(|| {
-        ShellError::InvalidInput(format!(
-            "the force on tool `{name}`: no such tool (expected one of {names:?})"
-        ))
-    })
 }
 
 /// What a monitor measures.
@@ -1341,12 +1200,12 @@ impl Monitor {
         Ok(Monitor { label, quantity })
     }
 
-    /// The quadrature points in `region` ([`region_points`]), or [`Monitor::empty_region`].
+    /// The quadrature points in `region` ([`region_points`]), none an error.
     fn region_points(
         &self,
         model: &ShellModel,
         region: &[[f64; 2]; 2],
-    ) -> Result<Vec<usize>, ShellError> {
+    ) -> Result<Vec<usize>, MonitorError> {
         let idx = region_points(model, region);
         if idx.is_empty() {
             return Err(self.empty_region(region));
@@ -1355,18 +1214,42 @@ impl Monitor {
     }
 
     /// The error of a region without quadrature points.
-    fn empty_region(&self, region: &[[f64; 2]; 2]) -> ShellError {
-        ShellError::InvalidInput(format!(
-            "monitor `{}`: no quadrature point in the region {region:?}: expected a parameter \
-             box containing at least one",
-            self.label
-        ))
+    fn empty_region(&self, region: &[[f64; 2]; 2]) -> MonitorError {
+        MonitorError::EmptyRegion {
+            label: self.label.clone(),
+            region: *region,
+        }
+    }
+
+    /// The index of the tool `name` in the problem's contact load.
+    fn tool_index(&self, problem: &ShellProblem, name: &str) -> Result<usize, MonitorError> {
+        let (label, tool) = (self.label.clone(), name.to_string());
+        let Some(contact) = contact_load(problem) else {
+            return Err(MonitorError::NoContact { label, tool });
+        };
+        let names = contact.contact.tools().iter().map(|t| t.name.as_str());
+        names
+            .clone()
+            .position(|n| n == name)
+            .ok_or_else(|| MonitorError::UnknownTool {
+                label,
+                tool,
+                expected: names.map(str::to_string).collect(),
+            })
+    }
+
+    /// The value of a position functional ([`position_functional`]) from the displacements
+    /// `u` at its points.
+    fn functional<T: crate::scalar::Real>(&self, u: &[Vector3<T>]) -> Result<T, MonitorError> {
+        position_functional(&self.quantity, u).ok_or_else(|| MonitorError::NotAFunctional {
+            label: self.label.clone(),
+        })
     }
 
     /// Its committed value in `problem` at pseudo-time `load` (the load factor of the
     /// converged step: the tools' position along their paths). Several monitors:
     /// [`monitor_values`], which evaluates the contact once for all tool forces.
-    pub fn value(&self, problem: &ShellProblem, load: f64) -> Result<f64, ShellError> {
+    pub fn value(&self, problem: &ShellProblem, load: f64) -> Result<f64, MonitorError> {
         self.value_with(problem, load, &mut None)
     }
 
@@ -1377,18 +1260,24 @@ impl Monitor {
         problem: &ShellProblem,
         load: f64,
         tools: &mut Option<Vec<[f64; 3]>>,
-    ) -> Result<f64, ShellError> {
+    ) -> Result<f64, MonitorError> {
         let model = &problem.model;
+        let model_err = |source| MonitorError::Model {
+            label: self.label.clone(),
+            source,
+        };
         match &self.quantity {
-            Quantity::Displacement { uv, component } => Ok(model.displacement_at(*uv)?[*component]),
+            Quantity::Displacement { uv, component } => {
+                Ok(model.displacement_at(*uv).map_err(model_err)?[*component])
+            }
             q @ (Quantity::ChordAngle { .. } | Quantity::TargetDistance { .. }) => {
                 let u: Vec<Vector3<f64>> = q
                     .functional_points()
                     .iter()
                     .map(|uv| model.displacement_at(*uv))
-                    .collect::<Result<_, _>>()?;
-                position_functional(q, &u)
-                    .ok_or_else(|| ShellError::InvalidInput("not a position functional".into()))
+                    .collect::<Result<_, _>>()
+                    .map_err(model_err)?;
+                self.functional(&u)
             }
             Quantity::PlasticStrain {
                 region,
@@ -1413,14 +1302,24 @@ impl Monitor {
                 Ok(smooth_max(&x, *rho))
             }
             Quantity::ToolForce { tool, component } => {
-                let i = tool_index(problem, tool)?;
+                let i = self.tool_index(problem, tool)?;
                 if tools.is_none() {
-                    *tools = Some(tool_forces(problem, load)?);
+                    *tools = Some(tool_forces(problem, load).map_err(model_err)?);
                 }
                 Ok(tools.as_deref().unwrap_or_default()[i][*component])
             }
         }
     }
+}
+
+/// The problem's (first) contact load, the one the methods carry.
+pub(crate) fn contact_load(problem: &ShellProblem) -> Option<&ContactLoad> {
+    problem.loads().iter().find_map(|l| l.contact())
+}
+
+/// The tools of [`contact_load`], none without one.
+pub(crate) fn contact_tools(problem: &ShellProblem) -> &[RigidTool] {
+    contact_load(problem).map_or(&[], |c| c.contact.tools())
 }
 
 /// The committed values of `monitors` in `problem` at pseudo-time `load` (the contact
@@ -1429,7 +1328,7 @@ pub fn monitor_values(
     problem: &ShellProblem,
     load: f64,
     monitors: &[Monitor],
-) -> Result<Vec<f64>, ShellError> {
+) -> Result<Vec<f64>, MonitorError> {
     let mut tools = None;
     monitors
         .iter()
@@ -1441,7 +1340,7 @@ pub fn monitor_values(
 /// and pseudo-time `load` (`[tool][component]`, empty without contact).
 fn tool_forces(problem: &ShellProblem, load: f64) -> Result<Vec<[f64; 3]>, ShellError> {
     let model = &problem.model;
-    match problem.loads().iter().find_map(|l| l.contact()) {
+    match contact_load(problem) {
         None => Ok(Vec::new()),
         Some(c) => Ok(c
             .contact
@@ -1451,6 +1350,77 @@ fn tool_forces(problem: &ShellProblem, load: f64) -> Result<Vec<[f64; 3]>, Shell
             .map(|t| t.force)
             .collect()),
     }
+}
+
+/// Why a monitor could not be evaluated or differentiated. Each names the monitor.
+#[derive(Debug, Error)]
+pub enum MonitorError {
+    /// No quadrature point (or layer point) in the monitor's parameter box.
+    #[error(
+        "monitor `{label}`: no quadrature point in the region {region:?}: expected a parameter \
+         box containing at least one"
+    )]
+    EmptyRegion {
+        /// Monitor label.
+        label: String,
+        /// `[[u_min, u_max], [v_min, v_max]]`.
+        region: [[f64; 2]; 2],
+    },
+    /// The force on a tool of a problem without contact.
+    #[error(
+        "monitor `{label}`: the force on tool `{tool}`: the problem has no contact (expected a \
+         case with [[tool]] tables)"
+    )]
+    NoContact {
+        /// Monitor label.
+        label: String,
+        /// The tool named.
+        tool: String,
+    },
+    /// The force on a tool the contact does not have.
+    #[error("monitor `{label}`: the force on tool `{tool}`: no such tool (expected one of {expected:?})")]
+    UnknownTool {
+        /// Monitor label.
+        label: String,
+        /// The tool named.
+        tool: String,
+        /// The contact's tools.
+        expected: Vec<String>,
+    },
+    /// A position functional's formula asked of another quantity.
+    #[error("monitor `{label}`: not a position functional")]
+    NotAFunctional {
+        /// Monitor label.
+        label: String,
+    },
+    /// A method's sensitivities lack a rate the monitor's derivative needs.
+    #[error("monitor `{label}`: no {what} for design variable {variable}")]
+    NoDerivative {
+        /// Monitor label.
+        label: String,
+        /// The rate missing.
+        what: String,
+        /// The design variable's index.
+        variable: usize,
+    },
+    /// Evaluating the model (an interpolation, the contact's report).
+    #[error("monitor `{label}`: {source}")]
+    Model {
+        /// Monitor label.
+        label: String,
+        /// Why.
+        #[source]
+        source: ShellError,
+    },
+    /// The method's derivatives of the forces on the tools.
+    #[error("monitor `{label}`: the derivatives of the forces on the tools: {source}")]
+    ToolRates {
+        /// Monitor label.
+        label: String,
+        /// Why.
+        #[source]
+        source: Box<dual::SensitivityError>,
+    },
 }
 
 /// Errors of design variables and sensitivity runs. Each names the variable or field concerned.
@@ -1516,7 +1486,7 @@ pub enum DesignError {
         name: String,
     },
     /// A shape design variable checked without the surface it belongs to.
-    #[error("shape design variable `shape.{name}`: needs the shell's surface (use DesignKind::parse_on, validate_design_on, Design::of_shell)")]
+    #[error("shape design variable `shape.{name}`: needs the shell's surface (use DesignKind::parse_on, Design::of_shell)")]
     ShapeWithoutSurface {
         /// The parameter name.
         name: String,
@@ -1548,6 +1518,34 @@ pub enum DesignError {
         delta: f64,
         /// What is violated.
         detail: String,
+    },
+    /// A shape perturbation whose surface has no regular normal at a point of the model.
+    #[error(
+        "design variable `{variable}` perturbed by {delta}: the perturbed surface at (u, v) = \
+         {uv:?}: {source}"
+    )]
+    DegenerateSurface {
+        /// Variable name.
+        variable: String,
+        /// The perturbation.
+        delta: f64,
+        /// The point's parameter coordinates.
+        uv: [f64; 2],
+        /// Why the normal is undefined.
+        #[source]
+        source: Box<crate::geometry::GeometryError>,
+    },
+    /// A tool-shape perturbation that leaves no valid tool
+    /// ([`crate::contact::RigidTool::reshaped`]).
+    #[error("design variable `{variable}` perturbed by {delta}: {source}")]
+    InvalidTool {
+        /// Variable name.
+        variable: String,
+        /// The perturbation.
+        delta: f64,
+        /// Why the tool is invalid.
+        #[source]
+        source: Box<crate::contact::ContactError>,
     },
     /// A monitor that cannot be evaluated.
     #[error("monitor `{label}`: {detail}")]
@@ -1606,60 +1604,14 @@ pub trait SensitivityFields: std::fmt::Debug {
     fn translations(&self, model: &ShellModel, v: usize) -> Vec<f64>;
     /// `ⁿė^p` of every layer point for variable `v`, point-major as `ShellModel::history`.
     fn plastic_strain(&self, v: usize) -> Vec<f64>;
-}
-
-impl SensitivityFields for continuum::ContinuumDsa {
-    fn n_variables(&self) -> usize {
-        self.states().len()
-    }
-    fn translations(&self, model: &ShellModel, v: usize) -> Vec<f64> {
-        let mut q = vec![0.0; model.n_dofs()];
-        for (i, p) in self.states()[v].particles.iter().enumerate() {
-            for c in 0..3 {
-                q[crate::shell::point::DOFS_PER_PARTICLE * i + c] = p.u[c];
-            }
-        }
-        q
-    }
-    fn plastic_strain(&self, v: usize) -> Vec<f64> {
-        self.states()[v]
-            .history
-            .iter()
-            .map(|h| h.material.eps_p)
-            .collect()
-    }
-}
-
-impl<D: dual::DesignDual> SensitivityFields for dual::DualDsa<D> {
-    fn n_variables(&self) -> usize {
-        self.variables().len()
-    }
-    fn translations(&self, model: &ShellModel, v: usize) -> Vec<f64> {
-        let mut q = vec![0.0; model.n_dofs()];
-        if let Some(g) = self
-            .groups()
-            .iter()
-            .find(|g| (g.first..g.first + g.count).contains(&v))
-        {
-            for (i, p) in g.particles.iter().enumerate() {
-                for c in 0..3 {
-                    q[crate::shell::point::DOFS_PER_PARTICLE * i + c] = p.u[c].part(v - g.first);
-                }
-            }
-        }
-        q
-    }
-    fn plastic_strain(&self, v: usize) -> Vec<f64> {
-        self.groups()
-            .iter()
-            .find(|g| (g.first..g.first + g.count).contains(&v))
-            .map_or_else(Vec::new, |g| {
-                g.history
-                    .iter()
-                    .map(|h| h.material.eps_p.part(v - g.first))
-                    .collect()
-            })
-    }
+    /// The derivatives of the forces the sheet exerts on the tools of `problem`'s contact at
+    /// its committed state and pseudo-time `load`, `[variable][tool]` (no tools without
+    /// contact).
+    fn tool_force_dots(
+        &self,
+        problem: &ShellProblem,
+        load: f64,
+    ) -> Result<Vec<Vec<[f64; 3]>>, dual::SensitivityError>;
 }
 
 /// One analysis of `problem` observed by the derivative methods of `methods`: the continuum

@@ -24,7 +24,7 @@ use crate::shell::contact::ShellContact;
 use crate::shell::model::ShellModel;
 use crate::shell::problem::ShellProblem;
 use crate::solver::observe::RewriteSchedule;
-use crate::solver::NewtonSolver;
+use crate::solver::{Failure, NewtonSolver};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use thiserror::Error;
@@ -106,14 +106,6 @@ pub enum DsaError {
         /// The plain analysis'.
         nominal: Vec<f64>,
     },
-    /// `--terms STEP` beyond the converged steps of the plain analysis.
-    #[error("--terms {step}: expected a converged load step in 1..={steps}")]
-    StepOutOfRange {
-        /// The step asked for.
-        step: usize,
-        /// Converged steps of the plain analysis.
-        steps: usize,
-    },
 }
 
 /// The analysis replaying given load levels: every level is a stop of the load stepping and
@@ -127,20 +119,14 @@ struct Replay<'a> {
 
 impl Analysis for Replay<'_> {
     fn build(&self, design: &Design) -> Result<(ShellProblem, NewtonSolver), SensitivityError> {
-        self.build_with_contact(design).map(|(p, n, _)| (p, n))
-    }
-    fn solver(&self) -> crate::solver::SolverOptions {
-        self.analysis.solver()
-    }
-    fn build_with_contact(
-        &self,
-        design: &Design,
-    ) -> Result<(ShellProblem, NewtonSolver, Option<Arc<ShellContact>>), SensitivityError> {
-        let (problem, mut newton, contact) = self.analysis.build_with_contact(design)?;
+        let (problem, mut newton) = self.analysis.build(design)?;
         newton.stepping.stops = self.levels.clone();
         newton.stepping.initial_step = newton.stepping.max_step;
         newton.stepping.stop_failure = crate::solver::StopFailure::Continuation;
-        Ok((problem, newton, contact))
+        Ok((problem, newton))
+    }
+    fn solver(&self) -> crate::solver::SolverOptions {
+        self.analysis.solver()
     }
 }
 
@@ -156,7 +142,7 @@ pub trait StepWriter {
         &mut self,
         contact: Option<Arc<ShellContact>>,
         variables: Vec<String>,
-    ) -> Result<(), String>;
+    ) -> Result<(), Failure>;
     /// Whether converged step `step` (1-based) at `load` is written.
     fn due(&self, step: usize, load: f64) -> bool;
     /// Write step `step` at `load` of `model` with the methods' committed sensitivities
@@ -165,7 +151,7 @@ pub trait StepWriter {
     /// Time spent writing so far.
     fn time(&self) -> Duration;
     /// The first error writing, if any.
-    fn error(&self) -> Option<&str>;
+    fn error(&self) -> Option<&Failure>;
     /// The files written so far.
     fn written(&self) -> &[VtuStep];
 }
@@ -370,7 +356,7 @@ pub fn run(
 /// [`RewriteSchedule`]), after each of those runs, after every finite-difference step size of
 /// every variable, and before an error of the plain analysis is returned (with its converged
 /// steps). With `need_step`, a plain analysis with fewer converged steps is an error
-/// before the methods run ([`DsaError::StepOutOfRange`]).
+/// before the methods run ([`SensitivityError::StepOutOfRange`]).
 ///
 /// The checks and the plain analysis are all or nothing: an error there is returned. After it,
 /// a failed method or re-run is recorded in [`DsaResult::failures`] (naming the method, the
@@ -403,11 +389,11 @@ pub fn run_with_output(
 
     // (1) The plain analysis.
     let t = Instant::now();
-    let (problem, newton, contact) = analysis.build_with_contact(base)?;
-    let with_contact = contact.is_some();
+    let (problem, newton) = analysis.build(base)?;
+    let with_contact = super::contact_load(&problem).is_some();
     // The design variables at the nominal design and every finite-difference design (shape:
-    // the perturbed surface with a regular normal at every particle and point of the model)
-    // are checked before the analysis.
+    // the perturbed surface with a regular normal at every particle and point of the model;
+    // tool shape: a valid perturbed tool) are checked before the analysis.
     let fd = spec.methods.contains(&DsaMethod::Fd);
     let deltas = |i: usize| {
         let steps = match fd {
@@ -421,7 +407,7 @@ pub fn run_with_output(
     let scope = DesignScope {
         base: Some(base),
         model: Some(&problem.model),
-        tools: None,
+        tools: Some(super::contact_tools(&problem)),
     };
     check_design(&vars, &deltas, &scope).map_err(SensitivityError::from)?;
     let mut result = DsaResult {
@@ -460,17 +446,10 @@ pub fn run_with_output(
         vtu_error: None,
     };
     let mut schedule = RewriteSchedule::starting(Instant::now());
-    let run = fd::response_observed(
-        problem,
-        contact,
-        &newton,
-        analysis.solver(),
-        monitors,
-        &mut |r| {
-            extend_response(&mut result.nominal, r);
-            update_if_due(update, &mut schedule, &result, r.loads.len());
-        },
-    );
+    let run = fd::response_observed(problem, &newton, analysis.solver(), monitors, &mut |r| {
+        extend_response(&mut result.nominal, r);
+        update_if_due(update, &mut schedule, &result, r.loads.len());
+    });
     result.time_analysis = t.elapsed().as_secs_f64();
     match run {
         Ok(nominal) => result.nominal = nominal,
@@ -486,10 +465,8 @@ pub fn run_with_output(
         result.time_analysis
     ));
     if let Some(step) = need_step.filter(|&s| s == 0 || s > result.nominal.loads.len()) {
-        return Err(DsaError::StepOutOfRange {
-            step,
-            steps: result.nominal.loads.len(),
-        });
+        let steps = Some(result.nominal.loads.len());
+        return Err(SensitivityError::StepOutOfRange { step, steps }.into());
     }
     update(&result);
     let nominal = result.nominal.clone();
@@ -544,10 +521,11 @@ pub fn run_with_output(
     let mut vtu_before_run = 0.0;
     let (continuum_run, dual_run) = if want_continuum || want_dual {
         let mut schedule = RewriteSchedule::starting(Instant::now());
-        let built = analysis.build_with_contact(base).map_err(DsaError::from);
-        if let (Some(w), Ok((problem, _, contact))) = (writer, &built) {
+        let built = analysis.build(base).map_err(DsaError::from);
+        if let (Some(w), Ok((problem, _))) = (writer, &built) {
             let names = vars.iter().map(|v| v.name.clone()).collect();
-            match w.open(contact.clone(), names) {
+            let contact = super::contact_load(problem).map(|c| c.contact.clone());
+            match w.open(contact, names) {
                 Ok(()) => {
                     let zero: Vec<_> = method_names.iter().map(|m| (*m, None)).collect();
                     w.write(0, 0.0, &problem.model, &zero);
@@ -555,10 +533,10 @@ pub fn run_with_output(
                     vtu_before_run = w.time().as_secs_f64();
                     vtu = Some(w);
                 }
-                Err(e) => result.vtu_error = Some(e),
+                Err(e) => result.vtu_error = Some(e.to_string()),
             }
         }
-        let runs = built.and_then(|(problem, newton, _)| {
+        let runs = built.and_then(|(problem, newton)| {
             run_hooked(
                 problem,
                 surface,
@@ -625,7 +603,7 @@ pub fn run_with_output(
         .map_or(0.0, |w| w.time().as_secs_f64() - vtu_before_run);
     if let Some(w) = vtu {
         result.time_vtu = Some(w.time().as_secs_f64());
-        result.vtu_error = w.error().map(str::to_string);
+        result.vtu_error = w.error().map(Failure::to_string);
         result.vtu = w.written().to_vec();
     }
 
@@ -904,7 +882,7 @@ pub fn terms(
     spec: &DsaSpec,
     step: usize,
 ) -> Result<Vec<TermBreakdown>, DsaError> {
-    let (problem, newton, _) = analysis.build_with_contact(base)?;
+    let (problem, newton) = analysis.build(base)?;
     let vars: Vec<DesignVariable> = spec.design.iter().map(|d| d.variable.clone()).collect();
     Ok(breakdown(
         problem,

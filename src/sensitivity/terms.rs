@@ -535,11 +535,7 @@ pub fn breakdown(
     step: usize,
 ) -> Result<Vec<TermBreakdown>, SensitivityError> {
     if step == 0 {
-        return Err(SensitivityError::Shell(
-            crate::shell::ShellError::InvalidInput(
-                "--terms 0: expected a converged step number ≥ 1".into(),
-            ),
-        ));
+        return Err(SensitivityError::StepOutOfRange { step, steps: None });
     }
     let pattern = problem.pattern().clone();
     let mut linear = LinearSolver::new(&pattern, crate::solver::Method::auto(&pattern), solver)?;
@@ -556,12 +552,11 @@ pub fn breakdown(
         .run(&mut p, &pattern, &mut linear, &u0)
         .map_err(SensitivityError::Newton)?;
     if p.observer.out.is_empty() {
-        return Err(SensitivityError::Shell(
-            crate::shell::ShellError::InvalidInput(format!(
-                "--terms {step}: the analysis has {} converged steps",
-                report.attempts.iter().filter(|a| a.converged).count()
-            )),
-        ));
+        let steps = report.attempts.iter().filter(|a| a.converged).count();
+        return Err(SensitivityError::StepOutOfRange {
+            step,
+            steps: Some(steps),
+        });
     }
     Ok(p.observer.out)
 }
