@@ -259,9 +259,8 @@ pub fn gauge_modes(model: &ShellModel) -> Vec<GaugeMode> {
                 };
                 let e = &mut fields[slot];
                 let s = pos(ij[a]);
-                for c in 0..DIRECTIONS {
+                for (c, &[a1, a2]) in alpha[src].iter().enumerate() {
                     let ut: Vector3<f64> = q.column(c).into();
-                    let [a1, a2] = alpha[src][c];
                     let ur = (st.e[0] * a1 + st.e[1] * a2).cross(&st.d) * det;
                     for k in 0..ENVELOPES {
                         let env = legendre(k, s);
