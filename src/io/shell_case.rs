@@ -946,7 +946,7 @@ fn integration_warning(kernel: &KernelSpec, integration: &IntegrationSpec) -> Op
     })
 }
 
-/// A support within [`RESONANT_SUPPORT_BAND`] spacings of a multiple of 4: the cubic B-spline
+/// A support within [`crate::shell::gauge::RESONANT_SUPPORT_BAND`] spacings of a multiple of 4: the cubic B-spline
 /// kernel of half-width `a` has knots `a/2` apart, so its Fourier transform (`sinc⁴`) vanishes
 /// at the two-spacing wavelength when `a` is a multiple of 4 spacings. A coefficient field
 /// alternating from particle to particle then passes (almost) nothing to the RK approximation:
@@ -958,23 +958,20 @@ fn integration_warning(kernel: &KernelSpec, integration: &IntegrationSpec) -> Op
 /// (docs/stability.md §6).
 fn resonance_warning(kernel: &KernelSpec) -> Option<String> {
     let k = (kernel.support / 4.0).round();
-    (k >= 1.0 && (kernel.support - 4.0 * k).abs() <= RESONANT_SUPPORT_BAND).then(|| {
+    crate::shell::gauge::resonant(kernel.support).then(|| {
         format!(
-            "`kernel.support` = {} spacings is within {RESONANT_SUPPORT_BAND} of {}: there the \
+            "`kernel.support` = {} spacings is within {} of {}: there the \
              cubic B-spline kernel passes (almost) no field that alternates from particle to \
              particle, a mode only edges resist; between symmetry planes on opposite edges the \
              run fixes such coefficient modes by constraint rows, and any it does not find leave \
              the tangent singular (docs/stability.md); a support away from multiples of 4 \
              spacings, e.g. 3.5 or 4.5, avoids both",
             kernel.support,
+            crate::shell::gauge::RESONANT_SUPPORT_BAND,
             4.0 * k
         )
     })
 }
-
-/// How close (in spacings) to a multiple of 4 a support draws [`resonance_warning`]: 4 ± 0.1
-/// were singular with symmetry planes on opposite edges, 3.8 and 4.2 were not.
-const RESONANT_SUPPORT_BAND: f64 = 0.15;
 
 /// Warnings about geometry outside the regime of the shell model: a thickness not small
 /// against the smallest radius of curvature (sampled on a 9 × 9 grid of the parameter box) or
