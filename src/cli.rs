@@ -668,6 +668,18 @@ fn run_shell(con: &Console, c: &ShellCase, out: &Path, quiet: bool) -> i32 {
             .len(),
         start.elapsed().as_secs_f64()
     );
+    let gauge = built.problem.gauge_modes();
+    if !gauge.is_empty() {
+        say!(
+            con,
+            "{} coefficient mode(s) invisible to the field (patterns alternating from particle \
+             to particle between symmetry planes, support near a multiple of 4 spacings; largest \
+             field transfer {:.1e}) fixed by one zero-valued constraint row each \
+             (docs/stability.md)",
+            gauge.len(),
+            gauge.iter().map(|m| m.transfer).fold(0.0, f64::max)
+        );
+    }
     report_lines(con, crate::io::shell_report(c));
     let bar = (!quiet && std::io::stdout().is_terminal()).then(|| {
         let b = indicatif::ProgressBar::new(1000);

@@ -2,11 +2,49 @@
 //! Fourier transform (`sinc⁴` with knots half a support apart) vanishes at the wavelength of two
 //! particle spacings, so a coefficient field alternating from particle to particle passes no
 //! displacement and no strain to the RK approximation (docs/stability.md §6). With symmetry
-//! planes on both `u` edges (the quarter hemisphere) that field is a zero-energy mode and the
-//! tangent is singular; `shelldsa` warns about such supports when it reads the case.
+//! planes on both `u` edges (the quarter hemisphere) that field is a zero-energy mode; the
+//! problem finds such coefficient modes (`shell::gauge`) and fixes each by a constraint row.
 use shelldsa::io::shell_build::build;
-use shelldsa::io::shell_case::parse_shell_case;
+use shelldsa::io::shell_case::{parse_shell_case, ShellCase};
+use shelldsa::solver::{LinearSolver, Method, NonlinearProblem, SolverOptions};
 use std::path::Path;
+
+/// The shipped linear hemisphere with `support` (and, with `unfix`, without its one `uz`
+/// restraint: a rigid translation left free).
+fn hemisphere_case(support: &str, unfix: bool) -> ShellCase {
+    let path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("verification/hemisphere-linear/case.toml");
+    let mut text = std::fs::read_to_string(&path).unwrap();
+    let old = "support = 3.0 ";
+    assert_eq!(text.matches(old).count(), 1);
+    text = text.replace(old, &format!("support = {support} "));
+    if unfix {
+        let from = text
+            .find("[[boundary]]                        # remove the rigid")
+            .unwrap();
+        let to = text.find("# Loads at load factor 1").unwrap();
+        text.replace_range(from..to, "");
+    }
+    parse_shell_case(&text, &path).unwrap()
+}
+
+/// Run the case; `Ok((δ_A / P, gauge rows))` with the radial displacement at A per unit
+/// load, or the driver's error text.
+fn radial_at_a(case: &ShellCase) -> Result<(f64, usize), String> {
+    let mut built = build(case).unwrap();
+    let gauge = built.problem.gauge_modes().len();
+    let pattern = built.problem.pattern().clone();
+    let mut solver =
+        LinearSolver::new(&pattern, Method::auto(&pattern), SolverOptions::default()).unwrap();
+    let n = built.problem.n_dofs();
+    built
+        .newton
+        .run(&mut built.problem, &pattern, &mut solver, &vec![0.0; n])
+        .map_err(|e| e.to_string())?;
+    let u = built.problem.model.displacement_at([0.0, 0.0]).unwrap();
+    // P = 1e-3 along +x at A = (R, 0, 0): the radial displacement is u_x.
+    Ok((u[0] / 1e-3, gauge))
+}
 
 /// The h·gradient transfer (`ShellModel::coefficient_transfer`) of `u_z = (−1)^i` along `u`
 /// (particle grid index `i`) on the shipped linear hemisphere with the support changed.
@@ -46,4 +84,40 @@ fn supports_of_four_and_eight_spacings_pass_no_alternating_field() {
     assert!(t45 > 1e-3, "support 4.5: {t45}");
     assert!(t4 < 1e-8, "support 4: {t4}");
     assert!(t8 < 1e-8, "support 8: {t8}");
+}
+
+/// Support 4 between the two symmetry planes: the alternating coefficient modes are fixed by
+/// rows and the run converges to the field of the neighbouring supports. Measured (17 × 17,
+/// 2 × 2 Gauss points, second-order VCI): δ_A/P = 0.090621 at support 3.8 (no rows), 0.091392
+/// at 4 (70 rows), 0.091607 at 4.2 (no rows); MacNeal–Harder's 0.0935 (README) is −2.3 % away
+/// at 4, as it is −3.1 % at 3.8: larger supports over-smooth on this grid. The bound 1 %
+/// against support 3.8 is the task's requirement; the measured gap is 0.85 %, and 3.8 and
+/// 4.2 differ by 1.1 % between themselves, so the bound checks that 4 lies with them, not
+/// more.
+#[test]
+fn support_four_between_symmetry_planes_runs() {
+    let (d38, g38) = radial_at_a(&hemisphere_case("3.8", false)).unwrap();
+    let (d4, g4) = radial_at_a(&hemisphere_case("4.0", false)).unwrap();
+    println!("δ_A/P: support 3.8 {d38:.6} ({g38} rows), 4 {d4:.6} ({g4} rows)");
+    assert_eq!(g38, 0, "support 3.8 needs no rows");
+    assert!(
+        g4 >= 17,
+        "support 4: {g4} rows, expected at least one per line along u (17)"
+    );
+    assert!(
+        ((d4 - d38) / d38).abs() < 0.01,
+        "support 4 gives {d4}, support 3.8 {d38}"
+    );
+}
+
+/// A model that is singular for a reason other than the kernel (the rigid translation in z
+/// left free) still fails at support 4, the rows notwithstanding, with a message naming the
+/// particle and the component of the offending unknown.
+#[test]
+fn support_four_with_a_missing_support_still_fails_naming_the_dof() {
+    let err = radial_at_a(&hemisphere_case("4.0", true)).unwrap_err();
+    println!("{err}");
+    assert!(err.contains("singular"), "{err}");
+    assert!(err.contains("is particle "), "{err}");
+    assert!(err.contains("component ū_z"), "{err}");
 }

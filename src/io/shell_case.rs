@@ -946,7 +946,7 @@ fn integration_warning(kernel: &KernelSpec, integration: &IntegrationSpec) -> Op
     })
 }
 
-/// A support within [`RESONANT_SUPPORT_BAND`] spacings of a multiple of 4: the cubic B-spline
+/// A support within [`crate::shell::gauge::RESONANT_SUPPORT_BAND`] spacings of a multiple of 4: the cubic B-spline
 /// kernel of half-width `a` has knots `a/2` apart, so its Fourier transform (`sinc⁴`) vanishes
 /// at the two-spacing wavelength when `a` is a multiple of 4 spacings. A coefficient field
 /// alternating from particle to particle then passes (almost) nothing to the RK approximation:
@@ -954,26 +954,24 @@ fn integration_warning(kernel: &KernelSpec, integration: &IntegrationSpec) -> Op
 /// (33 × 33, quadratic basis), the h·gradient transfer is 0.39 at support 3, 0.0081 at 3.8,
 /// 0.0019 at 3.9, 0 at 4, 0.0014 at 4.1, 0.0041 at 4.2, 0.012 at 4.5, 0 at 8. Only edges resist
 /// such a field, and symmetry planes on opposite edges mirror it into a complete alternating sum:
-/// `hemisphere-linear` (17 × 17, 3 × 3 Gauss points) runs at supports 3.8, 3.9, 4.2 and 4.5 and
-/// is singular at 4, 4.1 and 8 (docs/stability.md §6).
+/// [`crate::shell::gauge`] finds such coefficient modes and the problem fixes them by rows
+/// (docs/stability.md §6).
 fn resonance_warning(kernel: &KernelSpec) -> Option<String> {
     let k = (kernel.support / 4.0).round();
-    (k >= 1.0 && (kernel.support - 4.0 * k).abs() <= RESONANT_SUPPORT_BAND).then(|| {
+    crate::shell::gauge::resonant(kernel.support).then(|| {
         format!(
-            "`kernel.support` = {} spacings is within {RESONANT_SUPPORT_BAND} of {}: there the \
-             cubic B-spline kernel passes no field that alternates from particle to particle, \
-             a mode only edges resist (with symmetry planes on opposite edges nothing does: the \
-             tangent is singular; docs/stability.md); take a support away from multiples of 4 \
-             spacings, e.g. 3.5 or 4.5",
+            "`kernel.support` = {} spacings is within {} of {}: there the \
+             cubic B-spline kernel passes (almost) no field that alternates from particle to \
+             particle, a mode only edges resist; between symmetry planes on opposite edges the \
+             run fixes such coefficient modes by constraint rows, and any it does not find leave \
+             the tangent singular (docs/stability.md); a support away from multiples of 4 \
+             spacings, e.g. 3.5 or 4.5, avoids both",
             kernel.support,
+            crate::shell::gauge::RESONANT_SUPPORT_BAND,
             4.0 * k
         )
     })
 }
-
-/// How close (in spacings) to a multiple of 4 a support draws [`resonance_warning`]: 4 ± 0.1
-/// were singular with symmetry planes on opposite edges, 3.8 and 4.2 were not.
-const RESONANT_SUPPORT_BAND: f64 = 0.15;
 
 /// Warnings about geometry outside the regime of the shell model: a thickness not small
 /// against the smallest radius of curvature (sampled on a 9 × 9 grid of the parameter box) or

@@ -14,6 +14,7 @@ pub mod constraints;
 pub mod contact;
 pub mod contact_sensitivity;
 pub mod gather;
+pub mod gauge;
 pub mod integration;
 pub mod load;
 pub mod model;

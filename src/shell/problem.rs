@@ -16,6 +16,10 @@
 //! is `k_c μ_c`; [`ShellProblem::reactions`] reports the force (or moment) the support exerts on
 //! the shell, `−k_c μ_c`, so that `f_int = λ f_ext + Σ_c reaction_c C_cᵀ` at equilibrium.
 //!
+//! Coefficient modes that the RK field does not see ([`super::gauge`]: alternating patterns at
+//! supports of 4 and 8 spacings between symmetry planes) get one zero-valued row each, after
+//! the given rows; the field is unchanged and the bordered tangent regular.
+//!
 //! Symmetry conditions of particles on a plane ([`super::symmetry`]) are eliminated as fixed
 //! generalised DOFs through [`NonlinearProblem::essential`] when possible (`α2`, and `ū·n_s`
 //! when `n_s` is a coordinate axis), and become multiplier rows otherwise
@@ -31,6 +35,7 @@
 //! zero): its entries at `q = 0` enter the pattern.
 
 use super::constraints::{assemble, LinearConstraint, MergedRow, RowKind, SymmetryRows};
+use super::gauge::GaugeMode;
 use super::load::{Load, LoadScaling};
 use super::model::ShellModel;
 use super::point::{PointHistory, DOFS_PER_PARTICLE};
@@ -86,6 +91,8 @@ pub struct ShellProblem {
     prescribed_norm: f64,
     execution: Execution,
     redundant: Vec<MergedRow>,
+    /// Coefficient modes fixed by rows ([`super::gauge`]).
+    gauge: Vec<GaugeMode>,
     /// Cell buffers of the tangent assembly, reused over the Newton iterations.
     buffers: AssemblyBuffers,
 }
@@ -153,6 +160,10 @@ impl ShellProblem {
             SymmetryTreatment::Eliminate => SymmetryRows::Eliminate,
             SymmetryTreatment::Multipliers => SymmetryRows::Rows,
         };
+        // Coefficient modes the field does not see get one row each, after the given rows.
+        let gauge = super::gauge::gauge_modes(&model);
+        let mut constraints = constraints;
+        constraints.extend(gauge.iter().map(|m| m.constraint()));
         let set = assemble(&model, constraints, treatment)?;
         let (rows, fixed, redundant) = (set.rows, set.fixed, set.merged);
         let (e, t) = (model.material.young, model.thickness);
@@ -262,6 +273,7 @@ impl ShellProblem {
             prescribed_norm: 0.0,
             execution: options.execution,
             redundant,
+            gauge,
             buffers: AssemblyBuffers::new(),
         })
     }
@@ -271,6 +283,12 @@ impl ShellProblem {
     /// a diaphragm's component along a symmetry plane's normal at the corner where they meet).
     pub fn redundant_constraints(&self) -> &[MergedRow] {
         &self.redundant
+    }
+
+    /// The coefficient modes that the RK field does not see, each held by a constraint row
+    /// ([`super::gauge`]); empty for most models.
+    pub fn gauge_modes(&self) -> &[GaugeMode] {
+        &self.gauge
     }
 
     /// What unknown `dof` is, for messages: a generalised DOF of a particle (its index,
