@@ -197,6 +197,22 @@ pub enum SensitivityError {
         /// Its value.
         value: f64,
     },
+    /// A shape variable on a model whose coefficient modes invisible to the field are held by
+    /// rows ([`crate::shell::gauge`]): the rows of the director patterns follow the initial
+    /// directors, whose design derivative the methods do not carry into them.
+    #[error(
+        "design variable `{name}`: a shape variable, and the model holds {rows} coefficient \
+         mode(s) invisible to the field by constraint rows (a support near a multiple of 4 \
+         spacings between symmetry planes), whose design derivative the continuum and dual \
+         methods do not carry; take a support away from multiples of 4 spacings (e.g. 3.5 or \
+         4.5), or use the finite differences alone"
+    )]
+    ShapeWithGaugeRows {
+        /// The shape variable.
+        name: String,
+        /// The number of gauge rows.
+        rows: usize,
+    },
     /// More variables than the vector dual dispatch supports.
     #[error("design variables: {count} given, the vector dual supports 1..={max}")]
     TooManyVariables {
@@ -753,6 +769,26 @@ impl<D: DesignDual> SensitivityFields for DualDsa<D> {
     }
 }
 
+/// Shape variables are refused on a model with gauge rows ([`crate::shell::gauge`]): the rows
+/// of the director patterns follow the initial directors, which the methods do not carry into
+/// them ([`SensitivityError::ShapeWithGaugeRows`]).
+pub fn check_gauge_rows(
+    problem: &ShellProblem,
+    variables: &[DesignVariable],
+) -> Result<(), SensitivityError> {
+    let rows = problem.gauge_modes().len();
+    match variables
+        .iter()
+        .find(|v| rows > 0 && matches!(v.kind, DesignKind::Shape { .. }))
+    {
+        Some(v) => Err(SensitivityError::ShapeWithGaugeRows {
+            name: v.name.clone(),
+            rows,
+        }),
+        None => Ok(()),
+    }
+}
+
 /// What both sensitivity methods check before the analysis: the design variables are
 /// admissible for the model (and for `surface`, which shape variables need), the problem is at
 /// its initial state, its loads are of the kinds the methods carry, and every monitor can be
@@ -774,6 +810,7 @@ pub(crate) fn check_method_inputs(
         tools: Some(super::contact_tools(problem)),
     };
     check_design(variables, &|_| vec![0.0], &scope)?;
+    check_gauge_rows(problem, variables)?;
     if let Some((index, &value)) = problem.state().iter().enumerate().find(|(_, v)| **v != 0.0) {
         return Err(SensitivityError::NotInitial { index, value });
     }

@@ -410,6 +410,9 @@ pub fn run_with_output(
         tools: Some(super::contact_tools(&problem)),
     };
     check_design(&vars, &deltas, &scope).map_err(SensitivityError::from)?;
+    if spec.methods.contains(&DsaMethod::Continuum) || spec.methods.contains(&DsaMethod::Dual) {
+        super::dual::check_gauge_rows(&problem, &vars)?;
+    }
     let mut result = DsaResult {
         spec: spec.clone(),
         variables: spec
