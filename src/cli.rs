@@ -363,7 +363,10 @@ fn dsa(
     let path = out.join("sensitivity.json");
     let written = std::fs::create_dir_all(out)
         .map_err(|e| format!("cannot create output directory {}: {e}", out.display()))
-        .and_then(|()| dsa_output::write_json(&path, &dsa_output::empty_json(c, &spec, "running")));
+        .and_then(|()| {
+            dsa_output::write_json(&path, &dsa_output::empty_json(c, &spec, "running"))
+                .map_err(|e| e.to_string())
+        });
     if let Err(e) = written {
         err!("error: {e}");
         return EXIT_OUTPUT;
@@ -403,7 +406,7 @@ fn dsa(
             let doc = dsa_output::to_json(c, r, "running");
             if let Err(e) = dsa_output::write_json(&path, &doc) {
                 err!("error: {e} (the run goes on)");
-                write_error = Some(e);
+                write_error = Some(e.to_string());
             }
             last = Some(doc);
         }
@@ -967,7 +970,7 @@ fn plot_material_path(
     sm: &[crate::material::MaterialState<f64>],
     check: &crate::verification::material_path::PathCheck,
     path: &Path,
-) -> Result<(), String> {
+) -> Result<(), crate::io::plot::PlotError> {
     use crate::io::plot::{figure, Panel, Scale, Series};
     let steps = |f: &dyn Fn(usize) -> f64| -> Vec<(f64, f64)> {
         (0..states.len()).map(|k| ((k + 1) as f64, f(k))).collect()

@@ -60,13 +60,7 @@ fn radial_at_a(case: &ShellCase) -> Result<(f64, usize), String> {
 /// The h·gradient transfer (`ShellModel::coefficient_transfer`) of `u_z = (−1)^i` along `u`
 /// (particle grid index `i`) on the shipped linear hemisphere with the support changed.
 fn alternating_transfer(support: &str) -> f64 {
-    let path =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("verification/hemisphere-linear/case.toml");
-    let text = std::fs::read_to_string(&path).unwrap();
-    let old = "support = 3.0 ";
-    assert_eq!(text.matches(old).count(), 1);
-    let case =
-        parse_shell_case(&text.replace(old, &format!("support = {support} ")), &path).unwrap();
+    let case = hemisphere_case(support, false);
     let built = build(&case).unwrap();
     let model = &built.problem.model;
     let [nu, _] = case.particles.counts;

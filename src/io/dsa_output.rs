@@ -5,7 +5,8 @@
 use super::shell_build;
 use super::shell_case::ShellCase;
 use super::shell_output::{
-    add_sensitivity_fields, shell_vtu_with_contact, OutputGrid, SensitivityField, PVD_FILE,
+    add_sensitivity_fields, shell_vtu_with_contact, OutputError, OutputGrid, SensitivityField,
+    PVD_FILE,
 };
 use super::vtu::PvdCollection;
 use crate::sensitivity::study::{
@@ -196,10 +197,15 @@ pub fn empty_json(case: &ShellCase, spec: &DsaSpec, status: &str) -> Value {
 
 /// Write `doc` as `DIR/sensitivity.json` (pretty, replaced whole: a reader or a killed run
 /// sees the previous or the new file).
-pub fn write_json(path: &std::path::Path, doc: &Value) -> Result<(), String> {
-    let text = serde_json::to_string_pretty(doc).map_err(|e| format!("{}: {e}", path.display()))?;
-    super::vtu::replace_file(path, text.as_bytes())
-        .map_err(|e| format!("cannot write {}: {e}", path.display()))
+pub fn write_json(path: &std::path::Path, doc: &Value) -> Result<(), OutputError> {
+    let text = serde_json::to_string_pretty(doc).map_err(|source| OutputError::Document {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    super::vtu::replace_file(path, text.as_bytes()).map_err(|source| OutputError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// The notes written at the top of `sensitivity.json`.

@@ -5,7 +5,7 @@
 //! `--terms STEP`, the term groups of the continuum right-hand side against the dual reference
 //! as bars (`terms_step<STEP>.png`).
 
-use super::plot::{bar_figure, figure, BarPanel, Panel, Scale, Series};
+use super::plot::{bar_figure, figure, BarPanel, Panel, PlotError, Scale, Series};
 use crate::sensitivity::study::{max_rel_diff, DsaResult, VariableResult};
 use crate::sensitivity::terms::TermBreakdown;
 use std::path::{Path, PathBuf};
@@ -30,7 +30,7 @@ fn stem(name: &str) -> String {
 }
 
 /// Write the figures of every design variable into `dir`; returns the files written.
-pub fn write(dir: &Path, r: &DsaResult) -> Result<Vec<PathBuf>, String> {
+pub fn write(dir: &Path, r: &DsaResult) -> Result<Vec<PathBuf>, PlotError> {
     let mut written = Vec::new();
     for v in &r.variables {
         let name = stem(&v.entry.variable.name);
@@ -49,7 +49,7 @@ pub fn write(dir: &Path, r: &DsaResult) -> Result<Vec<PathBuf>, String> {
 /// One panel per monitored component: `dψ/dτ` against the load factor, continuum (line), dual
 /// (markers) and central differences per step size at the steps whose active set did not
 /// change within `±h` (markers).
-fn derivatives_figure(path: &Path, r: &DsaResult, v: &VariableResult) -> Result<(), String> {
+fn derivatives_figure(path: &Path, r: &DsaResult, v: &VariableResult) -> Result<(), PlotError> {
     let loads = &r.nominal.loads;
     let column = |d: &Vec<Vec<f64>>, m: usize| -> Vec<(f64, f64)> {
         d.iter().zip(loads).map(|(row, &l)| (l, row[m])).collect()
@@ -155,7 +155,7 @@ fn slope_two(points: &[(f64, f64)]) -> Vec<(f64, f64)> {
 /// Two log–log panels: the Taylor remainder `max_m |ψ(τ+h) − ψ(τ) − h ψ'|` against `h` at a few
 /// steps with the slope-2 reference, and the step-size study `max |Δψ/(ψ'Δτ) − 1|` over the
 /// unflagged components against `h`.
-fn fd_figure(path: &Path, r: &DsaResult, v: &VariableResult) -> Result<(), String> {
+fn fd_figure(path: &Path, r: &DsaResult, v: &VariableResult) -> Result<(), PlotError> {
     let steps = taylor_steps(v, r.nominal.loads.len());
     let labels: Vec<String> = steps
         .iter()
@@ -243,7 +243,7 @@ fn fd_figure(path: &Path, r: &DsaResult, v: &VariableResult) -> Result<(), Strin
 /// `--terms STEP`: one bar panel per design variable, per term group (and the whole right-hand
 /// side) the largest entry of the continuum fictitious load, of the dual reference seeded with
 /// that group, and of their difference. Returns the file written.
-pub fn write_terms(dir: &Path, breakdowns: &[TermBreakdown]) -> Result<PathBuf, String> {
+pub fn write_terms(dir: &Path, breakdowns: &[TermBreakdown]) -> Result<PathBuf, PlotError> {
     let step = breakdowns.first().map_or(0, |b| b.step);
     let path = dir.join(format!("terms_step{step}.png"));
     let titles: Vec<String> = breakdowns

@@ -121,9 +121,23 @@ fn range(vals: impl Iterator<Item = f64>, log: bool) -> (f64, f64) {
     }
 }
 
+/// A figure that could not be drawn or written: its file and the plotting backend's message
+/// (the backend's error types are generic over the drawing surface, so its text is kept).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("plotting {}: {detail}", path.display())]
+pub struct PlotError {
+    /// The figure's file.
+    pub path: std::path::PathBuf,
+    /// What the backend reported.
+    pub detail: String,
+}
+
 /// Draw panels stacked vertically into a PNG of `width × height` pixels.
-pub fn figure(path: &Path, width: u32, height: u32, panels: &[Panel]) -> Result<(), String> {
-    let e = |e: &dyn std::fmt::Display| format!("plotting {}: {e}", path.display());
+pub fn figure(path: &Path, width: u32, height: u32, panels: &[Panel]) -> Result<(), PlotError> {
+    let e = |e: &dyn std::fmt::Display| PlotError {
+        path: path.to_path_buf(),
+        detail: e.to_string(),
+    };
     register_font();
     let root = BitMapBackend::new(path, (width, height)).into_drawing_area();
     root.fill(&WHITE).map_err(|x| e(&x))?;
@@ -188,8 +202,16 @@ pub struct BarPanel<'a> {
 }
 
 /// Draw bar-chart panels stacked vertically into a PNG of `width × height` pixels.
-pub fn bar_figure(path: &Path, width: u32, height: u32, panels: &[BarPanel]) -> Result<(), String> {
-    let e = |e: &dyn std::fmt::Display| format!("plotting {}: {e}", path.display());
+pub fn bar_figure(
+    path: &Path,
+    width: u32,
+    height: u32,
+    panels: &[BarPanel],
+) -> Result<(), PlotError> {
+    let e = |e: &dyn std::fmt::Display| PlotError {
+        path: path.to_path_buf(),
+        detail: e.to_string(),
+    };
     register_font();
     let root = BitMapBackend::new(path, (width, height)).into_drawing_area();
     root.fill(&WHITE).map_err(|x| e(&x))?;

@@ -95,8 +95,16 @@ pub enum OutputError {
     #[error("results.json: {0}")]
     Json(#[from] serde_json::Error),
     /// The plot.
-    #[error("{0}")]
-    Plot(String),
+    #[error(transparent)]
+    Plot(#[from] super::plot::PlotError),
+    /// A JSON document other than results.json (`sensitivity.json`, `terms.json`).
+    #[error("{}: {source}", path.display())]
+    Document {
+        /// The file.
+        path: PathBuf,
+        /// Cause.
+        source: serde_json::Error,
+    },
     /// Sampling the model.
     #[error("sampling the shell: {0}")]
     Model(#[from] ShellError),
