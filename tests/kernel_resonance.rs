@@ -139,27 +139,32 @@ fn support_four_with_a_missing_support_still_fails_naming_the_dof() {
 fn support_four_design_sensitivities_continuum_equals_dual() {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/kernel-resonance-tests");
     std::fs::create_dir_all(&dir).unwrap();
-    let design = |extra: &str| {
-        format!(
+    // `shelldsa dsa` on the support-4 hemisphere with `extra` design tables before t and ν:
+    // the exit code and sensitivity.json.
+    let dsa = |name: &str, extra: &str| {
+        let text = format!(
             "{}\n{extra}[[design]]\nname = \"t\"\nkind = \"thickness\"\n\n[[design]]\n\
              name = \"nu\"\nkind = \"material.poisson\"\n\n[dsa]\n\
              methods = [\"continuum\", \"dual\"]\nmonitors = [\"A.ux\", \"B.uy\"]\n",
             hemisphere_text("4.0")
+        );
+        let case = dir.join(format!("{name}.toml"));
+        std::fs::write(&case, text).unwrap();
+        let out = dir.join(name);
+        let code = cli(&[
+            "dsa",
+            case.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let json = std::fs::read_to_string(out.join("sensitivity.json")).unwrap();
+        (
+            code,
+            serde_json::from_str::<serde_json::Value>(&json).unwrap(),
         )
     };
-    let case = dir.join("support4.toml");
-    std::fs::write(&case, design("")).unwrap();
-    let out = dir.join("support4");
-    let args = [
-        "dsa",
-        case.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    assert_eq!(cli(&args), 0);
-    let a: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("sensitivity.json")).unwrap())
-            .unwrap();
+    let (code, a) = dsa("support4", "");
+    assert_eq!(code, 0);
     for v in a["variables"].as_array().unwrap() {
         let d = v["continuum_vs_dual"].as_f64().unwrap();
         // Both methods solve the same bordered system; 1e-8 is the agreement the methods
@@ -167,25 +172,10 @@ fn support_four_design_sensitivities_continuum_equals_dual() {
         assert!(d <= 1e-8, "{}: continuum vs dual {d:e}", v["name"]);
     }
     let shape = "[[design]]\nname = \"R\"\nkind = \"shape.radius\"\n\n";
-    let case = dir.join("support4-shape.toml");
-    std::fs::write(&case, design(shape)).unwrap();
-    let out = dir.join("support4-shape");
-    let args = [
-        "dsa",
-        case.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ];
     // Refused before any analysis: a bad input (exit 1); sensitivity.json says why, with no
     // load level.
-    assert_eq!(
-        cli(&args),
-        1,
-        "a shape variable with gauge rows must be refused"
-    );
-    let r: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("sensitivity.json")).unwrap())
-            .unwrap();
+    let (code, r) = dsa("support4-shape", shape);
+    assert_eq!(code, 1, "a shape variable with gauge rows must be refused");
     let status = r["status"].as_str().unwrap();
     assert!(
         status.contains("`R`") && status.contains("coefficient mode"),
