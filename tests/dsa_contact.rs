@@ -34,7 +34,7 @@ use shelldsa::io::dsa_case::DsaMethod;
 use shelldsa::io::dsa_output;
 use shelldsa::io::dsa_study::{self, base_design, CaseAnalysis};
 use shelldsa::io::shell_build;
-use shelldsa::io::shell_case::parse_shell_case;
+use shelldsa::io::shell_case::{parse_shell_case, ShellCase};
 use shelldsa::sensitivity::study;
 use shelldsa::shell::contact::{ContactFaces, ContactInputs, ShellContact};
 use shelldsa::shell::contact_sensitivity::ContactSeeds;
@@ -82,6 +82,15 @@ impl Seed {
             penalty: 0.0,
             particles: vec![zero_state(); np],
             increment: vec![0.0; n],
+        }
+    }
+
+    /// Only the tools move, at `tools`.
+    fn tools(name: &'static str, tools: Vec<ToolRate>, np: usize, n: usize) -> Self {
+        Seed {
+            name,
+            tools,
+            ..Seed::none(np, n)
         }
     }
 }
@@ -282,7 +291,6 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
     // point projects onto a tool boundary: that branch carries no force in either method.)
     assert!(active.iter().all(|&a| a > 0), "active points {active:?}");
 
-    let zeros = vec![zero_state(); np];
     let state_dots: Vec<ParticleState<f64>> = (0..np)
         .map(|_| ParticleState {
             u: rng.v3(0.1),
@@ -293,45 +301,35 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
         .collect();
     let inc_dot: Vec<f64> = (0..n).map(|_| rng.next() * 0.05).collect();
     let seeds = vec![
-        Seed {
-            name: "die x",
-            tools: vec![ToolRate::default(), translation([1.0, 0.0, 0.0])],
-            thickness: 0.0,
-            penalty: 0.0,
-            particles: zeros.clone(),
-            increment: vec![0.0; n],
-        },
-        Seed {
-            name: "die z",
-            tools: vec![ToolRate::default(), translation([0.0, 0.0, 1.0])],
-            thickness: 0.0,
-            penalty: 0.0,
-            particles: zeros.clone(),
-            increment: vec![0.0; n],
-        },
-        Seed {
-            name: "punch z",
-            tools: vec![translation([0.0, 0.0, 1.0]), ToolRate::default()],
-            thickness: 0.0,
-            penalty: 0.0,
-            particles: zeros.clone(),
-            increment: vec![0.0; n],
-        },
+        Seed::tools(
+            "die x",
+            vec![ToolRate::default(), translation([1.0, 0.0, 0.0])],
+            np,
+            n,
+        ),
+        Seed::tools(
+            "die z",
+            vec![ToolRate::default(), translation([0.0, 0.0, 1.0])],
+            np,
+            n,
+        ),
+        Seed::tools(
+            "punch z",
+            vec![translation([0.0, 0.0, 1.0]), ToolRate::default()],
+            np,
+            n,
+        ),
         Seed {
             name: "thickness, penalty",
-            tools: vec![ToolRate::default(); 2],
             thickness: 1.0,
             penalty: -1000.0, // ω = c E/t: ω̇ = −ω/t
-            particles: zeros.clone(),
-            increment: vec![0.0; n],
+            ..Seed::none(np, n)
         },
         Seed {
             name: "state, increment",
-            tools: vec![ToolRate::default(); 2],
-            thickness: 0.0,
-            penalty: 0.0,
             particles: state_dots,
             increment: inc_dot,
+            ..Seed::none(np, n)
         },
     ];
     for seed in &seeds {
@@ -342,19 +340,10 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
             "{:<20} max|ḟ| {scale:.4e}  |hand − dual| {e_dual:.2e}  |hand − central| {e_cd:.2e}",
             seed.name
         );
-        assert!(scale > 0.0, "{}: the seed must move the force", seed.name);
-        // Same formulas evaluated two ways (dual numbers through the projection's Newton
-        // correction, and the hand-derived chain): round-off of sums of terms of size
-        // ~max|ḟ| (the penalty ω = 1000 amplifies gaps of ~1e-3 mm), so 1e-10 relative.
-        assert!(e_dual < 1e-10, "{}: hand vs dual {e_dual:e}", seed.name);
         // Central differences with h = 1e-6 (inputs of size 1…30 mm): truncation ~h²·|f'''|
         // ≲ 1e-11 and round-off ~ε|f|/h ≈ 1e-10 of the force; 1e-7 leaves room for the
         // curvature of the cylinder (R = 10) along a slave point's path.
-        assert!(
-            e_cd < 1e-7,
-            "{}: hand vs central differences {e_cd:e}",
-            seed.name
-        );
+        assert_three_way(seed.name, "force", rates.force);
 
         // The forces on the tools (the punch force): the same three ways.
         let (scale, e_dual, e_cd) = rates.tool_forces;
@@ -363,23 +352,9 @@ fn hand_derived_contact_force_sensitivity_matches_dual_and_central_differences()
              |hand − central| {e_cd:.2e}",
             seed.name
         );
-        assert!(
-            scale > 0.0,
-            "{}: the seed must move a tool force",
-            seed.name
-        );
         // Sums of the same per-point terms as above (no shape-function weights): the same
         // round-off and truncation bounds, relative to the largest tool-force rate.
-        assert!(
-            e_dual < 1e-10,
-            "{}: tool forces hand vs dual {e_dual:e}",
-            seed.name
-        );
-        assert!(
-            e_cd < 1e-7,
-            "{}: tool forces hand vs central differences {e_cd:e}",
-            seed.name
-        );
+        assert_three_way(seed.name, "tool forces", rates.tool_forces);
     }
     // The generic tool forces in f64 are the contact report's.
     let none = Seed::none(np, n);
@@ -403,6 +378,21 @@ fn three_way(hand: &[f64], dual: &[f64], fp: &[f64], fm: &[f64], h: f64) -> (f64
         max_diff(hand, dual) / scale,
         max_diff(hand, &cd) / scale,
     )
+}
+
+/// The bounds every contact kernel seed meets, on `(max rate, |hand − dual|, |hand − central|)`
+/// ([`three_way`]) of quantity `what`: the seed moves it; hand = dual to 1e-10 of the largest
+/// rate (the same formulas two ways, dual numbers through the projection's Newton correction
+/// and the hand-derived chain: round-off of sums of terms of size ~max rate, the penalty
+/// ω = 1000 amplifying gaps of ~1e-3 mm); hand = central differences to 1e-7 (truncation and
+/// round-off of the calling test's step, justified there).
+fn assert_three_way(name: &str, what: &str, (scale, e_dual, e_cd): (f64, f64, f64)) {
+    assert!(scale > 0.0, "{name}: the seed must move the {what}");
+    assert!(e_dual < 1e-10, "{name}: {what} hand vs dual {e_dual:e}");
+    assert!(
+        e_cd < 1e-7,
+        "{name}: {what} hand vs central differences {e_cd:e}"
+    );
 }
 
 /// The contact force rate and the tool-force rates of `seed` at `(q, t)` three ways
@@ -597,11 +587,7 @@ fn tool_rotation_sensitivity_matches_dual_and_central_differences() {
     }
 
     let none = ToolRate::default();
-    let seed = |name, tools| Seed {
-        name,
-        tools,
-        ..Seed::none(np, n)
-    };
+    let seed = |name, tools| Seed::tools(name, tools, np, n);
     let seeds = vec![
         seed("die rx", vec![none, rotation([1.0, 0.0, 0.0])]),
         seed("die rz", vec![none, rotation([0.0, 0.0, 1.0])]),
@@ -643,14 +629,8 @@ fn tool_rotation_sensitivity_matches_dual_and_central_differences() {
         // motion: the forces agree to round-off (1e-12 of max|f|).
         let fi = force_f64(&model, &contact, &q, t, seed, h);
         let e_repr = max_diff(&fp, &fi) / max_abs(&fi);
-        let cd: Vec<f64> = fp
-            .iter()
-            .zip(&fm)
-            .map(|(a, b)| (a - b) / (2.0 * h))
-            .collect();
-        let scale = max_abs(&dual);
-        let e_dual = max_diff(&hand, &dual) / scale;
-        let e_cd = max_diff(&hand, &cd) / scale;
+        let rates = three_way(&hand, &dual, &fp, &fm, h);
+        let (scale, e_dual, e_cd) = rates;
         println!(
             "{:<12} max|ḟ| {scale:.4e}  |hand − dual| {e_dual:.2e}  |hand − central| {e_cd:.2e}  \
              rotated path vs inputs {e_repr:.1e}",
@@ -659,21 +639,14 @@ fn tool_rotation_sensitivity_matches_dual_and_central_differences() {
         if seed.name == "die rx" {
             scale_rx = scale;
         }
-        assert!(scale > 0.0, "{}: the seed must move the force", seed.name);
         assert!(
             e_repr < 1e-12,
             "{}: rotated path vs inputs {e_repr:e}",
             seed.name
         );
-        // As for the translations (test above): the same formulas two ways, round-off.
-        assert!(e_dual < 1e-10, "{}: hand vs dual {e_dual:e}", seed.name);
         // Central differences: truncation ~h²|f'''| and round-off ~ε|f|/h ≈ 1e-10 of the
         // force, as for the translations.
-        assert!(
-            e_cd < 1e-7,
-            "{}: hand vs central differences {e_cd:e}",
-            seed.name
-        );
+        assert_three_way(seed.name, "force", rates);
     }
     // A rotation about a tool's own axis (pivot on it, R(t) keeps it along y) maps the cylinder
     // onto itself: the tool point slides along the surface (V^c tangential, ġ = 0) and the
@@ -1369,14 +1342,7 @@ fn tool_shape_sensitivity_matches_dual_and_central_differences() {
     assert!(e_geom < 1e-9, "NURBS die vs cylinder: {e_geom:e}");
 
     let none = ToolRate::default();
-    let seed = |name, tools| Seed {
-        name,
-        tools,
-        thickness: 0.0,
-        penalty: 0.0,
-        particles: vec![zero_state(); np],
-        increment: vec![0.0; n],
-    };
+    let seed = |name, tools| Seed::tools(name, tools, np, n);
     let (punch, die) = (&contact.tools()[0], &contact.tools()[1]);
     let ndie = &nurbs.tools()[1];
     let cases: Vec<(&ShellContact, Seed)> = vec![
@@ -1459,38 +1425,19 @@ fn tool_shape_sensitivity_matches_dual_and_central_differences() {
              rebuilt tool vs inputs {e_rebuilt:.1e}",
             seed.name
         );
-        assert!(scale > 0.0, "{}: the seed must move the force", seed.name);
         assert!(
             e_rebuilt < 1e-12,
             "{}: rebuilt tool vs inputs {e_rebuilt:e}",
             seed.name
         );
-        // As for the translations: the same formulas two ways, round-off.
-        assert!(e_dual < 1e-10, "{}: hand vs dual {e_dual:e}", seed.name);
         // Central differences with h = 1e-4 (parameters of size 0.6…30): the projection's
         // convergence noise in the force (~1e-13 of max|f| ~ 1e3) over h dominates smaller
         // steps for the seeds that move the force little (a control point off the die's top,
         // max|ḟ| ~ 2: measured 1.9e-7, 3.4e-8, 2.3e-9 at h = 1e-6, 1e-5, 1e-4), while the
         // truncation ~h²|f'''| stays below 2e-8 (the weight): 1e-7 of max|ḟ|.
-        assert!(
-            e_cd < 1e-7,
-            "{}: hand vs central differences {e_cd:e}",
-            seed.name
-        );
-
+        assert_three_way(seed.name, "force", rates.force);
         // The forces on the tools, the same three ways.
-        let (scale, e_dual, e_cd) = rates.tool_forces;
-        assert!(scale > 0.0, "{}: tool forces", seed.name);
-        assert!(
-            e_dual < 1e-10,
-            "{}: tool forces vs dual {e_dual:e}",
-            seed.name
-        );
-        assert!(
-            e_cd < 1e-7,
-            "{}: tool forces vs central {e_cd:e}",
-            seed.name
-        );
+        assert_three_way(seed.name, "tool forces", rates.tool_forces);
     }
     // A cylinder's radius with its axis fixed moves every tool point along its normal by one
     // (V^c = n, V^c,α = x^c,α / R). The die's contact points lie within a few degrees of its
@@ -1554,19 +1501,22 @@ fd_steps = [4e-3, 2e-3, 1e-3, 5e-4]
 [dsa]
 monitors = ["center.uz", "edge.ux", "edge.uz", "tool.punch.fz"]
 "#;
-    let c = case(0.5, design);
-    let spec = dsa_study::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
-    let t0 = std::time::Instant::now();
-    let r = run_case(&c, &spec);
-    println!(
-        "radii: {} steps, total {:.1} s",
-        r.nominal.loads.len(),
-        t0.elapsed().as_secs_f64()
-    );
-    assert!(r.dual_state_mismatch.unwrap() < 1e-10);
-    for v in 0..r.variables.len() {
-        check_variable(&r, v);
-    }
+    // The study three ways on `c`, every variable checked.
+    let run_and_check = |label: &str, c: &ShellCase| {
+        let spec = dsa_study::validate(c, &c.dsa.as_ref().unwrap().methods).unwrap();
+        let t0 = std::time::Instant::now();
+        let r = run_case(c, &spec);
+        println!(
+            "{label}: {} steps, total {:.1} s",
+            r.nominal.loads.len(),
+            t0.elapsed().as_secs_f64()
+        );
+        assert!(r.dual_state_mismatch.unwrap() < 1e-10);
+        for v in 0..r.variables.len() {
+            check_variable(&r, v);
+        }
+    };
+    run_and_check("radii", &case(0.5, design));
 
     let design = r#"
 [[design]]
@@ -1585,18 +1535,7 @@ monitors = ["center.uz", "edge.ux", "edge.uz", "tool.punch.fz"]
         Path::new("tests/dsa_contact.rs"),
     )
     .unwrap();
-    let spec = dsa_study::validate(&c, &c.dsa.as_ref().unwrap().methods).unwrap();
-    let t0 = std::time::Instant::now();
-    let r = run_case(&c, &spec);
-    println!(
-        "NURBS die: {} steps, total {:.1} s",
-        r.nominal.loads.len(),
-        t0.elapsed().as_secs_f64()
-    );
-    assert!(r.dual_state_mismatch.unwrap() < 1e-10);
-    for v in 0..r.variables.len() {
-        check_variable(&r, v);
-    }
+    run_and_check("NURBS die", &c);
 }
 
 /// `tool.<name>.shape.<parameter>`: parsed on the case's tools; an unknown parameter lists

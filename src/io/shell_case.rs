@@ -1048,6 +1048,29 @@ fn fmt_arr(a: &[f64]) -> String {
 }
 
 impl Checker<'_> {
+    /// The value of a keyword key: `default` when absent, else the option named `value`; an
+    /// error naming the key, the value and the options otherwise.
+    fn keyword<T: Copy>(
+        &self,
+        key: &str,
+        value: Option<&str>,
+        default: T,
+        options: &[(&str, T)],
+    ) -> Result<T, CaseError> {
+        let Some(v) = value else {
+            return Ok(default);
+        };
+        if let Some(&(_, t)) = options.iter().find(|(name, _)| *name == v) {
+            return Ok(t);
+        }
+        let names: Vec<String> = options.iter().map(|(n, _)| format!("{n:?}")).collect();
+        let expected = match names.split_last() {
+            Some((last, rest)) if !rest.is_empty() => format!("{} or {last}", rest.join(", ")),
+            _ => names.join(""),
+        };
+        Err(self.err(key, format!("{v:?}"), expected))
+    }
+
     fn err(
         &self,
         key: impl Into<String>,
@@ -2254,54 +2277,46 @@ impl Checker<'_> {
             ));
         }
         let easy_iterations = self.count("steps.easy_iterations", s.easy_iterations, 0, None)?;
-        let predictor = match s.predictor.as_deref() {
-            None => None,
-            Some("zero") => Some(PredictorKind::Zero),
-            Some("secant") => Some(PredictorKind::Secant),
-            Some("quadratic") => Some(PredictorKind::Quadratic),
-            Some(other) => {
-                return Err(self.err(
-                    "steps.predictor",
-                    format!("{other:?}"),
-                    "\"zero\", \"secant\" or \"quadratic\"",
-                ))
-            }
-        };
-        let linear_updates = match s.linear_updates.as_deref() {
-            Some("auto") => crate::solver::LinearUpdates::Auto,
-            None | Some("direct") => crate::solver::LinearUpdates::Direct,
-            Some("krylov") => crate::solver::LinearUpdates::KrylovNearConvergence,
-            Some("krylov-held") => crate::solver::LinearUpdates::KrylovHeld,
-            Some(other) => {
-                return Err(self.err(
-                    "steps.linear_updates",
-                    format!("{other:?}"),
-                    "\"auto\", \"direct\", \"krylov\" or \"krylov-held\"",
-                ))
-            }
-        };
-        let line_search = match s.line_search.as_deref() {
-            None | Some("on-failure") => crate::solver::LineSearch::OnFailure,
-            Some("off") => crate::solver::LineSearch::Off,
-            Some(other) => {
-                return Err(self.err(
-                    "steps.line_search",
-                    format!("{other:?}"),
-                    "\"on-failure\" or \"off\"",
-                ))
-            }
-        };
-        let stop_failure = match s.stop_failure.as_deref() {
-            None | Some("cut") => crate::solver::StopFailure::Cut,
-            Some("continuation") => crate::solver::StopFailure::Continuation,
-            Some(other) => {
-                return Err(self.err(
-                    "steps.stop_failure",
-                    format!("{other:?}"),
-                    "\"cut\" or \"continuation\"",
-                ))
-            }
-        };
+        let predictor = self.keyword(
+            "steps.predictor",
+            s.predictor.as_deref(),
+            None,
+            &[
+                ("zero", Some(PredictorKind::Zero)),
+                ("secant", Some(PredictorKind::Secant)),
+                ("quadratic", Some(PredictorKind::Quadratic)),
+            ],
+        )?;
+        use crate::solver::{LineSearch, LinearUpdates, StopFailure};
+        let linear_updates = self.keyword(
+            "steps.linear_updates",
+            s.linear_updates.as_deref(),
+            LinearUpdates::Direct,
+            &[
+                ("auto", LinearUpdates::Auto),
+                ("direct", LinearUpdates::Direct),
+                ("krylov", LinearUpdates::KrylovNearConvergence),
+                ("krylov-held", LinearUpdates::KrylovHeld),
+            ],
+        )?;
+        let line_search = self.keyword(
+            "steps.line_search",
+            s.line_search.as_deref(),
+            LineSearch::OnFailure,
+            &[
+                ("on-failure", LineSearch::OnFailure),
+                ("off", LineSearch::Off),
+            ],
+        )?;
+        let stop_failure = self.keyword(
+            "steps.stop_failure",
+            s.stop_failure.as_deref(),
+            StopFailure::Cut,
+            &[
+                ("cut", StopFailure::Cut),
+                ("continuation", StopFailure::Continuation),
+            ],
+        )?;
         let arc_length = match s.control.as_deref() {
             None | Some("load") => {
                 for (k, given) in [
