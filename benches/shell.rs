@@ -35,6 +35,7 @@ fn hemisphere() -> ShellModel {
         particle_uv: grid.positions.clone(),
         supports: grid.supports(3.0),
         basis: Basis::Quadratic,
+        kernel: Default::default(),
         quadrature: cq.iter().map(|(p, w, _)| (p, w)).collect(),
         thickness_rule: lob
             .nodes

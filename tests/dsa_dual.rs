@@ -235,6 +235,7 @@ fn elastic_cantilever_sensitivities_follow_beam_theory() {
         supports: grid.supports(3.0),
         particle_uv: grid.positions,
         basis: Basis::Quadratic,
+        kernel: Default::default(),
         quadrature: cq.iter().map(|(p, w, _)| (p, w)).collect(),
         thickness_rule: g2.nodes.iter().copied().zip(g2.weights).collect(),
         thickness: T,

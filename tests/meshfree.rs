@@ -59,15 +59,30 @@ fn reproducing_conditions_on_jittered_sets() {
     let mut rng = XorShift64::new(7);
     let pts = test_points(&b, 300, &mut rng);
     let mut out = ShapeValues::new();
-    for (basis, multiples) in [
-        (Basis::Linear, [2.0, 2.5, 4.0]),
-        (Basis::Quadratic, [3.0, 3.5, 4.0]),
+    for (kernel, basis, multiples) in [
+        (KernelFunction::CubicSpline, Basis::Linear, [2.0, 2.5, 4.0]),
+        (
+            KernelFunction::CubicSpline,
+            Basis::Quadratic,
+            [3.0, 3.5, 4.0],
+        ),
+        (
+            KernelFunction::QuarticSpline,
+            Basis::Linear,
+            [2.0, 2.5, 4.0],
+        ),
+        (
+            KernelFunction::QuarticSpline,
+            Basis::Quadratic,
+            [3.0, 3.5, 4.0],
+        ),
     ] {
         let mut worst = [0.0_f64; 2];
         for (s, &mult) in multiples.iter().enumerate() {
             let grid = jittered_grid(b, 17, 23, 0.3, 11 + s as u64);
-            let sf =
-                ShapeFunctions::new(grid.positions.clone(), grid.supports(mult), basis).unwrap();
+            let sf = ShapeFunctions::new(grid.positions.clone(), grid.supports(mult), basis)
+                .unwrap()
+                .with_kernel(kernel);
             for &x in &pts {
                 sf.evaluate(x, &mut out).unwrap_or_else(|e| panic!("{e}"));
                 for (e, val, grad) in monomials(basis.order(), x) {
@@ -86,7 +101,8 @@ fn reproducing_conditions_on_jittered_sets() {
                         worst[k.min(1)] = worst[k.min(1)].max(err);
                         assert!(
                             err <= 1e-12,
-                            "{basis} basis, support {mult}h, x = {x:?}, x^{e:?}, component {k}: {} vs {exact} (scaled error {err:.2e})",
+                            "{} {basis} basis, support {mult}h, x = {x:?}, x^{e:?}, component {k}: {} vs {exact} (scaled error {err:.2e})",
+                            kernel.name(),
                             sum[k]
                         );
                     }
@@ -94,8 +110,10 @@ fn reproducing_conditions_on_jittered_sets() {
             }
         }
         println!(
-            "{basis} basis: worst scaled reproduction error: values {:.2e}, derivatives {:.2e}",
-            worst[0], worst[1]
+            "{} {basis} basis: worst scaled reproduction error: values {:.2e}, derivatives {:.2e}",
+            kernel.name(),
+            worst[0],
+            worst[1]
         );
     }
 }
@@ -554,6 +572,40 @@ fn cubic_bspline_knots_and_continuity() {
             "z = {z}"
         );
     }
+}
+
+/// The quartic spline: `φ(0) = 2/3` (the cubic B-spline's), C² at `z = 1`, zero beyond, and its
+/// hand-written derivatives against dual numbers (round-off, 1e-14) and central differences
+/// (h = 1e-5: the truncation `h² φ‴ / 6` is below 1e-9 for this quartic, so 1e-8).
+#[test]
+fn quartic_spline_values_continuity_and_derivatives() {
+    assert_eq!(quartic_spline(0.0), [2.0 / 3.0, 0.0, -8.0]);
+    assert_eq!(quartic_spline(1.0), [0.0, 0.0, 0.0]);
+    assert_eq!(quartic_spline(1.5), [0.0, 0.0, 0.0]);
+    let l = quartic_spline(1.0 - 1e-9_f64);
+    assert!(l.iter().all(|v| v.abs() < 1e-7), "C² at z = 1: {l:?}");
+    for z in [0.1, 0.45, 0.7, 0.95] {
+        let d = quartic_spline(Dual::from_re(z).derivative());
+        let v = quartic_spline(z);
+        let h = 1e-5;
+        let fd = |k: usize| (quartic_spline(z + h)[k] - quartic_spline(z - h)[k]) / (2.0 * h);
+        assert!(
+            (d[0].eps - v[1]).abs() < 1e-14 && (d[1].eps - v[2]).abs() < 1e-14,
+            "dual, z = {z}"
+        );
+        assert!(
+            (fd(0) - v[1]).abs() < 1e-8 && (fd(1) - v[2]).abs() < 1e-8,
+            "central differences, z = {z}"
+        );
+    }
+    // The same through the kernel choice, and the choice's blind spots.
+    assert_eq!(KernelFunction::QuarticSpline.eval(0.3), quartic_spline(0.3));
+    assert_eq!(KernelFunction::CubicSpline.eval(0.3), cubic_bspline(0.3));
+    assert!(KernelFunction::CubicSpline.blind_at(4.0) && KernelFunction::CubicSpline.blind_at(8.1));
+    assert!(
+        !KernelFunction::CubicSpline.blind_at(3.5) && !KernelFunction::CubicSpline.blind_at(4.2)
+    );
+    assert!(!KernelFunction::QuarticSpline.blind_at(4.0));
 }
 
 /// Particle generators: deterministic, corners and edges on the box, spacing estimate.

@@ -65,6 +65,7 @@ fn hemisphere(n: usize, ppc: usize, layers: Layers, treatment: SymmetryTreatment
         supports: grid.supports(3.0),
         particle_uv: grid.positions,
         basis: Basis::Quadratic,
+        kernel: Default::default(),
         quadrature: cq.iter().map(|(p, w, _)| (p, w)).collect(),
         thickness_rule: rule
             .nodes

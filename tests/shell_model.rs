@@ -44,6 +44,7 @@ fn model() -> ShellModel {
         particle_uv: grid.positions,
         supports,
         basis: Basis::Quadratic,
+        kernel: Default::default(),
         quadrature: quad,
         thickness_rule: thick,
         thickness: 0.1,

@@ -574,6 +574,7 @@ fn independent_linear_tip_deflection() -> f64 {
         particle_uv: grid.positions.clone(),
         supports: vec![[3.0 / 12.0, 3.0 / 2.0]; grid.positions.len()],
         basis: Basis::Quadratic,
+        kernel: Default::default(),
         quadrature: cq.iter().map(|(p, w, _)| (p, w)).collect(),
         thickness_rule: g2.nodes.iter().copied().zip(g2.weights.clone()).collect(),
         thickness: 0.1,

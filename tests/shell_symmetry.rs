@@ -89,6 +89,7 @@ fn quarter() -> (Surface<f64>, ShellModel) {
         supports: grid.supports(3.0),
         particle_uv: grid.positions,
         basis: Basis::Quadratic,
+        kernel: Default::default(),
         quadrature: quadrature(),
         thickness_rule: thickness_rule(),
         thickness: 0.1,
@@ -119,6 +120,7 @@ fn full() -> (Surface<f64>, ShellModel) {
         supports: grid.supports(3.0),
         particle_uv: grid.positions,
         basis: Basis::Quadratic,
+        kernel: Default::default(),
         quadrature: quad,
         thickness_rule: thickness_rule(),
         thickness: 0.1,
@@ -286,6 +288,7 @@ fn plane_checks_name_the_edge_and_the_deviation() {
         supports: grid.supports(3.0),
         particle_uv: grid.positions.clone(),
         basis: Basis::Quadratic,
+        kernel: Default::default(),
         quadrature: quadrature(),
         thickness_rule: thickness_rule(),
         thickness: 0.1,
@@ -540,6 +543,7 @@ fn rotated_panel(start_deg: f64, treatment: SymmetryTreatment) -> Vec<Vector3<f6
         supports: grid.supports(3.0),
         particle_uv: grid.positions,
         basis: Basis::Quadratic,
+        kernel: Default::default(),
         quadrature: shelldsa::meshfree::quadrature::CellQuadrature::new(ParamBox::unit(), 6, 6, 2)
             .unwrap()
             .iter()

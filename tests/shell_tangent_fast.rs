@@ -469,6 +469,7 @@ fn model_local_tangents_equal_the_reference_sweep() {
         particle_uv: grid.positions.clone(),
         supports: grid.supports(3.0),
         basis: Basis::Quadratic,
+        kernel: Default::default(),
         quadrature: cq.iter().map(|(p, w, _)| (p, w)).collect(),
         thickness_rule: lob
             .nodes

@@ -8,8 +8,9 @@
 //! Ψ_I(x) = Hᵀ(0) M⁻¹(x) H(x − x_I) φ_a(x − x_I),      M(x) = Σ_I H(x − x_I) Hᵀ(x − x_I) φ_a(x − x_I)
 //! ```
 //!
-//! with the tensor-product cubic B-spline kernel `φ_a(d) = φ(|d_u|/a_u) φ(|d_v|/a_v)`
-//! ([`kernel::cubic_bspline`]) and a complete linear `H = (1, Δu, Δv)` or quadratic
+//! with a tensor-product kernel `φ_a(d) = φ(|d_u|/a_u) φ(|d_v|/a_v)`, the cubic B-spline
+//! ([`kernel::cubic_bspline`]) or the quartic spline ([`kernel::quartic_spline`]; the choice:
+//! [`KernelFunction`]), and a complete linear `H = (1, Δu, Δv)` or quadratic
 //! `H = (1, Δu, Δv, Δu², ΔuΔv, Δv²)` basis ([`Basis`]). They reproduce every polynomial of the
 //! basis exactly: `Σ_I Ψ_I p(x_I) = p(x)` and `Σ_I ∂_jΨ_I p(x_I) = ∂_j p(x)`.
 //!
@@ -30,7 +31,8 @@
 //! - [`ShapeFunctions`]: the f64 hot path; builds a [`SupportGrid`] once, then
 //!   [`ShapeFunctions::evaluate`] fills a reusable [`ShapeValues`] without allocating (after the
 //!   buffers have grown to the largest neighbourhood).
-//! - [`rk_shape_functions`] / [`rk_shape_functions_sparse`]: the generic point kernel over
+//! - [`rk_shape_functions`] / [`rk_shape_functions_sparse`]: the generic point kernel (cubic
+//!   B-spline) over
 //!   [`Real`](crate::scalar::Real), so evaluation point, particle coordinates and support sizes can
 //!   be dual numbers (design sensitivities, verification).
 //! - [`SupportGrid`]: which particles' supports cover a point (uniform cell grid, build once,
@@ -45,7 +47,10 @@ pub mod search;
 pub mod shape;
 pub mod vci;
 
-pub use kernel::{covers, cubic_bspline, kernel_1d, tensor_kernel};
+pub use kernel::{
+    covers, cubic_bspline, kernel_1d, kernel_1d_with, quartic_spline, tensor_kernel,
+    tensor_kernel_with, KernelFunction,
+};
 pub use particles::{
     jittered_grid, local_spacing, regular_grid, supports_from_spacing, Edge, ParamBox,
     ParticleGrid, XorShift64,

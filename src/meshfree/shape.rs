@@ -3,7 +3,7 @@
 // Dense small-matrix kernels read most clearly with index loops.
 #![allow(clippy::needless_range_loop)]
 
-use super::kernel::{covers, tensor_kernel};
+use super::kernel::{covers, tensor_kernel_with, KernelFunction};
 use super::search::SupportGrid;
 use super::{Basis, MeshfreeError};
 use crate::scalar::Real;
@@ -130,6 +130,7 @@ impl<T: Real, const N: usize> Factor<T, N> {
 fn rk_core<T: Real, const N: usize>(
     x: [T; 2],
     basis: Basis,
+    kernel: KernelFunction,
     nbrs: &[usize],
     pts: &[[T; 2]],
     sup: &[[T; 2]],
@@ -165,7 +166,7 @@ fn rk_core<T: Real, const N: usize>(
     let mut mv = [[zero; N]; N];
     for &i in nbrs {
         let d = [x[0] - pts[i][0], x[1] - pts[i][1]];
-        let k = tensor_kernel(d, sup[i]);
+        let k = tensor_kernel_with(kernel, d, sup[i]);
         w.push(k);
         let [h, hu, hv] = basis_terms::<T, N>([d[0] * inv_s[0], d[1] * inv_s[1]], inv_s);
         for a in 0..N {
@@ -224,6 +225,7 @@ fn rk_core<T: Real, const N: usize>(
 fn rk_dispatch<T: Real>(
     x: [T; 2],
     basis: Basis,
+    kernel: KernelFunction,
     nbrs: &[usize],
     pts: &[[T; 2]],
     sup: &[[T; 2]],
@@ -233,8 +235,10 @@ fn rk_dispatch<T: Real>(
     grads: &mut Vec<[T; 2]>,
 ) -> Result<(), MeshfreeError> {
     match basis {
-        Basis::Linear => rk_core::<T, 3>(x, basis, nbrs, pts, sup, limit, w, vals, grads),
-        Basis::Quadratic => rk_core::<T, 6>(x, basis, nbrs, pts, sup, limit, w, vals, grads),
+        Basis::Linear => rk_core::<T, 3>(x, basis, kernel, nbrs, pts, sup, limit, w, vals, grads),
+        Basis::Quadratic => {
+            rk_core::<T, 6>(x, basis, kernel, nbrs, pts, sup, limit, w, vals, grads)
+        }
     }
 }
 
@@ -305,6 +309,7 @@ pub fn rk_shape_functions_sparse<T: Real>(
     rk_dispatch(
         x,
         basis,
+        KernelFunction::CubicSpline,
         neighbours,
         particles,
         supports,
@@ -382,6 +387,7 @@ pub struct ShapeFunctions {
     particles: Vec<[f64; 2]>,
     supports: Vec<[f64; 2]>,
     basis: Basis,
+    kernel: KernelFunction,
     grid: SupportGrid,
     max_condition: f64,
 }
@@ -398,9 +404,16 @@ impl ShapeFunctions {
             particles,
             supports,
             basis,
+            kernel: KernelFunction::default(),
             grid,
             max_condition: DEFAULT_MAX_CONDITION,
         })
+    }
+
+    /// Replace the kernel function (the cubic B-spline by default).
+    pub fn with_kernel(mut self, kernel: KernelFunction) -> Self {
+        self.kernel = kernel;
+        self
     }
 
     /// Replace the limit on the moment-matrix condition estimate ([`DEFAULT_MAX_CONDITION`]).
@@ -420,6 +433,10 @@ impl ShapeFunctions {
     /// The basis.
     pub fn basis(&self) -> Basis {
         self.basis
+    }
+    /// The kernel function.
+    pub fn kernel(&self) -> KernelFunction {
+        self.kernel
     }
     /// The neighbour-search grid.
     pub fn grid(&self) -> &SupportGrid {
@@ -443,6 +460,7 @@ impl ShapeFunctions {
         let res = rk_dispatch(
             x,
             self.basis,
+            self.kernel,
             &out.neighbours,
             &self.particles,
             &self.supports,

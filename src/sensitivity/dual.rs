@@ -202,10 +202,11 @@ pub enum SensitivityError {
     /// directors, whose design derivative the methods do not carry into them.
     #[error(
         "design variable `{name}`: a shape variable, and the model holds {rows} coefficient \
-         mode(s) invisible to the field by constraint rows (a support near a multiple of 4 \
-         spacings between symmetry planes), whose design derivative the continuum and dual \
-         methods do not carry; take a support away from multiples of 4 spacings (e.g. 3.5 or \
-         4.5), or use the finite differences alone"
+         mode(s) invisible to the field by constraint rows (the cubic B-spline kernel at a \
+         support near a multiple of 4 spacings between symmetry planes), whose design \
+         derivative the continuum and dual methods do not carry; take the quartic spline \
+         (`kernel.function` = \"quartic-spline\", the default at such supports), a support \
+         away from multiples of 4 spacings (e.g. 3.5 or 4.5), or the finite differences alone"
     )]
     ShapeWithGaugeRows {
         /// The shape variable.

@@ -51,19 +51,6 @@ use nalgebra::{DMatrix, DVector, Matrix3, SymmetricEigen, Vector3};
 /// without rows, 4 and 4.1 fail the solver's singularity probe without them).
 pub const INVISIBLE_TRANSFER: f64 = 2e-3;
 
-/// Supports within this many spacings of a multiple of 4 are near the kernel's blind spot
-/// (module documentation): only there are the modes looked for, and the case check warns.
-/// Without the rows, 4 ± 0.1 were singular with symmetry planes on opposite edges, 3.8 and 4.2
-/// were not.
-pub const RESONANT_SUPPORT_BAND: f64 = 0.15;
-
-/// Whether a support of `spacings` particle spacings is within [`RESONANT_SUPPORT_BAND`] of a
-/// (non-zero) multiple of 4.
-pub fn resonant(spacings: f64) -> bool {
-    let k = (spacings / 4.0).round();
-    k >= 1.0 && (spacings - 4.0 * k).abs() <= RESONANT_SUPPORT_BAND
-}
-
 /// One coefficient mode the field does not see: an alternating translation pattern along a
 /// lattice line.
 #[derive(Clone, Debug, PartialEq)]
@@ -213,11 +200,12 @@ pub fn gauge_modes(model: &ShellModel) -> Vec<GaugeMode> {
     let Some((index, counts, h, origin)) = lattice(model) else {
         return Vec::new();
     };
-    // The kernel's blind spot is at supports of (near) a multiple of 4 spacings only.
+    // The cubic B-spline's blind spot is at supports of (near) a multiple of 4 spacings only.
+    let kernel = model.shape_functions.kernel();
     let supports = model.shape_functions.supports();
     if !supports
         .iter()
-        .any(|s| (0..2).any(|a| resonant(s[a] / h[a])))
+        .any(|s| (0..2).any(|a| kernel.blind_at(s[a] / h[a])))
     {
         return Vec::new();
     }

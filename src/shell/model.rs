@@ -22,7 +22,7 @@ use super::ShellError;
 use crate::geometry::{GeometryError, Surface};
 use crate::kinematics::rotation::{director_derivatives, rotate_director, DirectorDerivatives};
 use crate::material::{MaterialParams, MaterialState};
-use crate::meshfree::{Basis, MeshfreeError, ShapeFunctions, ShapeValues};
+use crate::meshfree::{Basis, KernelFunction, MeshfreeError, ShapeFunctions, ShapeValues};
 use crate::scalar::Real;
 use nalgebra::{DMatrix, Matrix3, Vector3};
 use rayon::prelude::*;
@@ -109,6 +109,8 @@ pub struct Discretisation {
     pub supports: Vec<[f64; 2]>,
     /// RK basis.
     pub basis: Basis,
+    /// RK kernel function.
+    pub kernel: KernelFunction,
     /// In-plane quadrature `(uv, parameter-domain weight)`.
     pub quadrature: Vec<([f64; 2], f64)>,
     /// Thickness rule `(ζ, weight)`.
@@ -227,6 +229,7 @@ impl ShellModel {
             particle_uv,
             supports,
             basis,
+            kernel,
             quadrature,
             thickness_rule,
             thickness,
@@ -267,7 +270,9 @@ impl ShellModel {
             sf_uv.push(im.uv);
             sf_sup.push(im.support);
         }
-        let sf = ShapeFunctions::new(sf_uv, sf_sup, basis).map_err(mf)?;
+        let sf = ShapeFunctions::new(sf_uv, sf_sup, basis)
+            .map_err(mf)?
+            .with_kernel(kernel);
         let source_of = |j: usize| {
             if j < n_real {
                 j

@@ -56,6 +56,7 @@ pub fn elastic_model(surface: &Surface<f64>, spec: &ModelSpec) -> ShellModel {
         supports: grid.supports(spec.support),
         particle_uv: grid.positions,
         basis: Basis::Quadratic,
+        kernel: Default::default(),
         quadrature: cq.iter().map(|(p, w, _)| (p, w)).collect(),
         thickness_rule: g2
             .nodes

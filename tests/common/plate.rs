@@ -69,6 +69,7 @@ impl Plate {
             supports: grid.supports(3.0),
             particle_uv: grid.positions,
             basis: Basis::Quadratic,
+            kernel: Default::default(),
             quadrature: cq.iter().map(|(p, w, _)| (p, w)).collect(),
             thickness_rule: lob.nodes.iter().copied().zip(lob.weights).collect(),
             thickness: design.thickness,
