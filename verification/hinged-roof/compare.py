@@ -60,8 +60,8 @@ def main(path):
     # Limit point and minimum of the computed path (largest P before the fall, then smallest).
     i_max = next((i for i in range(1, len(ps) - 1) if ps[i + 1] < ps[i]), len(ps) - 1)
     i_min = next((i for i in range(i_max, len(ps) - 1) if ps[i + 1] > ps[i]), len(ps) - 1)
-    def vertex(i):
-        # The parabola through the extreme step and its neighbours: its vertex (W, P).
+    def vertex(pts, i):
+        # The parabola through point i and its neighbours: its vertex (W, P).
         (x0, y0), (x1, y1), (x2, y2) = pts[i - 1], pts[i], pts[i + 1]
         d = (x0 - x1) * (x0 - x2) * (x1 - x2)
         a = (x2 * (y1 - y0) + x1 * (y0 - y2) + x0 * (y2 - y1)) / d
@@ -69,12 +69,24 @@ def main(path):
         c = y1 - a * x1 * x1 - b * x1
         xv = -b / (2 * a)
         return xv, c - b * b / (4 * a)
-    for name, i, (p_ref, w_ref) in [("limit load", i_max, (0.7421, 11.293)),
-                                    ("minimum   ", i_min, (0.1729, 19.852))]:
-        wv, pv = vertex(i)
+    # Sze's tabulated extremes are levels of his table, not the extremes of his path: the same
+    # parabola through his extreme level and its neighbours gives those, and the run's loads at
+    # the same three deflections give ours by the same construction.
+    ref_pts = [(w, p) for p, w in REF]
+    for name, i, k in [("limit load", i_max, 9), ("minimum   ", i_min, 23)]:
+        wv, pv = vertex(pts, i)
+        p_ref, w_ref = REF[k][0], REF[k][1]
         print(f"{name}: ours {pv:.4f} at W {wv:.3f} (parabola through steps {i - 1}..{i + 1}); "
-              f"Sze {p_ref} at {w_ref}: load {100 * (pv / p_ref - 1):+.2f} %, "
+              f"Sze's level {p_ref} at {w_ref}: load {100 * (pv / p_ref - 1):+.2f} %, "
               f"deflection {100 * (wv / w_ref - 1):+.2f} %")
+        ws, ps_ = vertex(ref_pts, k)
+        same = [(w, by_w.get(round(w, 6))) for w, _ in ref_pts[k - 1:k + 2]]
+        if all(p is not None for _, p in same):
+            wo, po = vertex(same, 1)
+            print(f"{name}: on Sze's deflections {ref_pts[k - 1][0]}..{ref_pts[k + 1][0]}, the "
+                  f"parabola's vertex: Sze {ps_:.4f} at W {ws:.3f}, ours {po:.4f} at W {wo:.3f}: "
+                  f"load {100 * (po / ps_ - 1):+.2f} %; ours through our steps against it "
+                  f"{100 * (pv / ps_ - 1):+.2f} %")
     # Deflection at each tabulated load on the same branch.
     ref_br = branches([(w, p) for p, w in REF])
     ours_br = branches(pts)
