@@ -3,7 +3,8 @@
 //!
 //! ```sh
 //! cargo run --release --example tangent_spectrum -- CASE.toml [--grid NU NV] [--gauss G]
-//!     [--subdivide S] [--jitter J] [--stabilise EPS] [--count K] [--every N] [--until LOAD]
+//!     [--subdivide S] [--jitter J] [--stabilise EPS] [--strength NAME] [--floor F] [--count K]
+//!     [--every N] [--until LOAD]
 //! ```
 //!
 //! At every `N`-th converged step (default: every step) it prints the load factor, the monitors'
@@ -14,6 +15,11 @@
 //! (u_x, u_y, u_z, α1, α2), the zig-zag indices along u and v (`Z = Σ(f_{i+1} − f_i)² /
 //! 2Σ(f_{i+1}² + f_i²)` over neighbouring particles of the grid: 0 for a constant field, 1 for a
 //! sign alternating from particle to particle, 0.5 for noise) and where the mode is largest.
+//! After each printed step it splits the lowest mode's Rayleigh quotient into the part of the
+//! particles' geometric director blocks at the committed state, `−Σ_I (m_I·d_I) |α_I|²`
+//! (`ShellModel::director_force_normals`), and the rest, and prints the largest and the median
+//! of `m_I·d_I` over the particles against the bending stiffness `E t³/(12(1 − ν²))` (the
+//! director filter's `κ` at ε = 1).
 use shelldsa::io::shell_build::build;
 use shelldsa::io::shell_case::{read_shell_case, CellLayout};
 use shelldsa::shell::problem::ShellProblem;
@@ -36,6 +42,10 @@ struct Probe {
     lines: Vec<String>,
     pending: Option<(f64, Vec<String>)>,
     h: f64,
+    /// The lowest mode and its eigenvalue at the last printed step.
+    lowest: Option<(f64, Vec<f64>)>,
+    /// `E t³ / (12 (1 − ν²))`.
+    bending: f64,
 }
 
 fn zigzag(x: &[f64], uv: &[[f64; 2]], counts: [usize; 2], domain: [[f64; 2]; 2]) -> [f64; 2] {
@@ -143,6 +153,7 @@ impl StepObserver<&mut ShellProblem> for Probe {
                 .collect::<Vec<_>>()
                 .join(" ")
         ));
+        self.lowest = sp.pairs.first().map(|p| (p.value, p.vector.clone()));
         self.pending = Some((step.load, out));
         Ok(())
     }
@@ -153,12 +164,80 @@ impl StepObserver<&mut ShellProblem> for Probe {
             line += &format!("  {name} ({:+.4}, {:+.4}, {:+.4})", d.x, d.y, d.z);
         }
         println!("{line}");
+        {
+            // The part of the total director change that the RK approximation filters out.
+            let model = &problem.model;
+            let (mut num, mut den, mut top) = (0.0, 0.0, (0.0, 0usize));
+            for i in 0..model.n_particles() {
+                let Ok(sv) = model.shape_values(model.particle_uv[i]) else {
+                    continue;
+                };
+                let dd = |j: usize| {
+                    let st = model.particle_state(j);
+                    st.d - st.d0
+                };
+                let mut g = dd(i);
+                for (j, psi, _) in sv.iter() {
+                    g -= dd(j) * psi;
+                }
+                num += g.norm_squared();
+                den += dd(i).norm_squared();
+                if g.norm() > top.0 {
+                    top = (g.norm(), i);
+                }
+            }
+            println!(
+                "  filtered part of d − d⁰: {:.3e} (RMS ratio), largest |g| {:.3e} at (u, v) = ({:.3}, {:.3})",
+                (num / den.max(f64::MIN_POSITIVE)).sqrt(),
+                top.0,
+                model.particle_uv[top.1][0],
+                model.particle_uv[top.1][1]
+            );
+        }
+        let printed = self.pending.is_some();
         for l in self.pending.take().map(|p| p.1).unwrap_or_default() {
             println!("{l}");
+        }
+        if let (true, Some((value, v))) = (printed, self.lowest.take()) {
+            let s = match problem.model.director_force_normals() {
+                Ok(s) => s,
+                Err(e) => {
+                    println!("  director forces: {e}");
+                    return;
+                }
+            };
+            let vv: f64 = v.iter().map(|x| x * x).sum();
+            let geo: f64 = s
+                .iter()
+                .enumerate()
+                .map(|(i, si)| -si * (v[5 * i + 3].powi(2) + v[5 * i + 4].powi(2)))
+                .sum::<f64>()
+                / vv;
+            let mut sorted = s.clone();
+            sorted.sort_by(f64::total_cmp);
+            let max = sorted.last().copied().unwrap_or(0.0);
+            let median = sorted[sorted.len() / 2];
+            let positive = s.iter().filter(|x| **x > 0.0).count();
+            println!(
+                "  lowest mode: λ/k̄ {:+.3e} = geometric blocks {:+.3e} + rest {:+.3e}",
+                value / self.scale,
+                geo / self.scale,
+                (value - geo) / self.scale
+            );
+            println!(
+                "  m·d: max {:+.3e}, median {:+.3e}, > 0 at {} of {} particles; κ(ε = 1) = {:.3e}, max/κ(ε = 1) = {:.3e}",
+                max,
+                median,
+                positive,
+                s.len(),
+                self.bending,
+                max / self.bending
+            );
         }
     }
     fn on_restore(&mut self) {
         self.pending = None;
+        self.lowest = None;
     }
 }
 
@@ -196,6 +275,23 @@ fn main() {
             }
             "--stabilise" => {
                 case.integration.director_stabilisation = num(i + 1);
+                i += 2;
+            }
+            "--strength" => {
+                case.integration.director_stabilisation_strength = match args
+                    .get(i + 1)
+                    .map(String::as_str)
+                {
+                    Some("bending") => shelldsa::shell::stabilisation::FilterStrength::Bending,
+                    Some("director-force") => {
+                        shelldsa::shell::stabilisation::FilterStrength::DirectorForce
+                    }
+                    other => panic!("--strength: {other:?}, expected bending or director-force"),
+                };
+                i += 2;
+            }
+            "--floor" => {
+                case.integration.director_stabilisation_floor = num(i + 1);
                 i += 2;
             }
             "--count" => {
@@ -299,6 +395,9 @@ fn main() {
         lines: Vec::new(),
         pending: None,
         h,
+        lowest: None,
+        bending: case.material.young * case.thickness.powi(3)
+            / (12.0 * (1.0 - case.material.poisson * case.material.poisson)),
     };
     println!(
         "{}: {} particles, {} unknowns ({} generalised), mean diagonal k̄ = {:.4e}",

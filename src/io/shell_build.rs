@@ -486,9 +486,11 @@ pub fn case_loads(
     }
     if case.integration.director_stabilisation > 0.0 {
         loads.push(load::Load::DirectorFilter(
-            crate::shell::stabilisation::DirectorFilter::new(
+            crate::shell::stabilisation::DirectorFilter::with_strength(
                 model,
                 case.integration.director_stabilisation,
+                case.integration.director_stabilisation_strength,
+                case.integration.director_stabilisation_floor,
             )
             .map_err(|e| model_err("integration.director_stabilisation", e))?,
         ));

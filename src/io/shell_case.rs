@@ -19,6 +19,7 @@ use crate::meshfree::vci::VciOrder;
 use crate::meshfree::Edge;
 use crate::meshfree::{Basis, KernelFunction, ParamBox};
 use crate::shell::contact::{ContactFaces, DEFAULT_PENALTY_FACTOR};
+use crate::shell::stabilisation::FilterStrength;
 use nalgebra::Vector3;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -113,6 +114,10 @@ struct IntegrationFile {
     vci: Option<String>,
     #[serde(default)]
     director_stabilisation: Option<f64>,
+    #[serde(default)]
+    director_stabilisation_strength: Option<String>,
+    #[serde(default)]
+    director_stabilisation_floor: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -365,6 +370,11 @@ pub struct IntegrationSpec {
     pub vci: VciOrder,
     /// Factor `ε` of the director-filter stabilisation (docs/stability.md; 0: off).
     pub director_stabilisation: f64,
+    /// How the stabilisation's stiffness is set from `ε` (docs/stability.md).
+    pub director_stabilisation_strength: FilterStrength,
+    /// The floor `φ` of the per-particle strength, a fraction of `E t³ / (12 (1 − ν²))`
+    /// (docs/stability.md; 0: none).
+    pub director_stabilisation_floor: f64,
 }
 
 /// A displacement or rotation component of a particle's 5 DOFs.
@@ -1327,12 +1337,43 @@ impl Checker<'_> {
                 ))
             }
         };
+        let director_stabilisation_strength = match i.director_stabilisation_strength.as_deref() {
+            None | Some("bending") => FilterStrength::Bending,
+            Some("director-force") => FilterStrength::DirectorForce,
+            Some(other) => {
+                return Err(self.err(
+                    "integration.director_stabilisation_strength",
+                    format!("{other:?}"),
+                    "\"bending\" or \"director-force\" (default \"bending\")",
+                ))
+            }
+        };
+        let director_stabilisation_floor = match i.director_stabilisation_floor {
+            None => 0.0,
+            Some(x)
+                if x.is_finite()
+                    && x >= 0.0
+                    && director_stabilisation_strength == FilterStrength::DirectorForce =>
+            {
+                x
+            }
+            Some(x) => {
+                return Err(self.err(
+                    "integration.director_stabilisation_floor",
+                    format!("{x}"),
+                    "a finite number >= 0, with director_stabilisation_strength = \
+                     \"director-force\" (the floor of the per-particle strength)",
+                ))
+            }
+        };
         let integration = IntegrationSpec {
             cells,
             gauss,
             thickness_rule,
             vci,
             director_stabilisation,
+            director_stabilisation_strength,
+            director_stabilisation_floor,
         };
 
         let material = material_from_spec(&f.material, self.path)?;

@@ -98,6 +98,10 @@ pub enum DsaError {
     /// The analysis or a method failed.
     #[error(transparent)]
     Sensitivity(#[from] SensitivityError),
+    /// An analysis setting the continuum and dual methods do not carry (the message names
+    /// the case key).
+    #[error("{0}")]
+    Unsupported(String),
     /// A hooked run took other load levels than the plain analysis.
     #[error("{}", fd::load_levels_differ(.levels, .nominal, "plain analysis"))]
     LoadLevels {
@@ -412,6 +416,18 @@ pub fn run_with_output(
     check_design(&vars, &deltas, &scope).map_err(SensitivityError::from)?;
     if spec.methods.contains(&DsaMethod::Continuum) || spec.methods.contains(&DsaMethod::Dual) {
         super::dual::check_gauge_rows(&problem, &vars)?;
+        if problem.loads().iter().any(|l| {
+            matches!(l, crate::shell::load::Load::DirectorFilter(f)
+                if f.strength() == crate::shell::stabilisation::FilterStrength::DirectorForce)
+        }) {
+            return Err(DsaError::Unsupported(
+                "integration.director_stabilisation_strength = \"director-force\": the \
+                 continuum and dual methods do not carry its design derivative (that of the \
+                 committed director forces); expected \"bending\" (the default), or the \
+                 finite differences alone"
+                    .into(),
+            ));
+        }
     }
     let mut result = DsaResult {
         spec: spec.clone(),

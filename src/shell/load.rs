@@ -33,7 +33,7 @@
 use super::gather::GatherMap;
 use super::model::ShellModel;
 use super::point::{director_first_derivatives, ParticleState, SurfacePoint, DOFS_PER_PARTICLE};
-use super::stabilisation::DirectorFilter;
+use super::stabilisation::{DirectorFilter, FilterStrength};
 use super::ShellError;
 use crate::geometry::Surface;
 use crate::kinematics::rotation::{director_derivatives, rotate_director};
@@ -210,10 +210,13 @@ impl Load {
     }
 
     /// Whether [`Load::force`] takes a [`LoadState`]: every kind but the edge moment and edge
-    /// force (their design derivative through the edge's length element is not carried).
+    /// force (their design derivative through the edge's length element is not carried) and
+    /// the director filter with the per-particle strength (that of the committed director
+    /// forces is not carried).
     pub fn takes_state(&self) -> bool {
         match self {
             Load::Moment(_) | Load::EdgeForce(_) => false,
+            Load::DirectorFilter(l) => l.strength() == FilterStrength::Bending,
             Load::Constant(inner) => inner.takes_state(),
             _ => true,
         }

@@ -1067,6 +1067,50 @@ impl ShellModel {
         Ok((f, trial))
     }
 
+    /// The normal component `m_I · d_I` of each real particle's director force on the
+    /// committed state (zero increment), `m_I = Σ_points Σ_layers (f z + P_{:3} t/2 Ψ_I)`,
+    /// `f = P_{:1} Ψ̃_I,1 + P_{:2} Ψ̃_I,2`: the vector whose products with `∂d_I/∂α_b` are the
+    /// particle's rotation residuals. At `α = 0` the second derivative of the director update
+    /// is `∂²d_I/∂α_b∂α_γ = −δ_bγ d_I`, so the tangent's block of the particle's two rotations
+    /// holds `−(m_I · d_I) I₂`: a particle with `m_I · d_I > 0` is destabilised by it. An
+    /// image's contribution `m_j · d_j` goes to its source (`d_j = Q d_src`, `m_j · Q d_src`).
+    /// In point order, so the sums are deterministic.
+    pub fn director_force_normals(&self) -> Result<Vec<f64>, ShellError> {
+        let per_point = (0..self.points.len())
+            .into_par_iter()
+            .map(|k| {
+                let p = &self.points[k];
+                let parts: Vec<ParticleState<f64>> = p
+                    .neighbours
+                    .iter()
+                    .map(|&j| self.particle_state(j))
+                    .collect();
+                let x = vec![0.0; DOFS_PER_PARTICLE * parts.len()];
+                let inc = PointIncrement::new(&parts, &x)?;
+                let mut m = vec![Vector3::zeros(); parts.len()];
+                for l in 0..self.thickness_rule.len() {
+                    let inp = self.layer_input(k, l, &parts);
+                    let res = point_residual_with(&inp, &inc)?;
+                    let pk = res.kinematics.p;
+                    let half_t = inp.thickness * 0.5;
+                    let z = half_t * inp.zeta;
+                    for (ma, sh) in m.iter_mut().zip(p.shape.iter()) {
+                        let f = pk.column(0) * sh.dpsi_test[0] + pk.column(1) * sh.dpsi_test[1];
+                        *ma += f * z + pk.column(2) * (half_t * sh.psi);
+                    }
+                }
+                Ok(m.iter().zip(&parts).map(|(ma, st)| ma.dot(&st.d)).collect())
+            })
+            .collect::<Result<Vec<Vec<f64>>, ShellError>>()?;
+        let mut s = vec![0.0; self.n_particles()];
+        for (p, vals) in self.points.iter().zip(per_point) {
+            for (&j, v) in p.neighbours.iter().zip(vals) {
+                s[self.source_of(j)] += v;
+            }
+        }
+        Ok(s)
+    }
+
     /// Commit a converged increment: particle coefficients and directors move, the lamina
     /// vectors of each particle rotate with its director, histories become the trial ones.
     /// Images follow their sources ([`ShellModel::particle_state`]).

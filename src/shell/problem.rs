@@ -95,6 +95,9 @@ pub struct ShellProblem {
     gauge: Vec<GaugeMode>,
     /// Cell buffers of the tangent assembly, reused over the Newton iterations.
     buffers: AssemblyBuffers,
+    /// A failure of [`NonlinearProblem::commit`] (updating a load from the committed state),
+    /// reported by the next evaluation.
+    commit_error: Option<String>,
 }
 
 /// A load's error: [`ShellError::StepTooLarge`] lets the driver cut the step, anything else
@@ -275,6 +278,7 @@ impl ShellProblem {
             redundant,
             gauge,
             buffers: AssemblyBuffers::new(),
+            commit_error: None,
         })
     }
 
@@ -405,6 +409,9 @@ impl ShellProblem {
         r: &mut [f64],
         values: Option<&mut [f64]>,
     ) -> Result<(), ProblemError> {
+        if let Some(e) = &self.commit_error {
+            return Err(fatal(format!("after the last committed step: {e}")));
+        }
         let n = self.pattern.n_dofs();
         if u.len() != n || r.len() != n {
             return Err(fatal(format!(
@@ -633,6 +640,15 @@ impl NonlinearProblem for ShellProblem {
             .collect();
         self.model.commit_histories(&q, histories);
         self.committed = u.to_vec();
+        // The per-particle strength of the director filter follows the committed state (a
+        // state the driver has just evaluated: its points evaluate again at zero increment).
+        for l in &mut self.loads {
+            if let Load::DirectorFilter(f) = l {
+                if let Err(e) = f.update(&self.model) {
+                    self.commit_error = Some(e.to_string());
+                }
+            }
+        }
     }
     fn restore(&mut self) {
         self.cache = None;

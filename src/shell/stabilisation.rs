@@ -37,6 +37,26 @@
 //!
 //! ([`DirectorFilter::add_design_derivative`], hand-derived; the dual-number reference
 //! evaluates [`DirectorFilter::force_with`] on its dual committed state instead.)
+//!
+//! **Strength.** [`FilterStrength::Bending`] sets the constant `κ` above for every particle.
+//! [`FilterStrength::DirectorForce`] sets it per particle from the destabilising term itself:
+//! at the start of a step (`α = 0` about the committed lamina vectors) the geometric block of
+//! particle `I`'s two rotations is `∂²d_I/∂α_b∂α_γ · m_I = −(m_I · d_I) δ_bγ`
+//! ([`ShellModel::director_force_normals`]), so
+//!
+//! ```text
+//! E_s = ½ Σ_I κ_I |g_I|²,   κ_I = ε max(0, m_I · d_I) + φ E t³ / (12 (1 − ν²))
+//! ```
+//!
+//! (committed state, frozen in the step; the floor `φ`, default 0, is a small constant part)
+//!
+//! restores to a checkerboard what that block takes from it (ε of order 1–2) and vanishes
+//! where the director forces do not destabilise, in particular in the first step from an
+//! unstressed state: a linear analysis is unchanged. The `κ_I` are recomputed when a step is
+//! committed ([`DirectorFilter::update`]), so within a step the term stays quadratic in the
+//! increment with the exact symmetric tangent `Σ_I κ_I B_Iᵀ B_I`. Its design derivative would
+//! need that of the committed director forces, which the sensitivity methods do not carry: they
+//! refuse it ([`super::load::Load::takes_state`]).
 
 use super::model::ShellModel;
 use super::point::{ParticleState, DOFS_PER_PARTICLE};
@@ -44,13 +64,42 @@ use super::ShellError;
 use crate::scalar::Real;
 use nalgebra::{Matrix3x2, Vector2, Vector3};
 
+/// How the stiffness of the stabilisation is set (module documentation; case key
+/// `integration.director_stabilisation_strength`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FilterStrength {
+    /// `κ = ε E t³ / (12 (1 − ν²))` for every particle (`"bending"`).
+    #[default]
+    Bending,
+    /// `κ_I = ε max(0, m_I · d_I)` per particle from the committed director forces
+    /// (`"director-force"`).
+    DirectorForce,
+}
+
+impl FilterStrength {
+    /// The name of the case format.
+    pub fn name(self) -> &'static str {
+        match self {
+            FilterStrength::Bending => "bending",
+            FilterStrength::DirectorForce => "director-force",
+        }
+    }
+}
+
 /// The stabilisation of one model (module documentation).
 #[derive(Debug, Clone)]
 pub struct DirectorFilter {
     /// The factor `ε`.
     epsilon: f64,
-    /// `κ = ε E t³ / (12 (1 − ν²))`.
+    /// How `κ` is set.
+    strength: FilterStrength,
+    /// `κ = ε E t³ / (12 (1 − ν²))` ([`FilterStrength::Bending`]).
     kappa: f64,
+    /// Per real particle `κ_I` ([`FilterStrength::DirectorForce`]; empty otherwise).
+    kappa_rows: Vec<f64>,
+    /// The floor of [`FilterStrength::DirectorForce`], `φ E t³ / (12 (1 − ν²))`, added to
+    /// every `κ_I`.
+    floor: f64,
     /// Per real particle `I`: `(shape-function particle j, coefficient δ_Ij − Ψ_j(ξ_I))`.
     rows: Vec<Vec<(usize, f64)>>,
 }
@@ -59,8 +108,22 @@ pub struct DirectorFilter {
 type Blocks<T> = Vec<Vec<(usize, Matrix3x2<T>)>>;
 
 impl DirectorFilter {
-    /// The stabilisation of `model` with factor `epsilon` (> 0, finite).
+    /// The stabilisation of `model` with factor `epsilon` (> 0, finite) and the constant
+    /// stiffness ([`FilterStrength::Bending`]).
     pub fn new(model: &ShellModel, epsilon: f64) -> Result<Self, ShellError> {
+        Self::with_strength(model, epsilon, FilterStrength::Bending, 0.0)
+    }
+
+    /// The stabilisation of `model` with factor `epsilon` (> 0, finite) and the stiffness set
+    /// by `strength`; for [`FilterStrength::DirectorForce`] from the model's committed state,
+    /// plus `floor` (≥ 0, finite) times the bending stiffness `E t³ / (12 (1 − ν²))` (ignored
+    /// for [`FilterStrength::Bending`]).
+    pub fn with_strength(
+        model: &ShellModel,
+        epsilon: f64,
+        strength: FilterStrength,
+        floor: f64,
+    ) -> Result<Self, ShellError> {
         let mp = &model.material;
         let kappa = Self::stiffness(epsilon, mp.young, mp.poisson, model.thickness);
         let mut rows = Vec::with_capacity(model.n_particles());
@@ -73,11 +136,47 @@ impl DirectorFilter {
             }
             rows.push(row);
         }
-        Ok(DirectorFilter {
+        let mut filter = DirectorFilter {
             epsilon,
+            strength,
             kappa,
+            kappa_rows: Vec::new(),
+            floor: Self::stiffness(floor, mp.young, mp.poisson, model.thickness),
             rows,
-        })
+        };
+        filter.update(model)?;
+        Ok(filter)
+    }
+
+    /// Recompute the per-particle stiffness from the model's committed state
+    /// ([`FilterStrength::DirectorForce`]: `κ_I = ε max(0, m_I · d_I) + φ E t³/(12 (1 − ν²))`);
+    /// nothing for the constant stiffness. Called when a step is committed.
+    pub fn update(&mut self, model: &ShellModel) -> Result<(), ShellError> {
+        if self.strength == FilterStrength::DirectorForce {
+            let s = model.director_force_normals()?;
+            if s.len() != self.rows.len() {
+                return Err(ShellError::Dimension {
+                    expected: self.rows.len(),
+                    got: s.len(),
+                });
+            }
+            let (e, floor) = (self.epsilon, self.floor);
+            self.kappa_rows = s.iter().map(|v| e * v.max(0.0) + floor).collect();
+        }
+        Ok(())
+    }
+
+    /// How the stiffness is set.
+    pub fn strength(&self) -> FilterStrength {
+        self.strength
+    }
+
+    /// The stiffness of row (real particle) `i`.
+    pub fn row_kappa(&self, i: usize) -> f64 {
+        match self.strength {
+            FilterStrength::Bending => self.kappa,
+            FilterStrength::DirectorForce => self.kappa_rows[i],
+        }
     }
 
     /// `κ = ε E t³ / (12 (1 − ν²))` in scalar `T`.
@@ -90,7 +189,8 @@ impl DirectorFilter {
         self.epsilon
     }
 
-    /// The stiffness `κ` of the model it was built for.
+    /// The stiffness `κ` of the model it was built for (the constant of
+    /// [`FilterStrength::Bending`]; [`DirectorFilter::row_kappa`] gives each row's).
     pub fn kappa(&self) -> f64 {
         self.kappa
     }
@@ -163,22 +263,23 @@ fn sub_rotation<T: Real>(f: &mut [T], s: usize, r: Vector2<T>) {
     f[DOFS_PER_PARTICLE * s + ROT + 1] -= r[1];
 }
 
-/// Add `f = −κ Bᵀ B α` for the blocks `blocks`.
-fn apply<T: Real>(blocks: &Blocks<T>, kappa: T, q: &[T], f: &mut [T]) {
-    for row in blocks {
+/// Add `f = −Σ_I κ_I B_Iᵀ B_I α` for the blocks `blocks` (row `I`'s stiffness `kappa(I)`).
+fn apply<T: Real>(blocks: &Blocks<T>, kappa: impl Fn(usize) -> T, q: &[T], f: &mut [T]) {
+    for (i, row) in blocks.iter().enumerate() {
         let mut g = Vector3::zeros();
         for (s, b) in row {
             g += b * alpha(q, *s);
         }
+        let k = kappa(i);
         for (s, b) in row {
-            sub_rotation(f, *s, b.transpose() * g * kappa);
+            sub_rotation(f, *s, b.transpose() * g * k);
         }
     }
 }
 
 impl DirectorFilter {
-    /// Add `f = −κ Bᵀ B α` (the rotation increments of `q`) into `f`, in scalar `T`, on the
-    /// model's committed state and with its `κ`.
+    /// Add `f = −Σ_I κ_I B_Iᵀ B_I α` (the rotation increments of `q`) into `f`, in scalar `T`,
+    /// on the model's committed state and with its stiffness.
     pub fn force<T: Real>(
         &self,
         model: &ShellModel,
@@ -191,14 +292,15 @@ impl DirectorFilter {
             .into_iter()
             .map(|row| row.into_iter().map(|(s, b)| (s, b.map(T::cst))).collect())
             .collect();
-        apply(&blocks, T::cst(self.kappa), q, f);
+        apply(&blocks, |i| T::cst(self.row_kappa(i)), q, f);
         Ok(())
     }
 
     /// Add `f = −κ Bᵀ B α` into `f` in scalar `T` on the committed states `particles` of the
     /// real particles (as `ShellModel::particles`; the images follow their sources) with the
     /// stiffness `kappa`: the same force on another committed state and design (the dual
-    /// reference's, [`super::load::LoadState`]).
+    /// reference's, [`super::load::LoadState`]). Only for the constant stiffness: the
+    /// per-particle one depends on the committed director forces, which this does not take.
     pub fn force_with<T: Real>(
         &self,
         model: &ShellModel,
@@ -208,8 +310,9 @@ impl DirectorFilter {
         f: &mut [T],
     ) -> Result<(), ShellError> {
         self.check(model, Some(particles.len()), q.len(), f.len())?;
+        self.constant_only("the force on another committed state and design")?;
         let blocks = self.blocks_of(model, |j| model.particle_state_in(j, particles));
-        apply(&blocks, kappa, q, f);
+        apply(&blocks, |_| kappa, q, f);
         Ok(())
     }
 
@@ -227,6 +330,7 @@ impl DirectorFilter {
         f: &mut [f64],
     ) -> Result<(), ShellError> {
         self.check(model, Some(particles_dot.len()), q.len(), f.len())?;
+        self.constant_only("the design derivative")?;
         for row in &self.rows {
             // (source, B block, Ḃ block), merged by source.
             let mut bl: Vec<(usize, Matrix3x2<f64>, Matrix3x2<f64>)> =
@@ -266,6 +370,20 @@ impl DirectorFilter {
         Ok(())
     }
 
+    /// An error for `what` unless the stiffness is the constant one.
+    fn constant_only(&self, what: &str) -> Result<(), ShellError> {
+        match self.strength {
+            FilterStrength::Bending => Ok(()),
+            FilterStrength::DirectorForce => Err(ShellError::InvalidInput(format!(
+                "director stabilisation with strength \"{}\": {what} is not implemented \
+                 (it needs the design derivative of the committed director forces; expected \
+                 strength \"{}\")",
+                FilterStrength::DirectorForce.name(),
+                FilterStrength::Bending.name()
+            ))),
+        }
+    }
+
     /// Sizes: `q` and `f` are generalised vectors of the model, `particles` (when given) one
     /// state per real particle.
     fn check(
@@ -290,16 +408,18 @@ impl DirectorFilter {
         }
     }
 
-    /// Add the tangent `−κ Bᵀ B` as global entries (independent of the increment).
+    /// Add the tangent `−Σ_I κ_I B_Iᵀ B_I` as global entries (independent of the increment;
+    /// the entries of a row with `κ_I = 0` are kept, so the pattern does not change).
     pub fn add_stiffness(
         &self,
         model: &ShellModel,
         out: &mut Vec<(usize, usize, f64)>,
     ) -> Result<(), ShellError> {
-        for row in self.blocks(model) {
+        for (i, row) in self.blocks(model).into_iter().enumerate() {
+            let kappa = self.row_kappa(i);
             for (s, bs) in &row {
                 for (p, bp) in &row {
-                    let k = bs.transpose() * bp * (-self.kappa);
+                    let k = bs.transpose() * bp * (-kappa);
                     for a in 0..2 {
                         for b in 0..2 {
                             out.push((
