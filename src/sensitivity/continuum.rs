@@ -1,6 +1,10 @@
 //! The continuum (hand-derived) design sensitivity analysis, path 2 of `docs/sensitivity.md`:
 //! the paper's §3 (eqs 37–65) on the discretised shell, at every converged load step, with the
-//! tangent the Newton driver holds factorised at the converged state and no iteration.
+//! tangent factorised at the converged state and no iteration. Where it runs
+//! ([`ContinuumSchedule`]): in the analysis' convergence hook, with the tangent the Newton
+//! driver factorises there for it, or on a thread of its own beside the analysis, which hands
+//! it each committed step; it then replays the commits on a copy of the problem and factorises
+//! the same tangent itself, while the analysis goes on as the plain one.
 //!
 //! At the converged step `n → n+1` (increment `Δu`, unknowns `u = [q, μ]`), for every design
 //! variable `τ` at once (the columns of one multi-right-hand-side solve):
@@ -1009,17 +1013,27 @@ impl Replica {
     }
 }
 
+/// Where a step failed on the DSA's thread, as the synchronous path would meet it.
+#[derive(Debug)]
+enum StepFailure {
+    /// Before the commit (the converged tangent or the sensitivities): the convergence hook's
+    /// failure in the synchronous path.
+    Hook(ProblemError),
+    /// After the commit (the records): the synchronous path stops at the next evaluation.
+    Record(Failure),
+}
+
 impl ContinuumDsa {
     /// One committed step on the DSA's thread: the converged tangent, the sensitivities
     /// ([`ContinuumDsa::solve_step`]), the replica's commit and the records.
-    fn replay(&mut self, replica: &mut Replica, step: &Committed) -> Result<(), ProblemError> {
+    fn replay(&mut self, replica: &mut Replica, step: &Committed) -> Result<(), StepFailure> {
         let t0 = Instant::now();
-        let bc = replica.factorise(step)?;
+        let bc = replica.factorise(step).map_err(StepFailure::Hook)?;
         self.timing.tangent += t0.elapsed().as_secs_f64();
         let t0 = Instant::now();
         let solved = self.solve_step(&replica.problem, &step.u, step.load, &replica.solver, &bc);
         self.time += t0.elapsed();
-        solved?;
+        solved.map_err(StepFailure::Hook)?;
         let t0 = Instant::now();
         replica.problem.commit(&step.u, step.load);
         self.timing.tangent += t0.elapsed().as_secs_f64();
@@ -1027,47 +1041,75 @@ impl ContinuumDsa {
         let recorded = self.record(&replica.problem, step.load);
         self.time += t0.elapsed();
         self.timing.record += t0.elapsed().as_secs_f64();
-        recorded.map_err(ProblemError::Failed)
+        recorded.map_err(StepFailure::Record)
     }
 }
 
-/// The analysis' failure as the driver reports a convergence hook's (`on_converged`): `error`
-/// at converged step `k` of `report`, whose committed start was `u` at `load`. The attempts
-/// after it are dropped (the analysis ran on before the DSA's thread reached step `k`).
+/// The error of a run whose DSA failed at converged step `k` of the analysis' `report`, as the
+/// synchronous path reports it, with the replica's committed state `u` at `load`: a failure
+/// before the commit as the driver reports a failed convergence hook (`on_converged`: the
+/// step's attempt failed, the state before it committed); a failure of the records after the
+/// commit as the failure of the next attempt at its first evaluation (after the last step: as
+/// the observer's failure). The attempts after the failed one are dropped: the analysis ran
+/// on while the DSA's thread was behind.
 fn failure_at_step(
     mut report: NewtonReport,
     k: usize,
     (u, load): (&[f64], f64),
-    error: ProblemError,
-) -> NewtonFailure {
-    let reason = FailureReason::Problem(ProblemError::Failed(Failure::new("on_converged", error)));
-    let at = report
+    failure: StepFailure,
+) -> SensitivityError {
+    let converged_at = report
         .attempts
         .iter()
         .enumerate()
         .filter(|(_, a)| a.converged)
         .nth(k)
         .map(|(i, _)| i);
-    let (attempted, step_size, residuals) = match at {
+    // The attempt that fails in the synchronous path, why, and its residuals.
+    let (failed, reason, residuals) = match failure {
+        StepFailure::Hook(e) => {
+            let reason =
+                FailureReason::Problem(ProblemError::Failed(Failure::new("on_converged", e)));
+            let residuals = converged_at
+                .map(|i| report.attempts[i].residual_norms.clone())
+                .unwrap_or_default();
+            (converged_at, reason, residuals)
+        }
+        StepFailure::Record(f) => {
+            let next = converged_at
+                .map(|i| i + 1)
+                .filter(|&i| i < report.attempts.len());
+            match next {
+                Some(i) => (
+                    Some(i),
+                    FailureReason::Problem(ProblemError::Failed(f)),
+                    Vec::new(),
+                ),
+                None => return SensitivityError::Observer(f),
+            }
+        }
+    };
+    let (attempted, step_size) = match failed {
         Some(i) => {
             report.attempts.truncate(i + 1);
             let rec = &mut report.attempts[i];
             rec.converged = false;
             rec.failure = Some(reason.clone());
-            (rec.load, rec.step_size, rec.residual_norms.clone())
+            rec.residual_norms.clone_from(&residuals);
+            (rec.load, rec.step_size)
         }
-        None => (load, 0.0, Vec::new()),
+        None => (load, 0.0),
     };
     report.u = u.to_vec();
     report.load = load;
-    NewtonFailure {
+    SensitivityError::Newton(Box::new(NewtonFailure {
         converged_load: load,
         attempted_load: attempted,
         step_size,
         reason,
         last_residuals: residuals,
         report,
-    }
+    }))
 }
 
 /// What a thread's panic carried, as text.
@@ -1119,11 +1161,14 @@ pub(super) fn run_concurrent(
             let out = newton.run(&mut obs, &pattern, &mut linear, &u0);
             (out, started.elapsed())
         });
-        // A failed step: its index, the committed unknowns and load level before it, why.
-        let mut stop: Option<(usize, Vec<f64>, f64, ProblemError)> = None;
+        // A failed step: its index, the replica's committed unknowns and load level, why.
+        let mut stop: Option<(usize, Vec<f64>, f64, StepFailure)> = None;
         let mut load = newton.stepping.start;
         for (k, step) in steps.iter().enumerate() {
             if let Err(e) = dsa.replay(&mut replica, &step) {
+                if matches!(e, StepFailure::Record(_)) {
+                    load = step.load;
+                }
                 stop = Some((k, replica.problem.state().to_vec(), load, e));
                 break;
             }
@@ -1140,8 +1185,7 @@ pub(super) fn run_concurrent(
                 Ok(r) => r,
                 Err(f) => f.report,
             };
-            let f = failure_at_step(report, k, (&u, load), e);
-            return Err(SensitivityError::Newton(Box::new(f)));
+            return Err(failure_at_step(report, k, (&u, load), e));
         }
         let report = outcome.map_err(SensitivityError::Newton)?;
         let total = t0.elapsed();
@@ -1175,4 +1219,74 @@ pub fn run_continuum(
         &mut |_| {},
     )?;
     Ok(run.unwrap_or_else(|| unreachable!("run_hooked returns a run per method asked for")))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::solver::{Predictor, StepRecord};
+
+    /// Attempts 0 → 1 (converged), 1 → 2 (cut), 1 → 1.5, 1.5 → 2 (converged), each with its
+    /// residual norms.
+    fn report() -> NewtonReport {
+        let attempt = |from: f64, to: f64, converged: bool| {
+            let mut r = StepRecord::new(from, to, to - from, Predictor::Zero);
+            r.converged = converged;
+            r.residual_norms = vec![to, 1e-9 * to];
+            r
+        };
+        NewtonReport {
+            u: vec![3.0; 2],
+            load: 2.0,
+            attempts: vec![
+                attempt(0.0, 1.0, true),
+                attempt(1.0, 2.0, false),
+                attempt(1.0, 1.5, true),
+                attempt(1.5, 2.0, true),
+            ],
+        }
+    }
+
+    fn newton(e: SensitivityError) -> NewtonFailure {
+        match e {
+            SensitivityError::Newton(f) => *f,
+            other => panic!("expected the analysis' failure, got {other}"),
+        }
+    }
+
+    #[test]
+    fn a_failed_hook_is_the_failure_of_its_step() {
+        let e = StepFailure::Hook(ProblemError::Fatal("singular".into()));
+        let f = newton(failure_at_step(report(), 1, (&[1.0, 1.0], 1.0), e));
+        assert_eq!(
+            (f.converged_load, f.attempted_load, f.step_size),
+            (1.0, 1.5, 0.5)
+        );
+        assert_eq!(f.last_residuals, vec![1.5, 1e-9 * 1.5], "the step's attempt");
+        assert!(f.reason.to_string().contains("singular"), "{}", f.reason);
+        assert_eq!(f.report.attempts.len(), 3, "the attempts after it dropped");
+        assert_eq!(f.report.converged_steps().count(), 1);
+        assert!(f.report.attempts[2].failure.is_some());
+        assert_eq!(
+            (f.report.u.as_slice(), f.report.load),
+            (&[1.0, 1.0][..], 1.0)
+        );
+    }
+
+    #[test]
+    fn a_failed_record_is_the_failure_of_the_next_attempt() {
+        let e = StepFailure::Record(Failure::new(CONTEXT, "monitor"));
+        let f = newton(failure_at_step(report(), 0, (&[2.0, 2.0], 1.0), e));
+        assert_eq!((f.converged_load, f.attempted_load), (1.0, 2.0));
+        assert!(
+            f.last_residuals.is_empty(),
+            "failed at its first evaluation"
+        );
+        assert_eq!(f.report.attempts.len(), 2);
+        assert_eq!(f.report.converged_steps().count(), 1);
+        // After the last step: the observer's failure.
+        let e = StepFailure::Record(Failure::new(CONTEXT, "monitor"));
+        let last = failure_at_step(report(), 2, (&[3.0, 3.0], 2.0), e);
+        assert!(matches!(last, SensitivityError::Observer(_)), "{last}");
+    }
 }
