@@ -289,10 +289,10 @@ pub enum ContinuumSchedule {
     /// In the analysis' convergence hook: the driver factorises the tangent at every converged
     /// iterate for it (`ConvergedTangent::Required`) and the analysis waits for the DSA.
     Synchronous,
-    /// On a thread of its own, one committed step behind the analysis or more: the analysis
-    /// runs as the plain one (residual-first acceptance, no converged tangent) and hands each
-    /// committed step's unknowns and load level through a bounded queue
-    /// (`QUEUED_STEPS`); the DSA's thread replays them on its own copy of the problem,
+    /// On a thread of its own, behind the analysis by the step it is on and at most
+    /// `QUEUED_STEPS` more: the analysis runs as the plain one (residual-first acceptance, no
+    /// converged tangent) and hands each committed step's unknowns and load level through a
+    /// bounded queue; the DSA's thread replays them on its own copy of the problem,
     /// assembles and factorises the converged tangent there and runs the same code, so the
     /// records are bit-identical to [`ContinuumSchedule::Synchronous`]'s whenever the
     /// analysis accepts the same iterates with and without the converged tangent (always
@@ -1262,7 +1262,11 @@ mod tests {
             (f.converged_load, f.attempted_load, f.step_size),
             (1.0, 1.5, 0.5)
         );
-        assert_eq!(f.last_residuals, vec![1.5, 1e-9 * 1.5], "the step's attempt");
+        assert_eq!(
+            f.last_residuals,
+            vec![1.5, 1e-9 * 1.5],
+            "the step's attempt"
+        );
         assert!(f.reason.to_string().contains("singular"), "{}", f.reason);
         assert_eq!(f.report.attempts.len(), 3, "the attempts after it dropped");
         assert_eq!(f.report.converged_steps().count(), 1);
