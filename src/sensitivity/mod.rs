@@ -1642,7 +1642,10 @@ pub fn run_hooked(
     type Runs = (Option<continuum::ContinuumRun>, Option<dual::DualRun>);
     if methods.continuum
         && methods.dual.is_none()
-        && methods.schedule == continuum::ContinuumSchedule::Concurrent
+        && methods
+            .schedule
+            .resolve(crate::solver::NonlinearProblem::n_dofs(&problem))
+            == continuum::ContinuumSchedule::Concurrent
     {
         let run = continuum::run_concurrent(
             problem,
