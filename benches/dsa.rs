@@ -9,6 +9,13 @@
 //! pair of runs with the median of the pairs (the typical figure on a shared machine, where
 //! the best-of figure is the least disturbed one).
 //!
+//! The whole-run figure `(hooked − plain) / plain / variables` is printed in wall time and in
+//! the process' CPU time (user + system, from `/proc/self/stat`), which on a shared machine
+//! says what the hooked run adds whatever the other tenants take. The continuum runs where
+//! `ContinuumSchedule::Auto` puts it (on a thread of its own beside the analysis with two or
+//! more rayon threads and at most `CONCURRENT_MAX_UNKNOWNS` unknowns);
+//! `DSA_BENCH_SCHEDULE=synchronous` (or `concurrent`) chooses.
+//!
 //! `cargo bench --bench dsa` (≈ 10 min on 2 cores); one case:
 //! `cargo bench --bench dsa -- hemisphere-plastic-dsa` (or `cylindrical-bending-dsa`). The
 //! percentages alone (no criterion samples): `cargo bench --bench dsa -- nomatch`; one case's
@@ -17,10 +24,10 @@
 use criterion::{criterion_group, criterion_main, Criterion};
 use shelldsa::io::dsa_study::CaseAnalysis;
 use shelldsa::io::shell_case::{read_shell_case, ShellCase};
-use shelldsa::sensitivity::continuum::run_continuum;
+use shelldsa::sensitivity::continuum::ContinuumSchedule;
 use shelldsa::sensitivity::dual::{run_dual_on, DualMode};
 use shelldsa::sensitivity::fd::{self, Analysis};
-use shelldsa::sensitivity::{Design, DesignVariable};
+use shelldsa::sensitivity::{run_hooked, Design, DesignVariable, HookedMethods};
 use shelldsa::shell::problem::ShellProblem;
 use shelldsa::solver::NewtonSolver;
 use std::hint::black_box;
@@ -34,6 +41,20 @@ const CASES: [&str; 2] = [
 struct Setup {
     case: ShellCase,
     vars: Vec<DesignVariable>,
+    schedule: ContinuumSchedule,
+}
+
+/// CPU time of this process so far (user + system, s; clock ticks of 10 ms).
+fn cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    // The fields after the command name (in parentheses, which may hold spaces).
+    let rest = stat.rsplit_once(')').map_or("", |r| r.1);
+    let f: Vec<f64> = rest
+        .split_whitespace()
+        .map(|x| x.parse().unwrap_or(0.0))
+        .collect();
+    // utime and stime are fields 14 and 15 of the line, 12 and 13 after the name.
+    (f.get(11).copied().unwrap_or(0.0) + f.get(12).copied().unwrap_or(0.0)) / 100.0
 }
 
 impl Setup {
@@ -48,7 +69,16 @@ impl Setup {
             .iter()
             .map(|d| d.variable.clone())
             .collect();
-        Setup { case, vars }
+        let schedule = match std::env::var("DSA_BENCH_SCHEDULE").as_deref() {
+            Ok("synchronous") => ContinuumSchedule::Synchronous,
+            Ok("concurrent") => ContinuumSchedule::Concurrent,
+            _ => ContinuumSchedule::default(),
+        };
+        Setup {
+            case,
+            vars,
+            schedule,
+        }
     }
     fn base(&self) -> Design {
         shelldsa::io::dsa_study::base_design(&self.case)
@@ -71,19 +101,36 @@ impl Setup {
     fn continuum(&self) -> (f64, f64) {
         let a = CaseAnalysis { case: &self.case };
         let (p, n) = self.problem();
-        let r = run_continuum(
+        let methods = HookedMethods {
+            continuum: true,
+            dual: None,
+            schedule: self.schedule,
+        };
+        let (r, _) = run_hooked(
             p,
             Some(&self.case.surface),
             self.vars.clone(),
             self.case.dsa.as_ref().unwrap().monitors.clone(),
             &n,
             a.solver(),
+            methods,
+            &mut |_| {},
         )
         .unwrap();
+        let r = r.unwrap();
         let t = r.timing;
         eprintln!(
-            "continuum stages: rhs {:.3} s, solve {:.3} s, update {:.3} s, record {:.3} s",
-            t.rhs, t.solve, t.update, t.record
+            "continuum ({:?}) stages: rhs {:.3} s, solve {:.3} s, update {:.3} s, record {:.3} \
+             s; converged tangents on the DSA's thread {:.3} s; analysis {:.3} s of the run's \
+             {:.3} s",
+            r.schedule,
+            t.rhs,
+            t.solve,
+            t.update,
+            t.record,
+            t.tangent,
+            r.analysis.as_secs_f64(),
+            r.total.as_secs_f64()
         );
         (r.dsa.as_secs_f64(), r.total.as_secs_f64())
     }
@@ -116,13 +163,45 @@ fn bench(c: &mut Criterion) {
         // per pair of runs (a plain analysis, then the hooked run: the two see about the same
         // load from the machine's other tenants), whose median is the typical figure.
         let nv = s.vars.len() as f64;
+        let mut cpu = Vec::new();
         let pairs: Vec<(f64, (f64, f64))> = (0..3)
             .map(|_| {
-                let t = Instant::now();
+                let (t, c0) = (Instant::now(), cpu_seconds());
                 black_box(s.analysis());
-                (t.elapsed().as_secs_f64(), s.continuum())
+                let (plain, c1) = (t.elapsed().as_secs_f64(), cpu_seconds());
+                let hooked = s.continuum();
+                cpu.push((c1 - c0, cpu_seconds() - c1));
+                (plain, hooked)
             })
             .collect();
+        println!(
+            "{name}: continuum ({:?}), CPU time (plain, hooked) per pair: {} s; (hooked − plain) \
+             / plain / variables in CPU time: {} %",
+            s.schedule,
+            cpu.iter()
+                .map(|(p, h)| format!("({p:.2}, {h:.2})"))
+                .collect::<Vec<_>>()
+                .join(" "),
+            cpu.iter()
+                .map(|(p, h)| format!("{:.2}", 100.0 * (h - p) / p / nv))
+                .collect::<Vec<_>>()
+                .join(" / ")
+        );
+        let mut whole: Vec<f64> = pairs
+            .iter()
+            .map(|(a, (_, h))| 100.0 * (h - a) / a / nv)
+            .collect();
+        whole.sort_by(f64::total_cmp);
+        println!(
+            "{name}: whole run (hooked − plain) / plain / variables in each pair: {} % (median \
+             {:.2} %)",
+            whole
+                .iter()
+                .map(|r| format!("{r:.2}"))
+                .collect::<Vec<_>>()
+                .join(" / "),
+            whole[whole.len() / 2]
+        );
         let t_analysis = pairs.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
         let (t_cont, t_cont_run) = pairs.iter().fold((f64::INFINITY, f64::INFINITY), |a, p| {
             (a.0.min(p.1 .0), a.1.min(p.1 .1))

@@ -979,6 +979,7 @@ pub fn run_dual_on(
     let methods = super::HookedMethods {
         continuum: false,
         dual: Some(mode),
+        schedule: super::continuum::ContinuumSchedule::Synchronous,
     };
     let (_, run) = super::run_hooked(
         problem,

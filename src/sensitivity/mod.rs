@@ -1575,6 +1575,11 @@ pub struct HookedMethods {
     pub continuum: bool,
     /// The dual-number reference, with its scalar ([`dual::DualMode`]).
     pub dual: Option<dual::DualMode>,
+    /// Where the continuum DSA runs. With the dual reference in the same run it runs in the
+    /// hook whatever this says ([`continuum::ContinuumSchedule::Synchronous`]): the dual
+    /// reference needs the converged tangent factorised by the analysis' driver, which the
+    /// continuum then uses as well.
+    pub schedule: continuum::ContinuumSchedule,
 }
 
 /// The records of a hooked run so far, seen after every converged step.
@@ -1619,7 +1624,10 @@ pub trait SensitivityFields: std::fmt::Debug {
 /// the continuum's hooks first). The methods share the analysis, its converged tangents and
 /// its load levels, and each still times only its own work (`ContinuumRun::dsa`,
 /// `DualRun::reference`); both results carry the one run's report and total time. `on_step`
-/// sees the records after every converged step (to write the results as the run goes).
+/// sees the records after every converged step (to write the results as the run goes); with
+/// the continuum DSA alone on its own thread
+/// ([`continuum::ContinuumSchedule::Concurrent`]) after every step it has recorded, with the
+/// model at that step's committed state, while the analysis may be a step or more ahead.
 #[allow(clippy::too_many_arguments)] // the run's inputs, the methods and the step callback
 pub fn run_hooked(
     problem: crate::shell::problem::ShellProblem,
@@ -1632,6 +1640,32 @@ pub fn run_hooked(
     on_step: &mut dyn FnMut(HookedRecords<'_>),
 ) -> Result<(Option<continuum::ContinuumRun>, Option<dual::DualRun>), dual::SensitivityError> {
     type Runs = (Option<continuum::ContinuumRun>, Option<dual::DualRun>);
+    if methods.continuum
+        && methods.dual.is_none()
+        && methods
+            .schedule
+            .resolve(crate::solver::NonlinearProblem::n_dofs(&problem))
+            == continuum::ContinuumSchedule::Concurrent
+    {
+        let run = continuum::run_concurrent(
+            problem,
+            surface,
+            variables,
+            monitors,
+            newton,
+            solver,
+            &mut |p, c| {
+                on_step(HookedRecords {
+                    continuum: Some(c.records()),
+                    dual: None,
+                    model: &p.model,
+                    continuum_fields: Some(c),
+                    dual_fields: None,
+                })
+            },
+        )?;
+        return Ok((Some(run), None));
+    }
     #[allow(clippy::too_many_arguments)]
     fn drive<D: dual::DesignDual>(
         problem: crate::shell::problem::ShellProblem,
@@ -1720,6 +1754,7 @@ pub fn run_continuum_and_dual(
     let methods = HookedMethods {
         continuum: true,
         dual: Some(mode),
+        schedule: continuum::ContinuumSchedule::Synchronous,
     };
     let runs = run_hooked(
         problem,

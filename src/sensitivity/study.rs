@@ -531,6 +531,7 @@ pub fn run_with_output(
     let methods = HookedMethods {
         continuum: want_continuum,
         dual: want_dual.then_some(dual_mode),
+        schedule: crate::sensitivity::continuum::ContinuumSchedule::default(),
     };
     let method_names: Vec<&str> = [(want_continuum, "continuum"), (want_dual, "dual")]
         .into_iter()

@@ -69,8 +69,9 @@ pub struct ProblemOptions {
 
 type Histories = Vec<Vec<PointHistory<f64>>>;
 
-/// The shell problem.
-#[derive(Debug)]
+/// The shell problem. A clone is an independent problem at the same committed state (the
+/// continuum DSA's thread replays the analysis' commits on one).
+#[derive(Clone, Debug)]
 pub struct ShellProblem {
     /// The discrete shell (committed state).
     pub model: ShellModel,
