@@ -14,16 +14,19 @@
 use num_dual::Dual64;
 use shelldsa::io::shell_build;
 use shelldsa::io::shell_case::{parse_shell_case, ShellCase};
-use shelldsa::shell::load::Load;
 use shelldsa::shell::point::DOFS_PER_PARTICLE;
 use shelldsa::shell::problem::ShellProblem;
-use shelldsa::shell::stabilisation::{DirectorFilter, FilterStrength};
+use shelldsa::shell::stabilisation::FilterStrength;
 use shelldsa::solver::{LinearSolver, Method, SolverOptions};
 use std::path::{Path, PathBuf};
 
 #[path = "common/cli.rs"]
 mod cli;
 use cli::cli;
+
+#[path = "common/director_filter.rs"]
+mod director_filter;
+use director_filter::{filter, max_abs, Lcg};
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -64,32 +67,6 @@ fn run(case: &ShellCase) -> (ShellProblem, Result<(), String>) {
         .map(|_| ())
         .map_err(|e| e.to_string());
     (built.problem, res)
-}
-
-fn filter(p: &ShellProblem) -> &DirectorFilter {
-    p.loads()
-        .iter()
-        .find_map(|l| match l {
-            Load::DirectorFilter(f) => Some(f),
-            _ => None,
-        })
-        .expect("director_stabilisation > 0 adds the filter to the loads")
-}
-
-/// A small linear congruential generator: uniform in [−1, 1).
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-    }
-}
-
-fn max_abs(v: &[f64]) -> f64 {
-    v.iter().fold(0.0, |a, x| a.max(x.abs()))
 }
 
 #[test]

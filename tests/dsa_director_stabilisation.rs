@@ -32,6 +32,10 @@ use std::path::{Path, PathBuf};
 mod cli;
 use cli::cli;
 
+#[path = "common/director_filter.rs"]
+mod director_filter;
+use director_filter::{filter, max_abs, Lcg};
+
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
@@ -52,32 +56,6 @@ fn case_text(grid: usize) -> String {
 fn problem(text: &str) -> ShellProblem {
     let case = parse_shell_case(text, Path::new("stabilised.toml")).unwrap();
     shell_build::build(&case).unwrap().problem
-}
-
-fn filter(p: &ShellProblem) -> &DirectorFilter {
-    p.loads()
-        .iter()
-        .find_map(|l| match l {
-            Load::DirectorFilter(f) => Some(f),
-            _ => None,
-        })
-        .expect("director_stabilisation > 0 adds the filter to the loads")
-}
-
-/// A small linear congruential generator: uniform in [−1, 1).
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-    }
-}
-
-fn max_abs(v: &[f64]) -> f64 {
-    v.iter().fold(0.0, |a, x| a.max(x.abs()))
 }
 
 fn max_diff(a: &[f64], b: &[f64]) -> f64 {
