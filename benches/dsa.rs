@@ -61,14 +61,7 @@ impl Setup {
     fn new(rel: &str) -> Self {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(rel);
         let case = read_shell_case(&path).unwrap();
-        let vars = case
-            .dsa
-            .as_ref()
-            .unwrap()
-            .design
-            .iter()
-            .map(|d| d.variable.clone())
-            .collect();
+        let vars = case.dsa.as_ref().unwrap().variables();
         let schedule = match std::env::var("DSA_BENCH_SCHEDULE").as_deref() {
             Ok("synchronous") => ContinuumSchedule::Synchronous,
             Ok("concurrent") => ContinuumSchedule::Concurrent,

@@ -19,14 +19,7 @@ use std::path::Path;
 fn case(rel: &str) -> (ShellCase, Vec<DesignVariable>) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(rel);
     let case = read_shell_case(&path).unwrap();
-    let vars = case
-        .dsa
-        .as_ref()
-        .unwrap()
-        .design
-        .iter()
-        .map(|d| d.variable.clone())
-        .collect();
+    let vars = case.dsa.as_ref().unwrap().variables();
     (case, vars)
 }
 

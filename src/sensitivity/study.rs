@@ -92,6 +92,13 @@ pub struct DsaSpec {
     pub monitors: Vec<super::Monitor>,
 }
 
+impl DsaSpec {
+    /// The design variables, in the order of the case.
+    pub fn variables(&self) -> Vec<DesignVariable> {
+        self.design.iter().map(|d| d.variable.clone()).collect()
+    }
+}
+
 /// Errors of a `dsa` run.
 #[derive(Debug, Error)]
 pub enum DsaError {
@@ -387,7 +394,7 @@ pub fn run_with_output(
     progress: &mut dyn FnMut(&str),
     update: &mut dyn FnMut(&DsaResult),
 ) -> Result<DsaResult, DsaError> {
-    let vars: Vec<DesignVariable> = spec.design.iter().map(|d| d.variable.clone()).collect();
+    let vars = spec.variables();
     let monitors = &spec.monitors;
     let surface = base.surface.as_ref();
 
@@ -903,7 +910,7 @@ pub fn terms(
     step: usize,
 ) -> Result<Vec<TermBreakdown>, DsaError> {
     let (problem, newton) = analysis.build(base)?;
-    let vars: Vec<DesignVariable> = spec.design.iter().map(|d| d.variable.clone()).collect();
+    let vars = spec.variables();
     Ok(breakdown(
         problem,
         base.surface.as_ref(),
