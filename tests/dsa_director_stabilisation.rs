@@ -34,7 +34,11 @@ use cli::cli;
 
 #[path = "common/director_filter.rs"]
 mod director_filter;
-use director_filter::{filter, max_abs, Lcg};
+use director_filter::filter;
+
+#[path = "common/small_bending.rs"]
+mod small_bending;
+use small_bending::{max_abs, Lcg};
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
