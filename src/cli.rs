@@ -576,12 +576,15 @@ fn describe(c: &Case) -> String {
         ),
         Case::Shell(s) => {
             format!(
-                "shell on a {} surface, {} × {} particles, {} basis, {} boundary condition(s), {} \
-             load(s), {} tool(s), {} monitor(s), load factor to {}",
+                "shell on a {} surface, {} × {} particles, {} basis, {} kernel on supports of {} \
+             spacings, {} boundary condition(s), {} load(s), {} tool(s), {} monitor(s), load \
+             factor to {}",
                 s.surface.kind(),
                 s.particles.counts[0],
                 s.particles.counts[1],
                 s.kernel.basis,
+                s.kernel.function.name(),
+                s.kernel.support,
                 s.boundary.len(),
                 s.loads.len(),
                 s.tools.len(),
