@@ -1011,12 +1011,8 @@ impl Replica {
         let p = &mut self.problem;
         p.residual_and_tangent(&step.u, step.load, &mut self.r, &mut self.values)?;
         let bc = EssentialBc::new(p.n_dofs(), &p.essential(step.load)).map_err(fatal)?;
-        let g: Vec<f64> = bc
-            .dofs()
-            .iter()
-            .zip(bc.values())
-            .map(|(&d, &v)| v - step.u[d])
-            .collect();
+        let mut g = Vec::new();
+        bc.increments_into(&step.u, &mut g);
         bc.apply_with(p.pattern(), &mut self.values, &mut self.r, &g)
             .map_err(fatal)?;
         self.solver.factorize(&self.values).map_err(fatal)?;

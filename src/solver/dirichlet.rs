@@ -94,6 +94,14 @@ impl EssentialBc {
         self.apply_with(pattern, values, rhs, &self.values)
     }
 
+    /// The increments `g − u_c` that take the unknowns `u` to the prescribed values, aligned
+    /// with [`EssentialBc::dofs`], written into `g` (its contents replaced): what
+    /// [`EssentialBc::apply_with`] eliminates at a Newton iterate `u`.
+    pub fn increments_into(&self, u: &[f64], g: &mut Vec<f64>) {
+        g.clear();
+        g.extend(self.dofs.iter().zip(&self.values).map(|(&d, &v)| v - u[d]));
+    }
+
     /// Eliminate with other prescribed values `g` (aligned with [`EssentialBc::dofs`]), e.g. the
     /// increments `g − u_c` of a Newton iteration, or zeros for a homogeneous system.
     pub fn apply_with(

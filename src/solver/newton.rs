@@ -1217,8 +1217,7 @@ impl NewtonSolver {
                 reject!(FailureReason::Problem(e));
             }
             unknowns_terms = unknowns_term_scale(pattern, &w.values, u, u_n, &bc, &mut w.s);
-            w.g.clear();
-            w.g.extend(bc.dofs().iter().zip(bc.values()).map(|(&d, &v)| v - u[d]));
+            bc.increments_into(u, &mut w.g);
             for (x, r) in w.rhs.iter_mut().zip(&w.r) {
                 *x = -r;
             }
