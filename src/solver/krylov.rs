@@ -9,7 +9,8 @@
 //! from the chord step `x₀ = M⁻¹ b`, build an orthonormal basis `V` of the Krylov space of
 //! `A M⁻¹` on `r₀ = b − A x₀` by modified Gram–Schmidt, keep the least-squares problem in upper
 //! triangular form with Givens rotations, and stop when the estimated residual
-//! `|g_{j+1}| ≤ rtol ‖b‖`; then `x = x₀ + M⁻¹ V y`. No restart: the iteration fails (and the
+//! `|g_{j+1}| ≤ rtol ‖b‖`; then `x = x₀ + M⁻¹ V y`, from the vectors `M⁻¹ v_j` the Arnoldi
+//! steps formed. No restart: the iteration fails (and the
 //! caller refactorises) when `max_iterations` is reached first.
 
 use super::{LinearSolver, SolverError, SparsityPattern};
@@ -23,11 +24,44 @@ pub struct GmresInfo {
     pub relative_residual: f64,
 }
 
+/// Products with at least this many stored entries run as two rayon tasks.
+const PAR_PRODUCT_NNZ: usize = 1 << 20;
+
 /// `y = A x` for the CSC values `values` of `pattern`.
+///
+/// A large product is split into two halves of the columns (at the column that halves the
+/// stored entries, fixed by the pattern): the second half sums into a buffer that is added
+/// to `y` at the end, so the result does not depend on the number of threads.
 pub fn csc_mul(pattern: &SparsityPattern, values: &[f64], x: &[f64], y: &mut [f64]) {
-    let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
+    let cp = pattern.col_ptr();
+    let nnz = cp[cp.len() - 1];
     y.fill(0.0);
-    for (j, &xj) in x.iter().enumerate() {
+    if nnz < PAR_PRODUCT_NNZ {
+        csc_mul_columns(pattern, values, x, 0..x.len(), y);
+        return;
+    }
+    let mid = cp.partition_point(|&p| p < nnz / 2).min(x.len());
+    let mut upper = vec![0.0; y.len()];
+    rayon::join(
+        || csc_mul_columns(pattern, values, x, 0..mid, y),
+        || csc_mul_columns(pattern, values, x, mid..x.len(), &mut upper),
+    );
+    for (yi, ui) in y.iter_mut().zip(&upper) {
+        *yi += ui;
+    }
+}
+
+/// `y += A[:, cols] x[cols]`.
+fn csc_mul_columns(
+    pattern: &SparsityPattern,
+    values: &[f64],
+    x: &[f64],
+    cols: std::ops::Range<usize>,
+    y: &mut [f64],
+) {
+    let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
+    for j in cols {
+        let xj = x[j];
         if xj == 0.0 {
             continue;
         }
@@ -109,13 +143,16 @@ pub fn gmres_to(
     let mut r: Vec<Vec<f64>> = Vec::new();
     let mut rot: Vec<(f64, f64)> = Vec::new();
     let mut g = vec![beta];
-    let mut z = vec![0.0; n];
+    // The preconditioned basis `M⁻¹ v_j`, kept so that the update `M⁻¹ V y` costs no
+    // further solve.
+    let mut zs: Vec<Vec<f64>> = Vec::new();
     let mut w = vec![0.0; n];
     let mut converged = false;
     for j in 0..max_iterations {
-        z.copy_from_slice(&v[j]);
+        let mut z = v[j].clone();
         m.solve_in_place(&mut z)?;
         csc_mul(pattern, values, &z, &mut w);
+        zs.push(z);
         let mut h = Vec::with_capacity(j + 2);
         for vi in &v {
             let hij = dot(&w, vi);
@@ -168,7 +205,7 @@ pub fn gmres_to(
     if !converged {
         return Ok(None);
     }
-    // Back substitution R y = g, then x += M⁻¹ V y.
+    // Back substitution R y = g, then x += M⁻¹ V y = Σ y_i M⁻¹ v_i.
     let k = r.len();
     let mut y = vec![0.0; k];
     for i in (0..k).rev() {
@@ -178,15 +215,10 @@ pub fn gmres_to(
         }
         y[i] = s / r[i][i];
     }
-    z.fill(0.0);
-    for (vi, yi) in v.iter().zip(&y) {
-        for (zk, vk) in z.iter_mut().zip(vi) {
-            *zk += yi * vk;
+    for (zi, yi) in zs.iter().zip(&y) {
+        for (xk, zk) in x.iter_mut().zip(zi) {
+            *xk += yi * zk;
         }
-    }
-    m.solve_in_place(&mut z)?;
-    for (xk, zk) in x.iter_mut().zip(&z) {
-        *xk += zk;
     }
     csc_mul(pattern, values, x, &mut ax);
     let res = b

@@ -39,6 +39,9 @@ const UPDATE_BLOCK: usize = 128;
 const PAR_UPDATE_FLOPS: f64 = 4.0e6;
 /// Subtrees below this many flops are factorised in one task.
 const PAR_SUBTREE_FLOPS: f64 = 2.0e6;
+/// Subtrees with fewer stored factor entries are solved in one task (a solve reads every entry
+/// once: 2¹⁶ entries are about 0.1 ms of work, far above a task's cost).
+const PAR_SOLVE_ENTRIES: usize = 1 << 16;
 
 /// Fill-reducing ordering of [`super::Method::SupernodalLu`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -76,6 +79,12 @@ pub(crate) struct SupernodalSymbolic {
     asm: Vec<(u32, u32)>,
     /// Floating-point operations of every subtree's factorisation.
     subtree_flops: Vec<f64>,
+    /// Stored factor entries of every subtree (the work of its part of a solve).
+    subtree_entries: Vec<usize>,
+    /// First supernode of every subtree, when every subtree's supernodes (and so its
+    /// columns) are consecutive, the children's ranges in ascending order followed by the
+    /// supernode itself (a postorder); `None` otherwise, and the solve runs sequentially.
+    first: Option<Vec<usize>>,
     /// Operations of one numeric factorisation.
     pub flops: f64,
     /// Stored entries of `L` and `U` together.
@@ -115,6 +124,40 @@ struct Front {
 #[derive(Debug, Default)]
 pub(crate) struct SupernodalNumeric {
     factors: Vec<Mutex<SupernodeFactor>>,
+    /// Front storage kept from one factorisation to the next: the fronts of a pattern have
+    /// the same sizes every time, so after the first factorisation no front is allocated
+    /// (a fresh large allocation costs page faults and, when freed, a TLB shootdown on every
+    /// core).
+    pool: FrontPool,
+}
+
+/// Buffers of released fronts.
+#[derive(Debug, Default)]
+struct FrontPool(Mutex<Vec<Vec<f64>>>);
+
+impl FrontPool {
+    /// A zeroed buffer of `len` entries: the smallest kept one that holds them, else a new one.
+    fn take(&self, len: usize) -> Vec<f64> {
+        let mut kept = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        let best = kept
+            .iter()
+            .enumerate()
+            .filter(|(_, b)| b.capacity() >= len)
+            .min_by_key(|(_, b)| b.capacity())
+            .map(|(i, _)| i);
+        let mut buf = match best {
+            Some(i) => kept.swap_remove(i),
+            None => Vec::with_capacity(len),
+        };
+        drop(kept);
+        buf.clear();
+        buf.resize(len, 0.0);
+        buf
+    }
+
+    fn give(&self, buf: Vec<f64>) {
+        self.0.lock().unwrap_or_else(|e| e.into_inner()).push(buf);
+    }
 }
 
 impl SupernodalSymbolic {
@@ -277,11 +320,19 @@ impl SupernodalSymbolic {
                 .sum();
         }
         let mut subtree_flops = flops_of.clone();
+        let mut subtree_entries: Vec<usize> = (0..ns)
+            .map(|s| {
+                let k = begin[s + 1] - begin[s];
+                k * (2 * front(s) - k)
+            })
+            .collect();
         for s in 0..ns {
             if let Some(p) = parent[s] {
                 subtree_flops[p] += subtree_flops[s];
+                subtree_entries[p] += subtree_entries[s];
             }
         }
+        let first = postorder_ranges(&children_ptr, &children, &roots, ns);
         if asm.len() > u32::MAX as usize || max_front.pow(2) > u32::MAX as usize {
             return Err(SolverError::TooManyEntries { nnz: asm.len() });
         }
@@ -298,6 +349,8 @@ impl SupernodalSymbolic {
             asm_ptr,
             asm,
             subtree_flops,
+            subtree_entries,
+            first,
             flops: flops_of.iter().sum(),
             factor_entries,
             max_front,
@@ -327,11 +380,11 @@ impl SupernodalSymbolic {
         if numeric.factors.len() != ns {
             numeric.factors = (0..ns).map(|_| Mutex::default()).collect();
         }
-        let factors = &numeric.factors;
+        let (factors, pool) = (&numeric.factors, &numeric.pool);
         self.roots
             .par_iter()
             .with_max_len(1)
-            .for_each(|&s| drop(self.factor_subtree(s, values, factors)));
+            .for_each(|&s| pool.give(self.factor_subtree(s, values, factors, pool).data));
     }
 
     /// Factorise the subtree rooted at `s`; returns its front (update matrix in rows and
@@ -341,21 +394,22 @@ impl SupernodalSymbolic {
         s: usize,
         values: &[f64],
         factors: &[Mutex<SupernodeFactor>],
+        pool: &FrontPool,
     ) -> Front {
         let kids = self.kids(s);
         let updates: Vec<Front> = if kids.len() > 1 && self.subtree_flops[s] > PAR_SUBTREE_FLOPS {
             kids.par_iter()
                 .with_max_len(1)
-                .map(|&c| self.factor_subtree(c, values, factors))
+                .map(|&c| self.factor_subtree(c, values, factors, pool))
                 .collect()
         } else {
             kids.iter()
-                .map(|&c| self.factor_subtree(c, values, factors))
+                .map(|&c| self.factor_subtree(c, values, factors, pool))
                 .collect()
         };
         let (k, r) = (self.k(s), self.r(s));
         let m = k + r;
-        let mut data = vec![0.0f64; m * m];
+        let mut data = pool.take(m * m);
         for &(slot, pos) in &self.asm[self.asm_ptr[s]..self.asm_ptr[s + 1]] {
             data[pos as usize] += values[slot as usize];
         }
@@ -370,7 +424,9 @@ impl SupernodalSymbolic {
                 }
             }
         }
-        drop(updates);
+        for upd in updates {
+            pool.give(upd.data);
+        }
         let mut piv: Vec<usize> = (0..k).collect();
         {
             let f = MatMut::from_column_major_slice_mut(&mut data, m, m);
@@ -418,6 +474,14 @@ impl SupernodalSymbolic {
     }
 
     /// Solve in place for every column of `rhs` with the factors in `numeric`.
+    ///
+    /// Both substitutions run over the supernodal tree as the factorisation does, front by
+    /// front: the forward one hands each parent the sum of its subtree's updates to the rows
+    /// of the subtree root's pattern (an update vector, extend-added by the same maps as the
+    /// update matrices), the backward one hands each child the solved values of its parent's
+    /// front. Subtrees then write disjoint rows only, so independent subtrees run as rayon
+    /// tasks; every operation and its order is fixed by the pattern alone, and the result is
+    /// bit-identical for any number of threads.
     pub fn solve(&self, numeric: &SupernodalNumeric, mut rhs: MatMut<'_, f64>) {
         let n = self.n;
         let nrhs = rhs.ncols();
@@ -427,6 +491,176 @@ impl SupernodalSymbolic {
                 x[(new, j)] = rhs[(old, j)];
             }
         }
+        match &self.first {
+            Some(first) => {
+                let mut parts = Vec::with_capacity(self.roots.len());
+                let mut rest = x.as_mut();
+                for &s in &self.roots {
+                    let len = self.begin[s + 1] - self.begin[first[s]];
+                    let (a, b) = rest.split_at_row_mut(len);
+                    parts.push((s, a));
+                    rest = b;
+                }
+                let no_rows = Mat::<f64>::zeros(0, nrhs);
+                parts
+                    .into_par_iter()
+                    .with_max_len(1)
+                    .for_each(|(s, mut xs)| {
+                        self.forward(numeric, first, s, xs.rb_mut());
+                        self.backward(numeric, first, s, xs, no_rows.as_ref());
+                    });
+            }
+            None => self.solve_sequential(numeric, x.as_mut()),
+        }
+        for j in 0..nrhs {
+            for (new, &old) in self.perm.iter().enumerate() {
+                rhs[(old, j)] = x[(new, j)];
+            }
+        }
+    }
+
+    /// The children of `s` with their rows of `x` (the subtree's rows, children first).
+    fn split_children<'a>(
+        &self,
+        first: &[usize],
+        s: usize,
+        x: MatMut<'a, f64>,
+    ) -> (Vec<(usize, MatMut<'a, f64>)>, MatMut<'a, f64>) {
+        let (mut rest, own) = x.split_at_row_mut(self.begin[s] - self.begin[first[s]]);
+        let kids = self.kids(s);
+        let mut parts = Vec::with_capacity(kids.len());
+        for &c in kids {
+            let (a, b) = rest.split_at_row_mut(self.begin[c + 1] - self.begin[first[c]]);
+            parts.push((c, a));
+            rest = b;
+        }
+        (parts, own)
+    }
+
+    /// Whether the children of `s` are solved as parallel tasks.
+    fn solve_in_parallel(&self, s: usize) -> bool {
+        self.kids(s).len() > 1 && self.subtree_entries[s] >= PAR_SOLVE_ENTRIES
+    }
+
+    /// Forward substitution `L y = P b` over the subtree of `s`, whose rows of `x` (children's
+    /// subtrees, then `s`'s own columns) hold `P b` and receive `y`; returns the subtree's
+    /// update to the rows of `s`'s pattern (to be added to the parent's front).
+    fn forward(
+        &self,
+        numeric: &SupernodalNumeric,
+        first: &[usize],
+        s: usize,
+        x: MatMut<'_, f64>,
+    ) -> Mat<f64> {
+        let (parts, mut own) = self.split_children(first, s, x);
+        let updates: Vec<Mat<f64>> = if self.solve_in_parallel(s) {
+            parts
+                .into_par_iter()
+                .with_max_len(1)
+                .map(|(c, xc)| self.forward(numeric, first, c, xc))
+                .collect()
+        } else {
+            parts
+                .into_iter()
+                .map(|(c, xc)| self.forward(numeric, first, c, xc))
+                .collect()
+        };
+        let nrhs = own.ncols();
+        let (k, r) = (self.k(s), self.r(s));
+        let mut front = Mat::<f64>::zeros(k + r, nrhs);
+        front.as_mut().subrows_mut(0, k).copy_from(own.rb());
+        for (&c, upd) in self.kids(s).iter().zip(&updates) {
+            let rel = &self.rel[self.rows_ptr[c]..self.rows_ptr[c + 1]];
+            for j in 0..nrhs {
+                for (a, &p) in rel.iter().enumerate() {
+                    front[(p as usize, j)] += upd[(a, j)];
+                }
+            }
+        }
+        let fac = factors_ref(numeric, s);
+        for j in 0..nrhs {
+            for (i, &p) in fac.piv.iter().enumerate() {
+                own[(i, j)] = front[(p, j)];
+            }
+        }
+        let panel = fac.panel.as_ref();
+        tri::solve_unit_lower_triangular_in_place(
+            panel.submatrix(0, 0, k, k),
+            own.rb_mut(),
+            Par::Seq,
+        );
+        let mut update = front.as_mut().subrows_mut(k, r);
+        if r > 0 {
+            matmul(
+                update.rb_mut(),
+                Accum::Add,
+                panel.submatrix(k, 0, r, k),
+                own.rb(),
+                -1.0,
+                Par::Seq,
+            );
+        }
+        update.to_owned()
+    }
+
+    /// Backward substitution `U x = y` over the subtree of `s`: its rows of `x` hold `y` and
+    /// receive `x`; `above` holds the solution at the rows of `s`'s pattern.
+    fn backward(
+        &self,
+        numeric: &SupernodalNumeric,
+        first: &[usize],
+        s: usize,
+        x: MatMut<'_, f64>,
+        above: MatRef<'_, f64>,
+    ) {
+        let (parts, mut own) = self.split_children(first, s, x);
+        let (k, r) = (self.k(s), self.r(s));
+        {
+            let fac = factors_ref(numeric, s);
+            if r > 0 {
+                matmul(
+                    own.rb_mut(),
+                    Accum::Add,
+                    fac.u12.as_ref(),
+                    above,
+                    -1.0,
+                    Par::Seq,
+                );
+            }
+            tri::solve_upper_triangular_in_place(
+                fac.panel.as_ref().submatrix(0, 0, k, k),
+                own.rb_mut(),
+                Par::Seq,
+            );
+        }
+        if parts.is_empty() {
+            return;
+        }
+        let nrhs = own.ncols();
+        let mut front = Mat::<f64>::zeros(k + r, nrhs);
+        front.as_mut().subrows_mut(0, k).copy_from(own.rb());
+        front.as_mut().subrows_mut(k, r).copy_from(above);
+        let child = |(c, xc): (usize, MatMut<'_, f64>)| {
+            let rel = &self.rel[self.rows_ptr[c]..self.rows_ptr[c + 1]];
+            let mut a = Mat::<f64>::zeros(rel.len(), nrhs);
+            for j in 0..nrhs {
+                for (q, &p) in rel.iter().enumerate() {
+                    a[(q, j)] = front[(p as usize, j)];
+                }
+            }
+            self.backward(numeric, first, c, xc, a.as_ref());
+        };
+        if self.solve_in_parallel(s) {
+            parts.into_par_iter().with_max_len(1).for_each(child);
+        } else {
+            parts.into_iter().for_each(child);
+        }
+    }
+
+    /// The solve supernode by supernode in their order, for trees whose subtrees are not
+    /// consecutive.
+    fn solve_sequential(&self, numeric: &SupernodalNumeric, mut x: MatMut<'_, f64>) {
+        let nrhs = x.ncols();
         let mut tmp = Mat::<f64>::zeros(0, 0);
         let ns = self.n_supernodes();
         // Forward: L y = P b.
@@ -445,7 +679,7 @@ impl SupernodalSymbolic {
             let panel = fac.panel.as_ref();
             tri::solve_unit_lower_triangular_in_place(
                 panel.submatrix(0, 0, k, k),
-                x.as_mut().subrows_mut(f0, k),
+                x.rb_mut().subrows_mut(f0, k),
                 Par::Seq,
             );
             if r > 0 {
@@ -454,7 +688,7 @@ impl SupernodalSymbolic {
                     t.rb_mut(),
                     Accum::Replace,
                     panel.submatrix(k, 0, r, k),
-                    x.as_ref().subrows(f0, k),
+                    x.rb().subrows(f0, k),
                     1.0,
                     Par::Seq,
                 );
@@ -479,7 +713,7 @@ impl SupernodalSymbolic {
                     }
                 }
                 matmul(
-                    x.as_mut().subrows_mut(f0, k),
+                    x.rb_mut().subrows_mut(f0, k),
                     Accum::Add,
                     fac.u12.as_ref(),
                     tmp.as_ref(),
@@ -489,16 +723,48 @@ impl SupernodalSymbolic {
             }
             tri::solve_upper_triangular_in_place(
                 fac.panel.as_ref().submatrix(0, 0, k, k),
-                x.as_mut().subrows_mut(f0, k),
+                x.rb_mut().subrows_mut(f0, k),
                 Par::Seq,
             );
         }
-        for j in 0..nrhs {
-            for (new, &old) in self.perm.iter().enumerate() {
-                rhs[(old, j)] = x[(new, j)];
+    }
+}
+
+/// First supernode of every subtree when the tree is in postorder (every subtree's supernodes
+/// consecutive, its children's ranges ascending and adjacent, then itself, and the roots'
+/// ranges tiling all supernodes in ascending order); `None` otherwise.
+fn postorder_ranges(
+    children_ptr: &[usize],
+    children: &[usize],
+    roots: &[usize],
+    ns: usize,
+) -> Option<Vec<usize>> {
+    let mut first: Vec<usize> = (0..ns).collect();
+    for s in 0..ns {
+        let kids = &children[children_ptr[s]..children_ptr[s + 1]];
+        let mut next = None;
+        for &c in kids {
+            // Children come before their parent, so `first[c]` is final here.
+            if c >= s || next.is_some_and(|n| first[c] != n) {
+                return None;
             }
+            if next.is_none() {
+                first[s] = first[c];
+            }
+            next = Some(c + 1);
+        }
+        if next.is_some_and(|n| n != s) {
+            return None;
         }
     }
+    let mut next = 0;
+    for &s in roots {
+        if first[s] != next {
+            return None;
+        }
+        next = s + 1;
+    }
+    (next == ns).then_some(first)
 }
 
 fn factors_ref(
@@ -596,15 +862,19 @@ fn partial_lu(mut f: MatMut<'_, f64>, k: usize, piv: &mut [usize]) {
             MemStack::new(&mut buf),
             params.into(),
         );
-        permute_rows(f.rb_mut().submatrix_mut(j, 0, h, j), fwd, &mut tmp);
-        permute_rows(
-            f.rb_mut().submatrix_mut(j, j + w, h, m - j - w),
-            fwd,
-            &mut tmp,
-        );
-        let old: Vec<usize> = piv[j..k].to_vec();
-        for (i, &p) in fwd.iter().enumerate() {
-            piv[j + i] = old[p];
+        // Most panels of the (nearly symmetric, diagonally strong) tangents keep their row
+        // order: nothing to move then.
+        if fwd.iter().enumerate().any(|(i, &p)| i != p) {
+            permute_rows(f.rb_mut().submatrix_mut(j, 0, h, j), fwd, &mut tmp);
+            permute_rows(
+                f.rb_mut().submatrix_mut(j, j + w, h, m - j - w),
+                fwd,
+                &mut tmp,
+            );
+            let old: Vec<usize> = piv[j..k].to_vec();
+            for (i, &p) in fwd.iter().enumerate() {
+                piv[j + i] = old[p];
+            }
         }
         // Rows below the block: X U = B with the panel's upper triangle U (Uᵀ Xᵀ = Bᵀ).
         if m > k {
@@ -935,5 +1205,121 @@ impl Dissection<'_> {
         self.dissect(a);
         self.dissect(b);
         self.order.extend(sep);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `nx × nx` particles with 3 DOFs, each cell coupling the particles within one spacing,
+    /// with diagonally dominant unsymmetric values.
+    fn grid(nx: usize) -> (SparsityPattern, Vec<f64>) {
+        let mut cells = Vec::new();
+        for i in 0..nx {
+            for j in 0..nx {
+                let mut dofs = Vec::new();
+                for a in i.saturating_sub(1)..(i + 2).min(nx) {
+                    for b in j.saturating_sub(1)..(j + 2).min(nx) {
+                        dofs.extend((0..3).map(|d| (a * nx + b) * 3 + d));
+                    }
+                }
+                cells.push(dofs);
+            }
+        }
+        let n = nx * nx * 3;
+        let p = SparsityPattern::from_cells(n, &cells).unwrap();
+        let (cp, ri) = (p.col_ptr().to_vec(), p.row_idx().to_vec());
+        let mut values = vec![0.0; p.nnz()];
+        for j in 0..n {
+            for q in cp[j]..cp[j + 1] {
+                let i = ri[q];
+                values[q] = if i == j {
+                    40.0
+                } else {
+                    -1.0 / (1.0 + (i.abs_diff(j) % 5) as f64) + 0.1 * ((i + 3 * j) % 7) as f64
+                };
+            }
+        }
+        (p, values)
+    }
+
+    #[test]
+    fn the_tree_solve_equals_the_supernode_by_supernode_solve() {
+        let (p, values) = grid(24);
+        let n = p.n_dofs();
+        for ordering in [FillOrdering::NestedDissection, FillOrdering::Amd] {
+            let tree = SupernodalSymbolic::new(&p, ordering).unwrap();
+            // Both orderings give a postorder, so the tree solve (with parallel subtrees:
+            // the root's subtree holds all entries, far above the task threshold) is taken.
+            assert!(tree.first.is_some(), "{ordering:?}");
+            assert!(tree.subtree_entries.iter().any(|&e| e >= PAR_SOLVE_ENTRIES));
+            let mut numeric = SupernodalNumeric::default();
+            tree.factorize(&values, &mut numeric);
+            let k = 2;
+            let b: Vec<f64> = (0..n * k).map(|i| ((i * 37) % 101) as f64 - 50.0).collect();
+            let mut x_tree = b.clone();
+            tree.solve(
+                &numeric,
+                MatMut::from_column_major_slice_mut(&mut x_tree, n, k),
+            );
+            let mut seq = SupernodalSymbolic::new(&p, ordering).unwrap();
+            seq.first = None;
+            let mut x_seq = b.clone();
+            seq.solve(
+                &numeric,
+                MatMut::from_column_major_slice_mut(&mut x_seq, n, k),
+            );
+            // The same operations but for the order in which the updates of a supernode's
+            // rows are summed: round-off (diagonally dominant, cond ≈ 1e1: 1e-13 with margin).
+            let scale = x_seq.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            let diff = x_tree
+                .iter()
+                .zip(&x_seq)
+                .fold(0.0f64, |a, (u, v)| a.max((u - v).abs()));
+            assert!(diff <= 1e-13 * scale, "{ordering:?}: {diff:e} of {scale:e}");
+            // And it solves the system: A x = b to round-off.
+            let mut ax = vec![0.0; n];
+            let (cp, ri) = (p.col_ptr(), p.row_idx());
+            for j in 0..n {
+                for q in cp[j]..cp[j + 1] {
+                    ax[ri[q]] += values[q] * x_tree[j];
+                }
+            }
+            let res = ax
+                .iter()
+                .zip(&b[..n])
+                .fold(0.0f64, |a, (u, v)| a.max((u - v).abs()));
+            assert!(res <= 1e-12 * 50.0, "{ordering:?}: residual {res:e}");
+        }
+    }
+
+    #[test]
+    fn postorder_ranges_are_found_or_refused() {
+        // 0, 1 → 2; 3 → 4; 2, 4 → 5 (a postorder): subtrees [0, 2], [3, 4], [0, 5].
+        let children_ptr = [0, 0, 0, 2, 2, 3, 5];
+        let children = [0, 1, 3, 2, 4];
+        assert_eq!(
+            postorder_ranges(&children_ptr, &children, &[5], 6),
+            Some(vec![0, 1, 0, 3, 3, 0])
+        );
+        // Two roots tiling the supernodes: 0 → 1, 2 alone.
+        assert_eq!(
+            postorder_ranges(&[0, 0, 1, 1], &[0], &[1, 2], 3),
+            Some(vec![0, 0, 2])
+        );
+        // 0 → 2 and 1 a root: the subtree of 2 is {0, 2}, not consecutive.
+        assert_eq!(postorder_ranges(&[0, 0, 0, 1], &[0], &[1, 2], 3), None);
+        // Children 0 and 2 of 3 with 1 → 2: subtree of 2 is {1, 2}, of 3 is {0, 1, 2, 3} in
+        // order 0, then [1, 2]: a postorder.
+        assert_eq!(
+            postorder_ranges(&[0, 0, 0, 1, 3], &[1, 0, 2], &[3], 4),
+            Some(vec![0, 1, 1, 0])
+        );
+        // Children of 3 out of order: [2] listed before its sibling 0 is not adjacent.
+        assert_eq!(
+            postorder_ranges(&[0, 0, 0, 1, 3], &[1, 2, 0], &[3], 4),
+            None
+        );
     }
 }
