@@ -258,3 +258,66 @@ fn a_whole_run_is_bit_identical_for_any_number_of_threads() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn a_bordered_tangent_is_factorised_by_the_supernodal_lu_itself() {
+    // The elastoplastic hemisphere (17 × 17) holds u_z at an interpolated point of the hole's
+    // rim by a constraint row: its multiplier has a zero diagonal. Pivoting only inside the
+    // supernodes, a multiplier ordered before the DOFs it couples meets that zero as its
+    // pivot, and the solver falls back to the unrestricted sparse LU (whose determinant sign
+    // it does not track: `determinant_sign` is `None` then). Ordered after them, its pivot is
+    // the Schur complement of its row, and the supernodal factors are used.
+    use shelldsa::io::shell_build::build;
+    use shelldsa::io::shell_case::read_shell_case;
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let case = read_shell_case(&root.join("verification/hemisphere-plastic/case.toml")).unwrap();
+    let mut built = build(&case).unwrap();
+    let problem = &mut built.problem;
+    let pattern = problem.pattern().clone();
+    let n = pattern.n_dofs();
+    let nq = problem.n_generalised();
+    assert!(nq < n, "the case has a constraint row");
+    assert_eq!(pattern.multipliers_from(), nq);
+    let u: Vec<f64> = (0..n)
+        .map(|j| {
+            if j < nq {
+                1e-3 * ((j as f64) * 0.37).sin()
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let load = 10.0;
+    let mut r = vec![0.0; n];
+    let mut values = vec![0.0; pattern.nnz()];
+    problem
+        .residual_and_tangent(&u, load, &mut r, &mut values)
+        .unwrap();
+    let bc = EssentialBc::new(n, &problem.essential(load)).unwrap();
+    let mut rhs: Vec<f64> = r.iter().map(|x| -x).collect();
+    bc.apply_with(&pattern, &mut values, &mut rhs, &vec![0.0; bc.dofs().len()])
+        .unwrap();
+    let factorise = |p: &SparsityPattern| {
+        let mut s = LinearSolver::new(p, Method::SupernodalLu, SolverOptions::default()).unwrap();
+        s.factorize(&values).unwrap();
+        s
+    };
+    let s = factorise(&pattern);
+    assert!(
+        s.determinant_sign().is_some(),
+        "the supernodal factors were replaced by the fallback LU"
+    );
+    let mut x = rhs.clone();
+    s.solve_in_place(&mut x).unwrap();
+    // A pivot from a near-cancellation would show as a large backward error (the probe's
+    // tolerance is far looser): 1e-12 bounds a stable factorisation's with margin.
+    let res = relative_residual(&pattern, &values, &x, &rhs);
+    assert!(res < 1e-12, "relative residual {res:e}");
+    // For comparison, the same matrix with the multiplier left where the ordering puts it.
+    let unmarked = factorise(&pattern.clone().with_multipliers_from(n));
+    println!(
+        "determinant sign with the multiplier ordered last: {:?}, unmarked: {:?}",
+        s.determinant_sign(),
+        unmarked.determinant_sign()
+    );
+}

@@ -206,7 +206,9 @@ impl ShellProblem {
             cells.push(cell);
         }
         let pattern_error = |e: crate::solver::SolverError| ShellError::InvalidInput(e.to_string());
-        let mut pattern = SparsityPattern::from_cells(n, &cells).map_err(pattern_error)?;
+        let mut pattern = SparsityPattern::from_cells(n, &cells)
+            .map_err(pattern_error)?
+            .with_multipliers_from(n_q);
         let zeros = vec![0.0; n_q];
         let mut entries = Vec::new();
         for l in loads.iter().filter(|l| l.is_follower()) {
@@ -226,7 +228,9 @@ impl ShellProblem {
             missing.sort_unstable();
             missing.dedup();
             cells.extend(missing);
-            pattern = SparsityPattern::from_cells(n, &cells).map_err(pattern_error)?;
+            pattern = SparsityPattern::from_cells(n, &cells)
+                .map_err(pattern_error)?
+                .with_multipliers_from(n_q);
         }
         let constraint_slots = rows
             .iter()

@@ -20,6 +20,9 @@ pub struct SparsityPattern {
     /// more than `u32::MAX` stored entries are rejected.
     slots: Vec<u32>,
     diag: Vec<usize>,
+    /// First DOF of the multipliers of a bordered (saddle-point) system, `n` when none: the
+    /// DOFs from here on have a zero diagonal block ([`Self::with_multipliers_from`]).
+    multipliers_from: usize,
 }
 
 impl SparsityPattern {
@@ -128,6 +131,7 @@ impl SparsityPattern {
             slot_ptr,
             slots,
             diag,
+            multipliers_from: n_dofs,
         })
     }
 
@@ -178,12 +182,29 @@ impl SparsityPattern {
             slot_ptr: vec![0],
             slots: Vec::new(),
             diag,
+            multipliers_from: n_dofs,
         })
     }
 
     /// Number of DOFs (rows = columns).
     pub fn n_dofs(&self) -> usize {
         self.n
+    }
+
+    /// Mark the DOFs from `first` on as the multipliers of constraint rows: the matrix is
+    /// bordered, `[K Cᵀ; C 0]`, with a zero block on their diagonal. A factorisation that
+    /// pivots only within blocks fixed by the pattern ([`super::Method::SupernodalLu`]) then
+    /// orders every multiplier after the DOFs it couples, where its pivot is the Schur
+    /// complement `−C K⁻¹ Cᵀ` rather than a structural zero. `first` is clamped to the DOF
+    /// count (no multipliers).
+    pub fn with_multipliers_from(mut self, first: usize) -> Self {
+        self.multipliers_from = first.min(self.n);
+        self
+    }
+
+    /// First multiplier DOF ([`Self::with_multipliers_from`]; the DOF count when none).
+    pub fn multipliers_from(&self) -> usize {
+        self.multipliers_from
     }
 
     /// Number of cells.

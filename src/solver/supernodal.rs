@@ -8,7 +8,10 @@
 //! structure: `L` has the Cholesky factor's pattern and `U` its transpose. Row pivoting is
 //! allowed inside each supernode's diagonal block, which does not change the structure (the
 //! rows of a supernode share their column pattern). A pivot that this restriction makes tiny is
-//! caught by the solver's probe solve, and the caller falls back to the unrestricted LU.
+//! caught by the solver's probe solve, and the caller falls back to the unrestricted LU. The
+//! multipliers of constraint rows, whose diagonal is zero, are ordered after the DOFs they
+//! couple ([`SparsityPattern::with_multipliers_from`]): in a supernode of their own before
+//! them they would meet that zero as their pivot, and every factorisation would fall back.
 //!
 //! Each supernode is eliminated from a dense frontal matrix (its columns, its rows and the rows
 //! of its pattern): the entries of `A`, then the children's update matrices (extend-add), then a
@@ -166,26 +169,19 @@ impl SupernodalSymbolic {
     pub fn new(pattern: &SparsityPattern, ordering: FillOrdering) -> Result<Self, SolverError> {
         let n = pattern.n_dofs();
         let faer_err = |e: faer::sparse::FaerError| SolverError::Faer(format!("{e:?}"));
-        let nd = match ordering {
-            FillOrdering::NestedDissection => {
-                let fwd = nested_dissection(pattern);
-                let mut inv = vec![0usize; n];
-                for (new, &old) in fwd.iter().enumerate() {
-                    inv[old] = new;
-                }
-                Some((fwd, inv))
-            }
-            FillOrdering::Amd => None,
+        let fwd = match ordering {
+            FillOrdering::NestedDissection => nested_dissection(pattern),
+            FillOrdering::Amd => amd(pattern).map_err(faer_err)?,
         };
+        let fwd = delay_multipliers(pattern, fwd);
+        let mut inv = vec![0usize; n];
+        for (new, &old) in fwd.iter().enumerate() {
+            inv[old] = new;
+        }
         let sym = factorize_symbolic_cholesky(
             pattern.symbolic(),
             Side::Lower,
-            match &nd {
-                Some((fwd, inv)) => {
-                    SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(fwd, inv, n))
-                }
-                None => SymmetricOrdering::Amd,
-            },
+            SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(&fwd, &inv, n)),
             CholeskySymbolicParams {
                 supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
                 ..Default::default()
@@ -902,6 +898,62 @@ fn partial_lu(mut f: MatMut<'_, f64>, k: usize, piv: &mut [usize]) {
     }
 }
 
+/// faer's approximate minimum degree ordering (`perm[new] = old`) of the pattern.
+fn amd(pattern: &SparsityPattern) -> Result<Vec<usize>, faer::sparse::FaerError> {
+    use faer::sparse::linalg::amd;
+    let n = pattern.n_dofs();
+    let mut fwd = vec![0usize; n];
+    let mut inv = vec![0usize; n];
+    let mut buf = MemBuffer::try_new(amd::order_scratch::<usize>(n, pattern.nnz()))?;
+    amd::order(
+        &mut fwd,
+        &mut inv,
+        pattern.symbolic(),
+        amd::Control::default(),
+        MemStack::new(&mut buf),
+    )?;
+    Ok(fwd)
+}
+
+/// `order` (`order[new] = old`) with every multiplier DOF
+/// ([`SparsityPattern::with_multipliers_from`]) moved to just after the last of the other DOFs
+/// it couples. Its pivot is then formed once those are eliminated: the Schur complement
+/// `−c K⁻¹ cᵀ` of its row, not the structural zero on its diagonal, which pivoting within a
+/// supernode cannot avoid when the multiplier sits in a supernode of its own. In the
+/// elimination tree a multiplier is then an ancestor of every DOF it couples, so the
+/// supernodes (a postorder of that tree) keep it after them.
+fn delay_multipliers(pattern: &SparsityPattern, order: Vec<usize>) -> Vec<usize> {
+    let first = pattern.multipliers_from();
+    let n = pattern.n_dofs();
+    if first >= n {
+        return order;
+    }
+    let mut pos = vec![0usize; n];
+    for (p, &d) in order.iter().enumerate() {
+        pos[d] = p;
+    }
+    let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
+    // (position it follows, 0 for a DOF of K and 1 for a multiplier, own position, DOF).
+    let mut keyed: Vec<(usize, u8, usize, usize)> = order
+        .iter()
+        .map(|&d| {
+            if d < first {
+                (pos[d], 0, pos[d], d)
+            } else {
+                let last = ri[cp[d]..cp[d + 1]]
+                    .iter()
+                    .filter(|&&r| r < first)
+                    .map(|&r| pos[r])
+                    .max()
+                    .unwrap_or(pos[d]);
+                (last, 1, pos[d], d)
+            }
+        })
+        .collect();
+    keyed.sort_unstable();
+    keyed.into_iter().map(|k| k.3).collect()
+}
+
 /// Nested-dissection ordering (`perm[new] = old`) of the pattern's graph.
 ///
 /// DOFs whose columns have identical patterns (the five DOFs of a particle) form one
@@ -1291,6 +1343,38 @@ mod tests {
                 .zip(&b[..n])
                 .fold(0.0f64, |a, (u, v)| a.max((u - v).abs()));
             assert!(res <= 1e-12 * 50.0, "{ordering:?}: residual {res:e}");
+        }
+    }
+
+    #[test]
+    fn multipliers_follow_the_dofs_they_couple() {
+        // A grid with three constraint rows appended (multipliers 432, 433, 434), each coupling
+        // a few DOFs spread over the grid; ordered by both methods, every multiplier comes
+        // after each DOF it couples in the supernodes' final order.
+        let (p, _) = grid(12);
+        let nq = p.n_dofs();
+        let mut cells: Vec<Vec<usize>> =
+            (0..p.n_cells()).map(|c| p.cell_dofs(c).to_vec()).collect();
+        let rows = [vec![0, 40, 200], vec![5, 6, 7, 431], vec![300, 17]];
+        for (c, r) in rows.iter().enumerate() {
+            let mut cell = vec![nq + c];
+            cell.extend(r);
+            cells.push(cell);
+        }
+        let bordered = SparsityPattern::from_cells(nq + rows.len(), &cells)
+            .unwrap()
+            .with_multipliers_from(nq);
+        for ordering in [FillOrdering::NestedDissection, FillOrdering::Amd] {
+            let sym = SupernodalSymbolic::new(&bordered, ordering).unwrap();
+            let mut pos = vec![0usize; bordered.n_dofs()];
+            for (new, &old) in sym.perm.iter().enumerate() {
+                pos[old] = new;
+            }
+            for (c, r) in rows.iter().enumerate() {
+                for &d in r {
+                    assert!(pos[nq + c] > pos[d], "{ordering:?}: row {c}, DOF {d}");
+                }
+            }
         }
     }
 
