@@ -11,10 +11,9 @@
 //!
 //! The whole-run figure `(hooked − plain) / plain / variables` is printed in wall time and in
 //! the process' CPU time (user + system, from `/proc/self/stat`), which on a shared machine
-//! says what the hooked run adds whatever the other tenants take. The continuum runs where
-//! `ContinuumSchedule::Auto` puts it (on a thread of its own beside the analysis with two or
-//! more rayon threads and at most `CONCURRENT_MAX_UNKNOWNS` unknowns);
-//! `DSA_BENCH_SCHEDULE=synchronous` (or `concurrent`) chooses.
+//! says what the hooked run adds whatever the other tenants take. The continuum runs on the
+//! default schedule (in the analysis' hook); `DSA_BENCH_SCHEDULE=concurrent` (or
+//! `synchronous`) chooses.
 //!
 //! `cargo bench --bench dsa` (≈ 10 min on 2 cores); one case:
 //! `cargo bench --bench dsa -- hemisphere-plastic-dsa` (or `cylindrical-bending-dsa`). The

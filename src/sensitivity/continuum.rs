@@ -284,15 +284,22 @@ pub struct ContinuumTiming {
 }
 
 /// Where the continuum DSA runs.
+///
+/// The default is [`ContinuumSchedule::Synchronous`]: measured on both paper examples with 2
+/// cores (`benches/dsa.rs`, machine otherwise idle, 2026-11-27), the whole run over the plain
+/// run per design variable was 4.65 % in the hook against 5.39 % on the DSA's own thread
+/// (hemisphere, median of three pairs) and 3.55 % against 3.45 % (bending), with less CPU time
+/// in the hook on both (4.1–4.7 % against 7.9–9.1 %, and 3.4–7.5 % against 5.3–11.7 %): the
+/// analysis keeps both cores busy, so a thread of the DSA's own takes its time from it.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum ContinuumSchedule {
     /// [`ContinuumSchedule::Concurrent`] when rayon's pool has two threads or more (a core for
     /// the DSA beside the analysis) and the problem has at most [`CONCURRENT_MAX_UNKNOWNS`]
     /// unknowns, else [`ContinuumSchedule::Synchronous`] ([`ContinuumSchedule::resolve`]).
-    #[default]
     Auto,
     /// In the analysis' convergence hook: the driver factorises the tangent at every converged
     /// iterate for it (`ConvergedTangent::Required`) and the analysis waits for the DSA.
+    #[default]
     Synchronous,
     /// On a thread of its own, behind the analysis by the step it is on and at most
     /// `QUEUED_STEPS` more: the analysis runs as the plain one (residual-first acceptance, no
@@ -307,11 +314,9 @@ pub enum ContinuumSchedule {
 
 /// Largest problem (unknowns) that [`ContinuumSchedule::Auto`] gives a thread of its own.
 /// The concurrent DSA keeps a second copy of the problem and needs a core the analysis leaves
-/// free. Measured on the elastoplastic hemisphere with 2 cores: at 17 × 17 (1,446 unknowns)
-/// the analysis keeps about one core busy and the whole-run cost per variable fell from 3.14 %
-/// (hook) to 1.40 % (own thread); at 33 × 33 (5,446 unknowns) the analysis keeps about 1.5
-/// cores busy, the own thread gave 6.25 % against 3.25 % in the hook (the two at different
-/// loads of the shared machine), and the copy adds the model's 0.6 GB. The bound lies between.
+/// free: at 33 × 33 (5,446 unknowns) the hemisphere's analysis keeps about 1.5 cores busy, the
+/// own thread gave 6.25 % per variable against 3.25 % in the hook, and the copy adds the
+/// model's 0.6 GB.
 pub const CONCURRENT_MAX_UNKNOWNS: usize = 4_000;
 
 impl ContinuumSchedule {
