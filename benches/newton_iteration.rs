@@ -30,17 +30,8 @@ fn newton_iteration(c: &mut Criterion) {
         let mut built = build(&case).expect("hemisphere builds");
         let pattern = built.problem.pattern().clone();
         let n = pattern.n_dofs();
-        let nq = built.problem.n_generalised();
         // A smooth deformed state (not an equilibrium): the tangent's values are generic.
-        let u: Vec<f64> = (0..n)
-            .map(|j| {
-                if j < nq {
-                    1e-3 * ((j as f64) * 0.37).sin()
-                } else {
-                    0.0
-                }
-            })
-            .collect();
+        let u = built.problem.generic_state();
         let load = 10.0;
         let bc = EssentialBc::new(n, &built.problem.essential(load)).expect("constraints");
         let g0 = vec![0.0; bc.dofs().len()];

@@ -183,15 +183,7 @@ fn bench_plastic(c: &mut Criterion) {
     let n = pattern.n_dofs();
     let nq = built.problem.n_generalised();
     // A state with a strain level of the run (displacements ~ 1e-2, rotations ~ 1e-3).
-    let u: Vec<f64> = (0..n)
-        .map(|j| {
-            if j < nq {
-                1e-3 * ((j as f64) * 0.37).sin()
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let u = built.problem.generic_state();
     let mut r = vec![0.0; n];
     let mut values = vec![0.0; pattern.nnz()];
     println!(

@@ -15,16 +15,7 @@ fn main() {
     let mut built = build(&case).unwrap();
     let pattern = built.problem.pattern().clone();
     let n = pattern.n_dofs();
-    let nq = built.problem.n_generalised();
-    let u: Vec<f64> = (0..n)
-        .map(|j| {
-            if j < nq {
-                1e-3 * ((j as f64) * 0.37).sin()
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let u = built.problem.generic_state();
     let mut r = vec![0.0; n];
     let mut values = vec![0.0; pattern.nnz()];
     let p = &mut built.problem;

@@ -70,19 +70,7 @@ fn values_of(p: &SparsityPattern, n: usize, a: &[f64]) -> Vec<f64> {
 /// A banded shell-like pattern: `nx × nx` particles with 3 DOFs, each coupled to the particles
 /// within one spacing.
 fn banded(nx: usize) -> SparsityPattern {
-    let mut cells = Vec::new();
-    for i in 0..nx {
-        for j in 0..nx {
-            let mut dofs = Vec::new();
-            for a in i.saturating_sub(1)..(i + 2).min(nx) {
-                for b in j.saturating_sub(1)..(j + 2).min(nx) {
-                    dofs.extend((0..3).map(|d| (a * nx + b) * 3 + d));
-                }
-            }
-            cells.push(dofs);
-        }
-    }
-    SparsityPattern::from_cells(nx * nx * 3, &cells).unwrap()
+    SparsityPattern::particle_grid(nx, 3, 1).unwrap()
 }
 
 /// The sign from a fresh factorisation with `method` on `threads` rayon threads (the

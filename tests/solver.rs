@@ -1704,3 +1704,21 @@ fn auto_linear_updates_follow_the_factorisation() {
     assert!(sparse.refactorisation_cost() >= 1.0);
     assert!(dense.refactorisation_cost() >= 1.0);
 }
+
+#[test]
+fn a_particle_grid_couples_each_particle_with_its_square_support() {
+    // 4 × 4 particles, 2 DOFs each, reach 1. Two DOFs are coupled when their particles share a
+    // cell, i.e. both lie within one spacing of a cell's particle: within two spacings of each
+    // other in each direction, clipped to the grid. Particle 0 (a corner) couples 3 × 3
+    // particles, particle 1 (on an edge) 4 × 3, particle 5 (inside) 4 × 4.
+    let p = SparsityPattern::particle_grid(4, 2, 1).unwrap();
+    assert_eq!(p.n_dofs(), 32);
+    let rows = |particle: usize| {
+        let j = 2 * particle;
+        p.col_ptr()[j + 1] - p.col_ptr()[j]
+    };
+    assert_eq!(rows(0), 2 * 3 * 3);
+    assert_eq!(rows(1), 2 * 4 * 3);
+    assert_eq!(rows(5), 2 * 4 * 4);
+    assert!(p.slot(0, 1).is_some() && p.slot(0, 2 * 15).is_none());
+}

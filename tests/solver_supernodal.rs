@@ -12,21 +12,8 @@ use std::path::PathBuf;
 /// the particles within 2 spacings (as `benches/solver.rs`), and unsymmetric values: a
 /// diagonally weighted graph Laplacian plus a skew part of relative size `skew`.
 fn shell_like(nx: usize, skew: f64) -> (SparsityPattern, Vec<f64>) {
-    let dof = 5;
-    let mut cells = Vec::new();
-    for i in 0..nx {
-        for j in 0..nx {
-            let mut dofs = Vec::new();
-            for a in i.saturating_sub(2)..(i + 3).min(nx) {
-                for b in j.saturating_sub(2)..(j + 3).min(nx) {
-                    dofs.extend((0..dof).map(|d| (a * nx + b) * dof + d));
-                }
-            }
-            cells.push(dofs);
-        }
-    }
-    let n = nx * nx * dof;
-    let p = SparsityPattern::from_cells(n, &cells).unwrap();
+    let p = SparsityPattern::particle_grid(nx, 5, 2).unwrap();
+    let n = p.n_dofs();
     let (cp, ri) = (p.col_ptr().to_vec(), p.row_idx().to_vec());
     let mut values = vec![0.0; p.nnz()];
     for j in 0..n {
@@ -278,15 +265,7 @@ fn a_bordered_tangent_is_factorised_by_the_supernodal_lu_itself() {
     let nq = problem.n_generalised();
     assert!(nq < n, "the case has a constraint row");
     assert_eq!(pattern.multipliers_from(), nq);
-    let u: Vec<f64> = (0..n)
-        .map(|j| {
-            if j < nq {
-                1e-3 * ((j as f64) * 0.37).sin()
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let u = problem.generic_state();
     let load = 10.0;
     let mut r = vec![0.0; n];
     let mut values = vec![0.0; pattern.nnz()];

@@ -332,6 +332,22 @@ impl ShellProblem {
         self.n_q
     }
 
+    /// A smooth deformed state that is not an equilibrium, for benchmarks and probes of the
+    /// tangent: generalised DOF `j` is `10⁻³ sin(0.37 j)` (displacements and rotations of the
+    /// strain level of the paper's runs), the multipliers zero. The tangent there has generic
+    /// values, with no symmetry an equilibrium path would give it.
+    pub fn generic_state(&self) -> Vec<f64> {
+        (0..self.n_dofs())
+            .map(|j| {
+                if j < self.n_q {
+                    1e-3 * ((j as f64) * 0.37).sin()
+                } else {
+                    0.0
+                }
+            })
+            .collect()
+    }
+
     /// The constraint rows (user rows after the symmetry rows), in multiplier order.
     pub fn constraints(&self) -> &[LinearConstraint] {
         &self.constraints

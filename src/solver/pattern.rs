@@ -135,6 +135,26 @@ impl SparsityPattern {
         })
     }
 
+    /// A model pattern of meshfree-shell-like structure: `nx × nx` particles on a grid, numbered
+    /// row by row with `dofs` consecutive DOFs each, every particle's cell coupling the
+    /// particles within `reach` spacings in both directions (a square support). For benchmarks
+    /// and tests of the solvers on patterns of the tangent's kind without building a model.
+    pub fn particle_grid(nx: usize, dofs: usize, reach: usize) -> Result<Self, SolverError> {
+        let mut cells = Vec::with_capacity(nx * nx);
+        for i in 0..nx {
+            for j in 0..nx {
+                let mut cell = Vec::new();
+                for a in i.saturating_sub(reach)..(i + reach + 1).min(nx) {
+                    for b in j.saturating_sub(reach)..(j + reach + 1).min(nx) {
+                        cell.extend((0..dofs).map(|d| (a * nx + b) * dofs + d));
+                    }
+                }
+                cells.push(cell);
+            }
+        }
+        Self::from_cells(nx * nx * dofs, &cells)
+    }
+
     /// Pattern of the given structural nonzeros `(row, col)` (duplicates allowed) plus the full
     /// diagonal, with no cells: for matrices formed by products rather than cell assembly (the
     /// transformed tangent `Λ⁻ᵀ K Λ⁻¹` of the meshfree transformation method). Fill values

@@ -1267,20 +1267,8 @@ mod tests {
     /// `nx × nx` particles with 3 DOFs, each cell coupling the particles within one spacing,
     /// with diagonally dominant unsymmetric values.
     fn grid(nx: usize) -> (SparsityPattern, Vec<f64>) {
-        let mut cells = Vec::new();
-        for i in 0..nx {
-            for j in 0..nx {
-                let mut dofs = Vec::new();
-                for a in i.saturating_sub(1)..(i + 2).min(nx) {
-                    for b in j.saturating_sub(1)..(j + 2).min(nx) {
-                        dofs.extend((0..3).map(|d| (a * nx + b) * 3 + d));
-                    }
-                }
-                cells.push(dofs);
-            }
-        }
-        let n = nx * nx * 3;
-        let p = SparsityPattern::from_cells(n, &cells).unwrap();
+        let p = SparsityPattern::particle_grid(nx, 3, 1).unwrap();
+        let n = p.n_dofs();
         let (cp, ri) = (p.col_ptr().to_vec(), p.row_idx().to_vec());
         let mut values = vec![0.0; p.nnz()];
         for j in 0..n {
