@@ -304,13 +304,7 @@ fn cholesky_gives_plus_one_and_the_sparse_lu_gives_no_sign() {
     let n = p.n_dofs();
     let (cp, ri) = (p.col_ptr().to_vec(), p.row_idx().to_vec());
     // A symmetric diagonally dominant matrix with a positive diagonal: positive definite.
-    let mut values = vec![0.0; p.nnz()];
-    for j in 0..n {
-        for q in cp[j]..cp[j + 1] {
-            let i = ri[q];
-            values[q] = -1.0 / (1.0 + (i + j) as f64 % 5.0);
-        }
-    }
+    let mut values = p.values_from(|i, j| -1.0 / (1.0 + (i + j) as f64 % 5.0));
     for j in 0..n {
         let s: f64 = (cp[j]..cp[j + 1])
             .filter(|&q| ri[q] != j)

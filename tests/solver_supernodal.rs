@@ -15,20 +15,16 @@ fn shell_like(nx: usize, skew: f64) -> (SparsityPattern, Vec<f64>) {
     let p = SparsityPattern::particle_grid(nx, 5, 2).unwrap();
     let n = p.n_dofs();
     let (cp, ri) = (p.col_ptr().to_vec(), p.row_idx().to_vec());
-    let mut values = vec![0.0; p.nnz()];
-    for j in 0..n {
-        for q in cp[j]..cp[j + 1] {
-            let i = ri[q];
-            values[q] = if i == j {
-                0.0
-            } else {
-                // Symmetric coupling −1/(1 + |i − j| mod 7) plus a skew part.
-                let sym = -1.0 / (1.0 + ((i.abs_diff(j)) % 7) as f64);
-                let sk = if i < j { skew } else { -skew } * ((i + 2 * j) % 5) as f64 / 5.0;
-                sym + sk
-            };
+    let mut values = p.values_from(|i, j| {
+        if i == j {
+            0.0
+        } else {
+            // Symmetric coupling −1/(1 + |i − j| mod 7) plus a skew part.
+            let sym = -1.0 / (1.0 + ((i.abs_diff(j)) % 7) as f64);
+            let sk = if i < j { skew } else { -skew } * ((i + 2 * j) % 5) as f64 / 5.0;
+            sym + sk
         }
-    }
+    });
     // Diagonal: the row sum of the symmetric part's magnitudes plus one (diagonally dominant
     // symmetric part: nonsingular, moderately conditioned).
     for j in 0..n {

@@ -155,6 +155,18 @@ impl SparsityPattern {
         Self::from_cells(nx * nx * dofs, &cells)
     }
 
+    /// The values array with the stored entry `(i, j)` set to `f(i, j)`.
+    pub fn values_from(&self, f: impl Fn(usize, usize) -> f64) -> Vec<f64> {
+        let (cp, ri) = (self.col_ptr(), self.row_idx());
+        let mut values = vec![0.0; self.nnz()];
+        for j in 0..self.n {
+            for q in cp[j]..cp[j + 1] {
+                values[q] = f(ri[q], j);
+            }
+        }
+        values
+    }
+
     /// Pattern of the given structural nonzeros `(row, col)` (duplicates allowed) plus the full
     /// diagonal, with no cells: for matrices formed by products rather than cell assembly (the
     /// transformed tangent `Λ⁻ᵀ K Λ⁻¹` of the meshfree transformation method). Fill values

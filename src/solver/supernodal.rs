@@ -1268,19 +1268,13 @@ mod tests {
     /// with diagonally dominant unsymmetric values.
     fn grid(nx: usize) -> (SparsityPattern, Vec<f64>) {
         let p = SparsityPattern::particle_grid(nx, 3, 1).unwrap();
-        let n = p.n_dofs();
-        let (cp, ri) = (p.col_ptr().to_vec(), p.row_idx().to_vec());
-        let mut values = vec![0.0; p.nnz()];
-        for j in 0..n {
-            for q in cp[j]..cp[j + 1] {
-                let i = ri[q];
-                values[q] = if i == j {
-                    40.0
-                } else {
-                    -1.0 / (1.0 + (i.abs_diff(j) % 5) as f64) + 0.1 * ((i + 3 * j) % 7) as f64
-                };
+        let values = p.values_from(|i, j| {
+            if i == j {
+                40.0
+            } else {
+                -1.0 / (1.0 + (i.abs_diff(j) % 5) as f64) + 0.1 * ((i + 3 * j) % 7) as f64
             }
-        }
+        });
         (p, values)
     }
 
