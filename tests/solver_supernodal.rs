@@ -213,6 +213,15 @@ fn a_whole_run_is_bit_identical_for_any_number_of_threads() {
         assert!(json["linear_solver"]
             .as_str()
             .is_some_and(|s| s.starts_with("SupernodalLu")));
+        // The case holds a point by a constraint row: its multiplier must not make the
+        // supernodal LU fall back.
+        assert!(json["factorisations"]["count"]
+            .as_u64()
+            .is_some_and(|c| c > 0));
+        assert_eq!(
+            json["factorisations"]["redone_by_the_sparse_lu"], 0,
+            "{name}"
+        );
         let mut v = Vec::new();
         numbers(&json, "", &mut v);
         v
@@ -278,6 +287,7 @@ fn a_bordered_tangent_is_factorised_by_the_supernodal_lu_itself() {
         s
     };
     let s = factorise(&pattern);
+    assert_eq!(s.n_fallbacks(), 0);
     assert!(
         s.determinant_sign().is_some(),
         "the supernodal factors were replaced by the fallback LU"
@@ -291,8 +301,9 @@ fn a_bordered_tangent_is_factorised_by_the_supernodal_lu_itself() {
     // For comparison, the same matrix with the multiplier left where the ordering puts it.
     let unmarked = factorise(&pattern.clone().with_multipliers_from(n));
     println!(
-        "determinant sign with the multiplier ordered last: {:?}, unmarked: {:?}",
+        "determinant sign with the multiplier ordered last: {:?}, unmarked: {:?} ({} fallback)",
         s.determinant_sign(),
-        unmarked.determinant_sign()
+        unmarked.determinant_sign(),
+        unmarked.n_fallbacks()
     );
 }

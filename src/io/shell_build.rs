@@ -823,6 +823,21 @@ pub fn run(
         })
         .collect();
     output.set_info("critical_points", json!(cps));
+    output.set_info(
+        "factorisations",
+        json!({
+            "count": solver.n_factorizations(),
+            "redone_by_the_sparse_lu": solver.n_fallbacks(),
+        }),
+    );
+    if solver.n_fallbacks() > 0 {
+        println!(
+            "note: {} of {} factorisations failed the supernodal LU's probe and were redone by \
+             the sparse LU (pivots too small within its supernodes)",
+            solver.n_fallbacks(),
+            solver.n_factorizations()
+        );
+    }
     let model = problem_model(&built.problem);
     if let Some(e) = hook_error {
         // Writing a step's results failed and stopped the run: that is the error to report.

@@ -160,6 +160,7 @@ pub struct LinearSolver {
     options: SolverOptions,
     factorized: bool,
     n_factorizations: usize,
+    n_fallbacks: usize,
 }
 
 impl std::fmt::Debug for LinearSolver {
@@ -170,6 +171,7 @@ impl std::fmt::Debug for LinearSolver {
             .field("options", &self.options)
             .field("factorized", &self.factorized)
             .field("n_factorizations", &self.n_factorizations)
+            .field("n_fallbacks", &self.n_fallbacks)
             .finish()
     }
 }
@@ -307,6 +309,7 @@ impl LinearSolver {
             options,
             factorized: false,
             n_factorizations: 0,
+            n_fallbacks: 0,
         })
     }
 
@@ -329,6 +332,7 @@ impl LinearSolver {
             options,
             factorized: false,
             n_factorizations: 0,
+            n_fallbacks: 0,
         })
     }
 
@@ -401,6 +405,13 @@ impl LinearSolver {
     /// Number of successful numeric factorisations so far (the symbolic one is done once).
     pub fn n_factorizations(&self) -> usize {
         self.n_factorizations
+    }
+
+    /// How many of those [`Method::SupernodalLu`] redid with the unrestricted sparse LU after
+    /// its probe solve failed (a pivot too small for pivoting within the supernodes): each
+    /// costs both factorisations.
+    pub fn n_fallbacks(&self) -> usize {
+        self.n_fallbacks
     }
 
     /// Sign of the determinant of the matrix held factorised: `Some(±1)` (or `Some(0)` for an
@@ -549,6 +560,7 @@ impl LinearSolver {
                 // Pivots restricted to the supernodes' diagonal blocks may be poor where
                 // unrestricted ones are fine: redo with the sparse LU, whose verdict stands.
                 self.factorize_fallback(values)?;
+                self.n_fallbacks += 1;
                 self.factorized = true;
                 if let Err(e) = self.probe(values, tol) {
                     self.factorized = false;
