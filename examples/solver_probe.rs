@@ -119,7 +119,10 @@ fn main() {
             / rhs.iter().map(|b| b * b).sum::<f64>().sqrt();
         println!(
             "  {m} ({par:?}): symbolic {t_sym:.3} s, numeric {t_num:.3} s wall, {c_num:.3} s CPU (incl. probe), \
-             solve {t_solve:.4} s, product {t_mv:.4} s, relative residual {res:.1e}"
+             solve {t_solve:.4} s, product {t_mv:.4} s, relative residual {res:.1e}, \
+             {} of {} factorisations redone by the sparse LU",
+            solver.n_fallbacks(),
+            solver.n_factorizations()
         );
         println!(
             "  {m}: one factorisation = {:.1} (solve + product) measured, {:.1} estimated \

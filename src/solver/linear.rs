@@ -41,8 +41,8 @@ impl Method {
     pub const DENSE_FILL: f64 = 0.25;
     /// Largest system [`Method::auto`] factorises densely. On the hemisphere's 17 × 17 tangent
     /// (1446 unknowns, 29.5 % stored) the supernodal LU with nested dissection does
-    /// 0.57 GFlop against the dense LU's 2.0 GFlop, in 0.050 against 0.057 CPU-s (0.044
-    /// against 0.033 s of wall time on two cores); the whole run takes 2.7 s with it. Above a
+    /// 0.57 GFlop against the dense LU's 2.0 GFlop, in 0.017 against 0.043 CPU-s (0.012
+    /// against 0.024 s of wall time on two cores, `examples/solver_probe.rs`). Above a
     /// thousand unknowns it is the better choice whatever the fill, and its result does not
     /// depend on the number of threads.
     pub const DENSE_MAX_N: usize = 1000;
