@@ -42,9 +42,10 @@ impl Method {
     /// Largest system [`Method::auto`] factorises densely. On the hemisphere's 17 × 17 tangent
     /// (1446 unknowns, 29.5 % stored) the supernodal LU with nested dissection does
     /// 0.57 GFlop against the dense LU's 2.0 GFlop, in 0.017 against 0.043 CPU-s (0.012
-    /// against 0.024 s of wall time on two cores, `examples/solver_probe.rs`). Above a
-    /// thousand unknowns it is the better choice whatever the fill, and its result does not
-    /// depend on the number of threads.
+    /// against 0.024 s of wall time on two cores, `examples/solver_probe.rs`); at 15 × 15
+    /// (1126) 0.007 against 0.016 s, while from 9 × 9 to 13 × 13 (406 to 846 unknowns) the two
+    /// take the same time. Above a thousand unknowns it is the better choice whatever the
+    /// fill, and its result does not depend on the number of threads.
     pub const DENSE_MAX_N: usize = 1000;
 
     /// The LU for `pattern`: [`Method::DenseLu`] for small systems (`n ≤`
