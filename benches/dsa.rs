@@ -26,7 +26,7 @@ use shelldsa::io::shell_case::{read_shell_case, ShellCase};
 use shelldsa::sensitivity::continuum::ContinuumSchedule;
 use shelldsa::sensitivity::dual::{run_dual_on, DualMode};
 use shelldsa::sensitivity::fd::{self, Analysis};
-use shelldsa::sensitivity::{run_hooked, Design, DesignVariable, HookedMethods};
+use shelldsa::sensitivity::{run_hooked, Design, DesignVariable, DsaAnalysis, HookedMethods};
 use shelldsa::shell::problem::ShellProblem;
 use shelldsa::solver::NewtonSolver;
 use std::hint::black_box;
@@ -89,26 +89,30 @@ impl Setup {
         let a = CaseAnalysis { case: &self.case };
         a.build(&self.base()).unwrap()
     }
+    /// The analysis of `problem` driven by `newton`, with the case's variables and monitors.
+    fn dsa_analysis<'a>(
+        &'a self,
+        problem: ShellProblem,
+        newton: &'a NewtonSolver,
+    ) -> DsaAnalysis<'a> {
+        DsaAnalysis {
+            problem,
+            surface: Some(&self.case.surface),
+            variables: self.vars.clone(),
+            monitors: self.case.dsa.as_ref().unwrap().monitors.clone(),
+            newton,
+            solver: CaseAnalysis { case: &self.case }.solver(),
+        }
+    }
     /// (method time, whole run time) in seconds.
     fn continuum(&self) -> (f64, f64) {
-        let a = CaseAnalysis { case: &self.case };
         let (p, n) = self.problem();
         let methods = HookedMethods {
             continuum: true,
             dual: None,
             schedule: self.schedule,
         };
-        let (r, _) = run_hooked(
-            p,
-            Some(&self.case.surface),
-            self.vars.clone(),
-            self.case.dsa.as_ref().unwrap().monitors.clone(),
-            &n,
-            a.solver(),
-            methods,
-            &mut |_| {},
-        )
-        .unwrap();
+        let (r, _) = run_hooked(self.dsa_analysis(p, &n), methods, &mut |_| {}).unwrap();
         let r = r.unwrap();
         let t = r.timing;
         eprintln!(
@@ -127,18 +131,8 @@ impl Setup {
         (r.dsa.as_secs_f64(), r.total.as_secs_f64())
     }
     fn dual(&self) -> (f64, f64) {
-        let a = CaseAnalysis { case: &self.case };
         let (p, n) = self.problem();
-        let r = run_dual_on(
-            p,
-            Some(&self.case.surface),
-            self.vars.clone(),
-            self.case.dsa.as_ref().unwrap().monitors.clone(),
-            &n,
-            a.solver(),
-            DualMode::Vector,
-        )
-        .unwrap();
+        let r = run_dual_on(self.dsa_analysis(p, &n), DualMode::Vector).unwrap();
         (r.reference.as_secs_f64(), r.total.as_secs_f64())
     }
 }
@@ -185,14 +179,8 @@ fn bench(c: &mut Criterion) {
             .collect();
         whole.sort_by(f64::total_cmp);
         println!(
-            "{name}: whole run (hooked − plain) / plain / variables in each pair: {} % (median \
-             {:.2} %)",
-            whole
-                .iter()
-                .map(|r| format!("{r:.2}"))
-                .collect::<Vec<_>>()
-                .join(" / "),
-            whole[whole.len() / 2]
+            "{name}: whole run (hooked − plain) / plain / variables in each pair: {}",
+            pairs_and_median(&whole)
         );
         let t_analysis = pairs.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
         let (t_cont, t_cont_run) = pairs.iter().fold((f64::INFINITY, f64::INFINITY), |a, p| {
@@ -201,14 +189,8 @@ fn bench(c: &mut Criterion) {
         let mut paired: Vec<f64> = pairs.iter().map(|(a, (c, _))| 100.0 * c / a / nv).collect();
         paired.sort_by(f64::total_cmp);
         println!(
-            "{name}: continuum DSA per variable in each (plain, hooked) pair of runs: {} % \
-             (median {:.2} %)",
-            paired
-                .iter()
-                .map(|r| format!("{r:.2}"))
-                .collect::<Vec<_>>()
-                .join(" / "),
-            paired[paired.len() / 2]
+            "{name}: continuum DSA per variable in each (plain, hooked) pair of runs: {}",
+            pairs_and_median(&paired)
         );
         let (t_dual, t_dual_run) = (0..3)
             .map(|_| s.dual())
@@ -237,3 +219,13 @@ fn bench(c: &mut Criterion) {
 
 criterion_group!(benches, bench);
 criterion_main!(benches);
+
+/// Sorted percentages as `a / b / c % (median m %)`.
+fn pairs_and_median(sorted: &[f64]) -> String {
+    let all: Vec<String> = sorted.iter().map(|r| format!("{r:.2}")).collect();
+    format!(
+        "{} % (median {:.2} %)",
+        all.join(" / "),
+        sorted[sorted.len() / 2]
+    )
+}

@@ -13,7 +13,7 @@ use shelldsa::io::shell_case::{read_shell_case, ShellCase};
 use shelldsa::sensitivity::continuum::{ContinuumRun, ContinuumSchedule};
 use shelldsa::sensitivity::dual::DualMode;
 use shelldsa::sensitivity::fd::Analysis;
-use shelldsa::sensitivity::{run_hooked, DesignVariable, HookedMethods};
+use shelldsa::sensitivity::{run_hooked, DesignVariable, DsaAnalysis, HookedMethods};
 use std::path::Path;
 
 fn case(rel: &str) -> (ShellCase, Vec<DesignVariable>) {
@@ -46,12 +46,14 @@ fn run(
         schedule,
     };
     let (c, _) = run_hooked(
-        problem,
-        Some(&case.surface),
-        vars.to_vec(),
-        monitors,
-        &newton,
-        a.solver(),
+        DsaAnalysis {
+            problem,
+            surface: Some(&case.surface),
+            variables: vars.to_vec(),
+            monitors,
+            newton: &newton,
+            solver: a.solver(),
+        },
         methods,
         &mut |r| {
             let recs = r.continuum.unwrap();

@@ -20,19 +20,24 @@ use plate::*;
 use shelldsa::sensitivity::continuum::{run_continuum, ContinuumRun, TermGroup};
 use shelldsa::sensitivity::dual::{run_dual, DualMode, DualRun};
 use shelldsa::sensitivity::terms::breakdown;
-use shelldsa::solver::SolverOptions;
+use shelldsa::sensitivity::{Design, DsaAnalysis};
+use shelldsa::solver::{NewtonSolver, SolverOptions};
+
+/// The plate of design `d` with the test's variables and monitors, driven by `newton`.
+fn plate_analysis<'a>(d: &Design, newton: &'a NewtonSolver) -> DsaAnalysis<'a> {
+    DsaAnalysis {
+        problem: Plate::problem(d),
+        surface: None,
+        variables: variables(),
+        monitors: Plate::monitors(),
+        newton,
+        solver: SolverOptions::default(),
+    }
+}
 
 fn continuum() -> ContinuumRun {
     let d = nominal_design();
-    run_continuum(
-        Plate::problem(&d),
-        None,
-        variables(),
-        Plate::monitors(),
-        &driver(STEPS),
-        SolverOptions::default(),
-    )
-    .unwrap()
+    run_continuum(plate_analysis(&d, &driver(STEPS))).unwrap()
 }
 
 fn dual() -> DualRun {
@@ -220,12 +225,7 @@ fn continuum_is_repeatable_and_thread_independent() {
 fn one_run_for_both_methods_equals_a_run_each() {
     let d = nominal_design();
     let (c, du) = shelldsa::sensitivity::run_continuum_and_dual(
-        Plate::problem(&d),
-        None,
-        variables(),
-        Plate::monitors(),
-        &driver(STEPS),
-        SolverOptions::default(),
+        plate_analysis(&d, &driver(STEPS)),
         DualMode::Vector,
     )
     .unwrap();

@@ -56,7 +56,7 @@ use crate::solver::Failure;
 use crate::solver::NonlinearProblem;
 use crate::solver::{
     ConvergedStep, ConvergedTangent, EssentialBc, FactorisedAt, LinearSolver, Method, NewtonReport,
-    NewtonSolver, ProblemError, SolverOptions,
+    ProblemError,
 };
 use nalgebra::Vector3;
 use std::sync::mpsc::{sync_channel, SyncSender};
@@ -1141,14 +1141,17 @@ fn panic_text(payload: &(dyn std::any::Any + Send)) -> String {
 /// ([`SensitivityError::Newton`], with the steps before it); a failed analysis is reported
 /// once every step it committed is recorded.
 pub(super) fn run_concurrent(
-    problem: ShellProblem,
-    surface: Option<&Surface<f64>>,
-    variables: Vec<DesignVariable>,
-    monitors: Vec<Monitor>,
-    newton: &NewtonSolver,
-    solver: SolverOptions,
+    analysis: super::DsaAnalysis<'_>,
     on_step: &mut dyn FnMut(&ShellProblem, &ContinuumDsa),
 ) -> Result<ContinuumRun, SensitivityError> {
+    let super::DsaAnalysis {
+        problem,
+        surface,
+        variables,
+        monitors,
+        newton,
+        solver,
+    } = analysis;
     let t0 = Instant::now();
     let pattern = problem.pattern().clone();
     let method = Method::auto(&pattern);
@@ -1205,31 +1208,14 @@ pub(super) fn run_concurrent(
     })
 }
 
-/// Run the analysis of `problem` (built on `surface`, needed by shape variables) with the
-/// continuum DSA of `variables` at every converged step.
-pub fn run_continuum(
-    problem: ShellProblem,
-    surface: Option<&Surface<f64>>,
-    variables: Vec<DesignVariable>,
-    monitors: Vec<Monitor>,
-    newton: &NewtonSolver,
-    solver: SolverOptions,
-) -> Result<ContinuumRun, SensitivityError> {
+/// Run `analysis` with the continuum DSA of its variables at every converged step.
+pub fn run_continuum(analysis: super::DsaAnalysis<'_>) -> Result<ContinuumRun, SensitivityError> {
     let methods = super::HookedMethods {
         continuum: true,
         dual: None,
         schedule: ContinuumSchedule::default(),
     };
-    let (run, _) = super::run_hooked(
-        problem,
-        surface,
-        variables,
-        monitors,
-        newton,
-        solver,
-        methods,
-        &mut |_| {},
-    )?;
+    let (run, _) = super::run_hooked(analysis, methods, &mut |_| {})?;
     Ok(run.unwrap_or_else(|| unreachable!("run_hooked returns a run per method asked for")))
 }
 

@@ -961,19 +961,23 @@ pub fn run_dual(
     solver: SolverOptions,
     mode: DualMode,
 ) -> Result<DualRun, SensitivityError> {
-    run_dual_on(problem, None, variables, monitors, newton, solver, mode)
+    run_dual_on(
+        super::DsaAnalysis {
+            problem,
+            surface: None,
+            variables,
+            monitors,
+            newton,
+            solver,
+        },
+        mode,
+    )
 }
 
-/// [`run_dual`] for a problem whose model was built on `surface`, which admits shape design
+/// [`run_dual`] for an analysis whose model was built on a surface, which admits shape design
 /// variables ([`DualDsa::new`]).
-#[allow(clippy::too_many_arguments)] // run_dual's arguments and the surface
 pub fn run_dual_on(
-    problem: ShellProblem,
-    surface: Option<&Surface<f64>>,
-    variables: Vec<DesignVariable>,
-    monitors: Vec<Monitor>,
-    newton: &NewtonSolver,
-    solver: SolverOptions,
+    analysis: super::DsaAnalysis<'_>,
     mode: DualMode,
 ) -> Result<DualRun, SensitivityError> {
     let methods = super::HookedMethods {
@@ -981,15 +985,6 @@ pub fn run_dual_on(
         dual: Some(mode),
         schedule: super::continuum::ContinuumSchedule::Synchronous,
     };
-    let (_, run) = super::run_hooked(
-        problem,
-        surface,
-        variables,
-        monitors,
-        newton,
-        solver,
-        methods,
-        &mut |_| {},
-    )?;
+    let (_, run) = super::run_hooked(analysis, methods, &mut |_| {})?;
     Ok(run.unwrap_or_else(|| unreachable!("run_hooked returns a run per method asked for")))
 }

@@ -1568,6 +1568,25 @@ pub enum DesignError {
     },
 }
 
+/// The analysis a derivative method observes: the problem, the surface its model was built
+/// on (`None` admits no shape variables), the design variables, the monitored responses, and
+/// the Newton driver with the linear solver's options.
+#[derive(Debug)]
+pub struct DsaAnalysis<'a> {
+    /// The problem at its initial state.
+    pub problem: crate::shell::problem::ShellProblem,
+    /// The surface the model was built on (needed by shape variables).
+    pub surface: Option<&'a Surface<f64>>,
+    /// The design variables.
+    pub variables: Vec<DesignVariable>,
+    /// The responses whose derivatives are recorded.
+    pub monitors: Vec<Monitor>,
+    /// The driver of the analysis.
+    pub newton: &'a crate::solver::NewtonSolver,
+    /// The linear solver's options.
+    pub solver: crate::solver::SolverOptions,
+}
+
 /// Which derivative methods observe a hooked run ([`run_hooked`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct HookedMethods {
@@ -1628,14 +1647,8 @@ pub trait SensitivityFields: std::fmt::Debug {
 /// the continuum DSA alone on its own thread
 /// ([`continuum::ContinuumSchedule::Concurrent`]) after every step it has recorded, with the
 /// model at that step's committed state, while the analysis may be a step or more ahead.
-#[allow(clippy::too_many_arguments)] // the run's inputs, the methods and the step callback
 pub fn run_hooked(
-    problem: crate::shell::problem::ShellProblem,
-    surface: Option<&Surface<f64>>,
-    variables: Vec<DesignVariable>,
-    monitors: Vec<Monitor>,
-    newton: &crate::solver::NewtonSolver,
-    solver: crate::solver::SolverOptions,
+    analysis: DsaAnalysis<'_>,
     methods: HookedMethods,
     on_step: &mut dyn FnMut(HookedRecords<'_>),
 ) -> Result<(Option<continuum::ContinuumRun>, Option<dual::DualRun>), dual::SensitivityError> {
@@ -1644,40 +1657,34 @@ pub fn run_hooked(
         && methods.dual.is_none()
         && methods
             .schedule
-            .resolve(crate::solver::NonlinearProblem::n_dofs(&problem))
+            .resolve(crate::solver::NonlinearProblem::n_dofs(&analysis.problem))
             == continuum::ContinuumSchedule::Concurrent
     {
-        let run = continuum::run_concurrent(
+        let run = continuum::run_concurrent(analysis, &mut |p, c| {
+            on_step(HookedRecords {
+                continuum: Some(c.records()),
+                dual: None,
+                model: &p.model,
+                continuum_fields: Some(c),
+                dual_fields: None,
+            })
+        })?;
+        return Ok((Some(run), None));
+    }
+    fn drive<D: dual::DesignDual>(
+        analysis: DsaAnalysis<'_>,
+        methods: HookedMethods,
+        on_step: &mut dyn FnMut(HookedRecords<'_>),
+    ) -> Result<Runs, dual::SensitivityError> {
+        use crate::solver::observe::{Observed, StepObserver, Tapped};
+        let DsaAnalysis {
             problem,
             surface,
             variables,
             monitors,
             newton,
             solver,
-            &mut |p, c| {
-                on_step(HookedRecords {
-                    continuum: Some(c.records()),
-                    dual: None,
-                    model: &p.model,
-                    continuum_fields: Some(c),
-                    dual_fields: None,
-                })
-            },
-        )?;
-        return Ok((Some(run), None));
-    }
-    #[allow(clippy::too_many_arguments)]
-    fn drive<D: dual::DesignDual>(
-        problem: crate::shell::problem::ShellProblem,
-        surface: Option<&Surface<f64>>,
-        variables: Vec<DesignVariable>,
-        monitors: Vec<Monitor>,
-        newton: &crate::solver::NewtonSolver,
-        solver: crate::solver::SolverOptions,
-        methods: HookedMethods,
-        on_step: &mut dyn FnMut(HookedRecords<'_>),
-    ) -> Result<Runs, dual::SensitivityError> {
-        use crate::solver::observe::{Observed, StepObserver, Tapped};
+        } = analysis;
         let t0 = std::time::Instant::now();
         let pattern = problem.pattern().clone();
         let mut linear = crate::solver::LinearSolver::new(
@@ -1722,33 +1729,24 @@ pub fn run_hooked(
     }
     macro_rules! vector {
         ($($n:literal),*) => {
-            match variables.len() {
-                $($n => drive::<num_dual::DualSVec64<$n>>(
-                    problem, surface, variables, monitors, newton, solver, methods,
-                    on_step,
-                ),)*
+            match analysis.variables.len() {
+                $($n => drive::<num_dual::DualSVec64<$n>>(analysis, methods, on_step),)*
                 count => Err(dual::SensitivityError::TooManyVariables { count, max: 8 }),
             }
         };
     }
     match methods.dual {
-        None | Some(dual::DualMode::PerVariable) => drive::<num_dual::Dual64>(
-            problem, surface, variables, monitors, newton, solver, methods, on_step,
-        ),
+        None | Some(dual::DualMode::PerVariable) => {
+            drive::<num_dual::Dual64>(analysis, methods, on_step)
+        }
         Some(dual::DualMode::Vector) => vector!(1, 2, 3, 4, 5, 6, 7, 8),
     }
 }
 
 /// The continuum DSA and the dual-number reference in one hooked run ([`run_hooked`] with
 /// both methods; the dual scalar follows `mode` as in [`dual::run_dual_on`]).
-#[allow(clippy::too_many_arguments)] // run_dual_on's arguments
 pub fn run_continuum_and_dual(
-    problem: crate::shell::problem::ShellProblem,
-    surface: Option<&Surface<f64>>,
-    variables: Vec<DesignVariable>,
-    monitors: Vec<Monitor>,
-    newton: &crate::solver::NewtonSolver,
-    solver: crate::solver::SolverOptions,
+    analysis: DsaAnalysis<'_>,
     mode: dual::DualMode,
 ) -> Result<(continuum::ContinuumRun, dual::DualRun), dual::SensitivityError> {
     let methods = HookedMethods {
@@ -1756,16 +1754,7 @@ pub fn run_continuum_and_dual(
         dual: Some(mode),
         schedule: continuum::ContinuumSchedule::Synchronous,
     };
-    let runs = run_hooked(
-        problem,
-        surface,
-        variables,
-        monitors,
-        newton,
-        solver,
-        methods,
-        &mut |_| {},
-    )?;
+    let runs = run_hooked(analysis, methods, &mut |_| {})?;
     match runs {
         (Some(c), Some(d)) => Ok((c, d)),
         _ => unreachable!("run_hooked returns a run per method asked for"),

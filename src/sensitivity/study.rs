@@ -18,7 +18,8 @@ use super::dual::{DualMode, SensitivityError};
 use super::fd::{self, fit_rate, Analysis, RunResponse, TaylorFit, TaylorRow};
 use super::terms::{breakdown, TermBreakdown};
 use super::{
-    check_design, run_hooked, Design, DesignScope, DesignVariable, HookedMethods, SensitivityFields,
+    check_design, run_hooked, Design, DesignScope, DesignVariable, DsaAnalysis, HookedMethods,
+    SensitivityFields,
 };
 use crate::shell::contact::ShellContact;
 use crate::shell::model::ShellModel;
@@ -565,12 +566,14 @@ pub fn run_with_output(
         }
         let runs = built.and_then(|(problem, newton)| {
             run_hooked(
-                problem,
-                surface,
-                vars.clone(),
-                monitors.clone(),
-                &newton,
-                analysis.solver(),
+                DsaAnalysis {
+                    problem,
+                    surface,
+                    variables: vars.clone(),
+                    monitors: monitors.clone(),
+                    newton: &newton,
+                    solver: analysis.solver(),
+                },
                 methods,
                 &mut |records| {
                     if let Some(w) = vtu.as_mut() {
