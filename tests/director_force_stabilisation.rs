@@ -254,6 +254,17 @@ fn dsa_refuses_the_director_force_strength_and_the_reader_names_bad_values() {
             "integration.director_stabilisation_floor",
             "0.1",
         ),
+        // The filter's support: from 2 spacings to the kernel's (3 here).
+        (
+            "director_stabilisation = 2.0\ndirector_stabilisation_support = 1.5",
+            "integration.director_stabilisation_support",
+            "1.5",
+        ),
+        (
+            "director_stabilisation = 2.0\ndirector_stabilisation_support = 3.5",
+            "integration.director_stabilisation_support",
+            "3.5",
+        ),
     ] {
         let e = parse_shell_case(&with(lines), Path::new("bad.toml"))
             .unwrap_err()

@@ -8,9 +8,11 @@
 //!    committed state (`Load::force` with a `LoadState`, the call of the dual reference), and
 //!    against central differences of the force of a filter rebuilt on the perturbed model
 //!    (`DirectorFilter::new` + `force`, the analysis' own path). The load stiffness against the
-//!    `Dual64` Jacobian in the increment.
+//!    `Dual64` Jacobian in the increment. Both on the model's own RK functions and on those of
+//!    supports of 2 spacings (`integration.director_stabilisation_support`).
 //! 3. Whole run: the reduced elastoplastic hemisphere (`verification/hemisphere-plastic-dsa/
-//!    ci.toml`) with `director_stabilisation = 0.1` through `shelldsa dsa`: continuum = dual,
+//!    ci.toml`) with `director_stabilisation = 0.1` (its filter on supports of 2 spacings,
+//!    `director_stabilisation_support = 2`) through `shelldsa dsa`: continuum = dual,
 //!    both against central differences of complete re-runs, Taylor rates, and `--terms`: the
 //!    continuum's `filter` group against the dual force of the filter alone.
 //!
@@ -44,15 +46,26 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// The reduced plastic hemisphere with the stabilisation on, on a `grid × grid` particle set.
-fn case_text(grid: usize) -> String {
+/// The case's kernel support (spacings).
+const KERNEL_SUPPORT: f64 = 3.0;
+/// The filter supports tested: the kernel's (the default) and the smallest
+/// (`integration.director_stabilisation_support`, docs/stability.md §8).
+const FILTER_SUPPORTS: [f64; 2] = [KERNEL_SUPPORT, 2.0];
+
+/// The reduced plastic hemisphere with the stabilisation on, on a `grid × grid` particle set,
+/// its filter on RK functions of `support` spacings.
+fn case_text(grid: usize, support: f64) -> String {
     let t = std::fs::read_to_string(root().join("verification/hemisphere-plastic-dsa/ci.toml"))
         .unwrap();
     assert!(t.contains("grid = [9, 9]") && t.contains("[integration]\n"));
+    assert!(t.contains(&format!("support = {KERNEL_SUPPORT:.1}")));
     t.replace("grid = [9, 9]", &format!("grid = [{grid}, {grid}]"))
         .replacen(
             "[integration]\n",
-            "[integration]\ndirector_stabilisation = 0.1\n",
+            &format!(
+                "[integration]\ndirector_stabilisation = 0.1\n\
+                 director_stabilisation_support = {support}\n"
+            ),
             1,
         )
 }
@@ -68,7 +81,13 @@ fn max_diff(a: &[f64], b: &[f64]) -> f64 {
 
 #[test]
 fn filter_rows_live_on_the_parameter_domain() {
-    let text = case_text(9);
+    for support in FILTER_SUPPORTS {
+        rows_on_the_parameter_domain(support);
+    }
+}
+
+fn rows_on_the_parameter_domain(support: f64) {
+    let text = case_text(9, support);
     let nominal = problem(&text);
     let f0 = filter(&nominal);
     assert!(f0.rows().iter().all(|r| r.len() > 1));
@@ -116,14 +135,23 @@ fn particles_at<T: shelldsa::scalar::Real>(
 }
 
 /// The filter force of a filter rebuilt on `model` with the design at `τ` (the analysis' path:
-/// `DirectorFilter::new` reads `E, ν, t` of the model, `force` its committed states).
-fn rebuilt_force(model: &ShellModel, eps: f64, s: &Seeds, tau: f64, q: &[f64]) -> Vec<f64> {
+/// `DirectorFilter::new` reads `E, ν, t` of the model, `force` its committed states), its rows
+/// from supports `scale` times the model's.
+fn rebuilt_force(
+    model: &ShellModel,
+    (eps, scale): (f64, f64),
+    s: &Seeds,
+    tau: f64,
+    q: &[f64],
+) -> Vec<f64> {
     let mut m = model.clone();
     m.particles = particles_at(&model.particles, s, tau);
     m.material.young += tau * s.young;
     m.material.poisson += tau * s.poisson;
     m.thickness += tau * s.thickness;
-    let filt = DirectorFilter::new(&m, eps).unwrap();
+    let filt = DirectorFilter::new(&m, eps)
+        .and_then(|f| f.with_filter_support(&m, scale))
+        .unwrap();
     let mut f = vec![0.0; q.len()];
     filt.force(&m, q, &mut f).unwrap();
     f
@@ -131,7 +159,14 @@ fn rebuilt_force(model: &ShellModel, eps: f64, s: &Seeds, tau: f64, q: &[f64]) -
 
 #[test]
 fn design_derivative_three_ways() {
-    let p = problem(&case_text(9));
+    for support in FILTER_SUPPORTS {
+        design_derivative_with_filter_support(support);
+    }
+}
+
+fn design_derivative_with_filter_support(support: f64) {
+    let scale_of_support = support / KERNEL_SUPPORT;
+    let p = problem(&case_text(9, support));
     let filt = filter(&p).clone();
     let mut model = p.model.clone();
     let n = model.n_particles();
@@ -253,8 +288,8 @@ fn design_derivative_three_ways() {
 
         // Central differences of the rebuilt filter's force.
         let central = |h: f64| -> f64 {
-            let fp = rebuilt_force(&model, filt.epsilon(), s, h, &q);
-            let fm = rebuilt_force(&model, filt.epsilon(), s, -h, &q);
+            let fp = rebuilt_force(&model, (filt.epsilon(), scale_of_support), s, h, &q);
+            let fm = rebuilt_force(&model, (filt.epsilon(), scale_of_support), s, -h, &q);
             let c: Vec<f64> = fp
                 .iter()
                 .zip(&fm)
@@ -264,8 +299,8 @@ fn design_derivative_three_ways() {
         };
         let (e1, e2) = (central(1e-3), central(5e-4));
         println!(
-            "{name:>10}: max|ḟ| {scale:.3e}, hand − dual {e_dual:.2e}, hand − central \
-             {e1:.2e} (h 1e-3), {e2:.2e} (h 5e-4)"
+            "filter support {support}, {name:>10}: max|ḟ| {scale:.3e}, hand − dual \
+             {e_dual:.2e}, hand − central {e1:.2e} (h 1e-3), {e2:.2e} (h 5e-4)"
         );
         // Two evaluations of the same sums, terms of the size of the largest entry:
         // round-off, 1e-13 of the largest entry.
@@ -284,7 +319,13 @@ fn design_derivative_three_ways() {
 
 #[test]
 fn load_stiffness_is_the_jacobian_of_the_force() {
-    let p = problem(&case_text(9));
+    for support in FILTER_SUPPORTS {
+        load_stiffness_with_filter_support(support);
+    }
+}
+
+fn load_stiffness_with_filter_support(support: f64) {
+    let p = problem(&case_text(9, support));
     let filt = filter(&p);
     let mut model = p.model.clone();
     let n = model.n_particles();
@@ -324,7 +365,7 @@ fn load_stiffness_is_the_jacobian_of_the_force() {
         scale = scale.max(max_abs(&jac));
     }
     println!(
-        "stiffness against the dual Jacobian: {:.2e} of {scale:.3e}",
+        "filter support {support}: stiffness against the dual Jacobian: {:.2e} of {scale:.3e}",
         worst / scale
     );
     assert!(scale > 0.0);
@@ -333,13 +374,16 @@ fn load_stiffness_is_the_jacobian_of_the_force() {
 }
 
 /// The reduced plastic hemisphere (9 × 9, 14 steps to P = 35, first yield in step 11) with
-/// `director_stabilisation = 0.1` and the design variables R, φ1 (shape), t, σ0 of the case
-/// plus E and ν (the filter's `κ`): three ways through `shelldsa dsa`.
+/// `director_stabilisation = 0.1` on the filter of the smallest support (2 spacings: its rows
+/// reach into the images across both symmetry planes, and the finite differences' re-runs
+/// rebuild it from the case key) and the design variables R, φ1 (shape), t, σ0 of the case
+/// plus E and ν (the filter's `κ`): three ways through `shelldsa dsa`. The model-level tests
+/// above check both supports; the derivative code does not depend on the rows.
 #[test]
 fn stabilised_hemisphere_three_ways_through_the_cli() {
     let extra = "[[design]]\nname = \"E\"\nkind = \"material.young\"\nfd_steps = [1e-3, 1e-4]\n\n\
                  [[design]]\nname = \"nu\"\nkind = \"material.poisson\"\nfd_steps = [1e-3, 1e-4]\n\n[dsa]\n";
-    let text = case_text(9).replacen("[dsa]\n", extra, 1);
+    let text = case_text(9, 2.0).replacen("[dsa]\n", extra, 1);
     let dir = root().join("target/dsa-stabilisation-tests");
     std::fs::create_dir_all(&dir).unwrap();
     let case = dir.join("case.toml");

@@ -492,6 +492,12 @@ pub fn case_loads(
                 case.integration.director_stabilisation_strength,
                 case.integration.director_stabilisation_floor,
             )
+            .and_then(|f| {
+                f.with_filter_support(
+                    model,
+                    case.integration.director_stabilisation_support / case.kernel.support,
+                )
+            })
             .map_err(|e| model_err("integration.director_stabilisation", e))?,
         ));
     }

@@ -118,6 +118,8 @@ struct IntegrationFile {
     director_stabilisation_strength: Option<String>,
     #[serde(default)]
     director_stabilisation_floor: Option<f64>,
+    #[serde(default)]
+    director_stabilisation_support: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -331,6 +333,11 @@ pub struct ParticleLayout {
     pub seed: u64,
 }
 
+/// The smallest support of the director filter's RK functions, in particle spacings
+/// (`integration.director_stabilisation_support`): from 2 on a particle's neighbours on the
+/// lattice (offsets ±1 in both directions) carry weight, the fewest that a quadratic basis needs.
+pub const MIN_FILTER_SUPPORT: f64 = 2.0;
+
 /// RK kernel: basis, support half-width as a multiple of the particle spacing, and the kernel
 /// function.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -375,6 +382,10 @@ pub struct IntegrationSpec {
     /// The floor `φ` of the per-particle strength, a fraction of `E t³ / (12 (1 − ν²))`
     /// (docs/stability.md; 0: none).
     pub director_stabilisation_floor: f64,
+    /// Support half-width, in particle spacings, of the RK functions that define the
+    /// stabilisation's filter (docs/stability.md §8); by default `kernel.support` (the model's
+    /// own functions).
+    pub director_stabilisation_support: f64,
 }
 
 /// A displacement or rotation component of a particle's 5 DOFs.
@@ -1366,6 +1377,21 @@ impl Checker<'_> {
                 ))
             }
         };
+        let director_stabilisation_support = match i.director_stabilisation_support {
+            None => kernel.support,
+            Some(x) if x.is_finite() && (MIN_FILTER_SUPPORT..=kernel.support).contains(&x) => x,
+            Some(x) => {
+                return Err(self.err(
+                    "integration.director_stabilisation_support",
+                    format!("{x}"),
+                    format!(
+                        "a support half-width in particle spacings from {MIN_FILTER_SUPPORT} to \
+                         kernel.support = {} (default kernel.support)",
+                        kernel.support
+                    ),
+                ))
+            }
+        };
         let integration = IntegrationSpec {
             cells,
             gauss,
@@ -1374,6 +1400,7 @@ impl Checker<'_> {
             director_stabilisation,
             director_stabilisation_strength,
             director_stabilisation_floor,
+            director_stabilisation_support,
         };
 
         let material = material_from_spec(&f.material, self.path)?;

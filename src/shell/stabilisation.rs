@@ -25,6 +25,15 @@
 //! It enters the problem as the prescribed configuration-dependent load `f = −κ Bᵀ B α`
 //! ([`super::load::Load::DirectorFilter`]).
 //!
+//! **Support.** `Ψ_J(ξ_I)` are by default the model's own RK functions. They may instead be
+//! built with the same basis, kernel function and image particles on supports `scale` times
+//! the model's ([`DirectorFilter::with_filter_support`], case key
+//! `integration.director_stabilisation_support`). On a regular lattice the penalty per unit `ε`
+//! of a coefficient pattern of wave vector `ω` is `(1 − ψ̂(ω))²`: a smaller support keeps more
+//! of it at the checkerboard `ω h = (π, π)` than at the smooth wavelengths that a point load's
+//! under-resolved rotations carry (docs/stability.md §8). The rows still vanish on quadratics,
+//! and their reach (and the tangent's pattern) does not grow.
+//!
 //! **Design derivative.** `Ψ_J(ξ_I)` lives on the parameter domain (the particles' `(u, v)`
 //! and the kernels do not move with any design variable), so at a fixed increment `α` the
 //! force depends on the design only through `κ(E, ν, t)` and the committed directors and
@@ -61,6 +70,7 @@
 use super::model::ShellModel;
 use super::point::{ParticleState, DOFS_PER_PARTICLE};
 use super::ShellError;
+use crate::meshfree::{ShapeFunctions, ShapeValues};
 use crate::scalar::Real;
 use nalgebra::{Matrix3x2, Vector2, Vector3};
 
@@ -128,13 +138,7 @@ impl DirectorFilter {
         let kappa = Self::stiffness(epsilon, mp.young, mp.poisson, model.thickness);
         let mut rows = Vec::with_capacity(model.n_particles());
         for i in 0..model.n_particles() {
-            let sv = model.shape_values(model.particle_uv[i])?;
-            let mut row: Vec<(usize, f64)> = sv.iter().map(|(j, psi, _)| (j, -psi)).collect();
-            match row.iter_mut().find(|(j, _)| *j == i) {
-                Some(t) => t.1 += 1.0,
-                None => row.push((i, 1.0)),
-            }
-            rows.push(row);
+            rows.push(filter_row(i, &model.shape_values(model.particle_uv[i])?));
         }
         let mut filter = DirectorFilter {
             epsilon,
@@ -164,6 +168,49 @@ impl DirectorFilter {
             self.kappa_rows = s.iter().map(|v| e * v.max(0.0) + floor).collect();
         }
         Ok(())
+    }
+
+    /// The rows from RK functions whose supports are the model's times `scale` (in `(0, 1]`;
+    /// 1 keeps the model's own functions), with the model's basis and kernel function (module
+    /// documentation, "Support"). Where such a function is not defined at a particle (too few
+    /// particles in the smaller support for the basis, at a boundary without a symmetry
+    /// plane), that row takes the smallest of `scale · 1.25^k` that is, up to the model's own.
+    pub fn with_filter_support(
+        mut self,
+        model: &ShellModel,
+        scale: f64,
+    ) -> Result<Self, ShellError> {
+        if !(scale.is_finite() && scale > 0.0 && scale <= 1.0) {
+            return Err(ShellError::InvalidInput(format!(
+                "director filter support scale {scale}: expected a number in (0, 1] (the \
+                 filter's support over the kernel's)"
+            )));
+        }
+        if scale == 1.0 {
+            return Ok(self);
+        }
+        let sf = &model.shape_functions;
+        let mut ladder = Vec::new();
+        let mut s = scale;
+        while s < 1.0 {
+            let set = ShapeFunctions::new(
+                sf.particles().to_vec(),
+                sf.supports().iter().map(|a| [a[0] * s, a[1] * s]).collect(),
+                sf.basis(),
+            )
+            .map_err(|e| ShellError::InvalidInput(format!("director filter support: {e}")))?
+            .with_kernel(sf.kernel());
+            ladder.push(set);
+            s *= 1.25;
+        }
+        let mut sv = ShapeValues::new();
+        for (i, row) in self.rows.iter_mut().enumerate() {
+            let uv = model.particle_uv[i];
+            if ladder.iter().any(|set| set.evaluate(uv, &mut sv).is_ok()) {
+                *row = filter_row(i, &sv);
+            }
+        }
+        Ok(self)
     }
 
     /// How the stiffness is set.
@@ -248,6 +295,16 @@ impl DirectorFilter {
 }
 
 const ROT: usize = 3;
+
+/// Row `i` of the filter, `(j, δ_ij − Ψ_j(ξ_i))`, from the RK functions `sv` at particle `i`.
+fn filter_row(i: usize, sv: &ShapeValues) -> Vec<(usize, f64)> {
+    let mut row: Vec<(usize, f64)> = sv.iter().map(|(j, psi, _)| (j, -psi)).collect();
+    match row.iter_mut().find(|(j, _)| *j == i) {
+        Some(t) => t.1 += 1.0,
+        None => row.push((i, 1.0)),
+    }
+    row
+}
 
 /// The two rotation increments of source particle `s` in `q`.
 fn alpha<T: Real>(q: &[T], s: usize) -> Vector2<T> {
