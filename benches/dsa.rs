@@ -13,7 +13,8 @@
 //! the process' CPU time (user + system, from `/proc/self/stat`), which on a shared machine
 //! says what the hooked run adds whatever the other tenants take. The continuum runs on the
 //! default schedule (in the analysis' hook); `DSA_BENCH_SCHEDULE=concurrent` (or
-//! `synchronous`) chooses.
+//! `synchronous`) chooses, and `DSA_BENCH_SOLVE=krylov` (or `factorised`) how the hook solves
+//! the sensitivity systems (default: the library's).
 //!
 //! `cargo bench --bench dsa` (≈ 10 min on 2 cores); one case:
 //! `cargo bench --bench dsa -- hemisphere-plastic-dsa` (or `cylindrical-bending-dsa`). The
@@ -23,7 +24,7 @@
 use criterion::{criterion_group, criterion_main, Criterion};
 use shelldsa::io::dsa_study::CaseAnalysis;
 use shelldsa::io::shell_case::{read_shell_case, ShellCase};
-use shelldsa::sensitivity::continuum::ContinuumSchedule;
+use shelldsa::sensitivity::continuum::{ContinuumSchedule, SensitivitySolve};
 use shelldsa::sensitivity::dual::{run_dual_on, DualMode};
 use shelldsa::sensitivity::fd::{self, Analysis};
 use shelldsa::sensitivity::{run_hooked, Design, DesignVariable, DsaAnalysis, HookedMethods};
@@ -41,6 +42,7 @@ struct Setup {
     case: ShellCase,
     vars: Vec<DesignVariable>,
     schedule: ContinuumSchedule,
+    solve: SensitivitySolve,
 }
 
 /// CPU time of this process so far (user + system, s; clock ticks of 10 ms).
@@ -66,10 +68,16 @@ impl Setup {
             Ok("concurrent") => ContinuumSchedule::Concurrent,
             _ => ContinuumSchedule::default(),
         };
+        let solve = match std::env::var("DSA_BENCH_SOLVE").as_deref() {
+            Ok("krylov") => SensitivitySolve::Krylov,
+            Ok("factorised") => SensitivitySolve::Factorised,
+            _ => SensitivitySolve::default(),
+        };
         Setup {
             case,
             vars,
             schedule,
+            solve,
         }
     }
     fn base(&self) -> Design {
@@ -111,17 +119,21 @@ impl Setup {
             continuum: true,
             dual: None,
             schedule: self.schedule,
+            solve: self.solve,
         };
         let (r, _) = run_hooked(self.dsa_analysis(p, &n), methods, &mut |_| {}).unwrap();
         let r = r.unwrap();
         let t = r.timing;
         eprintln!(
-            "continuum ({:?}) stages: rhs {:.3} s, solve {:.3} s, update {:.3} s, record {:.3} \
-             s; converged tangents on the DSA's thread {:.3} s; analysis {:.3} s of the run's \
-             {:.3} s",
+            "continuum ({:?}, {:?}) stages: rhs {:.3} s, solve {:.3} s ({} Arnoldi steps, {} \
+             steps factorised by the DSA), update {:.3} s, record {:.3} s; converged tangents \
+             on the DSA's thread {:.3} s; analysis {:.3} s of the run's {:.3} s",
             r.schedule,
+            self.solve,
             t.rhs,
             t.solve,
+            t.krylov_iterations,
+            t.krylov_fallbacks,
             t.update,
             t.record,
             t.tangent,

@@ -457,10 +457,19 @@ fn dsa(
         say!(
             con,
             "continuum DSA per design variable: {:.2} % of the analysis; stages: right-hand sides \
-             {:.3} s, solve {:.3} s, history update {:.3} s, monitors {:.3} s",
+             {:.3} s, solve {:.3} s{}, history update {:.3} s, monitors {:.3} s",
             100.0 * own,
             t.rhs,
             t.solve,
+            if t.krylov_iterations + t.krylov_fallbacks > 0 {
+                format!(
+                    " ({} Arnoldi steps on the converged tangents; {} step(s) factorised for \
+                     the DSA where GMRES gave up)",
+                    t.krylov_iterations, t.krylov_fallbacks
+                )
+            } else {
+                String::new()
+            },
             t.update,
             t.record
         );

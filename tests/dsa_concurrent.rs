@@ -10,7 +10,7 @@
 
 use shelldsa::io::dsa_study::{base_design, CaseAnalysis};
 use shelldsa::io::shell_case::{read_shell_case, ShellCase};
-use shelldsa::sensitivity::continuum::{ContinuumRun, ContinuumSchedule};
+use shelldsa::sensitivity::continuum::{ContinuumRun, ContinuumSchedule, SensitivitySolve};
 use shelldsa::sensitivity::dual::DualMode;
 use shelldsa::sensitivity::fd::Analysis;
 use shelldsa::sensitivity::{run_hooked, DesignVariable, DsaAnalysis, HookedMethods};
@@ -44,6 +44,9 @@ fn run(
         continuum: true,
         dual: dual.then_some(DualMode::Vector),
         schedule,
+        // The concurrent DSA factorises the converged tangent on its thread; the synchronous
+        // one compared with it bit for bit must factorise it too.
+        solve: SensitivitySolve::Factorised,
     };
     let (c, _) = run_hooked(
         DsaAnalysis {

@@ -50,13 +50,14 @@ use crate::shell::model::ShellModel;
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
 use crate::shell::point_sensitivity::{commit_particle_dot, ModelSeeds, StepLinearisation};
 use crate::shell::problem::ShellProblem;
+use crate::solver::krylov::{csc_mul, gmres_to};
 use crate::solver::newton::{FailureReason, NewtonFailure};
 use crate::solver::observe::{Observed, StepObserver};
 use crate::solver::Failure;
 use crate::solver::NonlinearProblem;
 use crate::solver::{
     ConvergedStep, ConvergedTangent, EssentialBc, FactorisedAt, LinearSolver, Method, NewtonReport,
-    ProblemError,
+    ProblemError, SolverOptions, SparsityPattern,
 };
 use nalgebra::Vector3;
 use std::sync::mpsc::{sync_channel, SyncSender};
@@ -281,6 +282,59 @@ pub struct ContinuumTiming {
     /// replayed commits ([`ContinuumSchedule::Concurrent`]; 0 in the synchronous hook, whose
     /// tangent the analysis' driver factorises). Not part of the DSA's own time.
     pub tangent: f64,
+    /// Arnoldi steps of the sensitivity solves ([`SensitivitySolve::Krylov`]), over all
+    /// steps and right-hand sides.
+    pub krylov_iterations: usize,
+    /// Steps whose sensitivity systems GMRES did not solve within its budget
+    /// ([`SensitivitySolve::Krylov`]): the DSA factorised the tangent itself there.
+    pub krylov_fallbacks: usize,
+}
+
+/// How the continuum DSA in the analysis' hook solves the sensitivity systems (eq 65) of a
+/// converged step.
+///
+/// The default is [`SensitivitySolve::Krylov`]: measured with 2 cores on an otherwise idle
+/// machine (2026-11-27, the two alternated in one sitting), the whole hooked run over the
+/// plain run per design variable was 3.80 / 3.90 % against 4.48 / 4.29 % on the 17 × 17 plastic
+/// hemisphere (`benches/dsa.rs`, medians of three pairs) and 1.69 / 1.51 % against 4.27 /
+/// 2.93 % on the same case at 33 × 33 (`shelldsa dsa --methods continuum`), where one
+/// factorisation costs far more than a few Arnoldi steps; on the bending case the two were
+/// within the pairs' spread.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum SensitivitySolve {
+    /// With the tangent factorised at the converged state: the driver factorises it once more
+    /// per step (`ConvergedTangent::Required`), and one multi-right-hand-side solve follows.
+    Factorised,
+    /// With GMRES on the converged tangent, which the driver assembles where it tests
+    /// convergence but does not factorise (`ConvergedTangent::Assembled`), preconditioned by
+    /// the factorisation the driver holds (an earlier iterate's), to a residual of
+    /// [`KRYLOV_RTOL`] of each right-hand side. A step whose systems GMRES does not solve
+    /// within [`KRYLOV_MAX_ITERATIONS`] is solved with a factorisation of the DSA's own.
+    #[default]
+    Krylov,
+}
+
+/// Relative residual `‖b − K u̇‖ / ‖b‖` to which [`SensitivitySolve::Krylov`] solves, or the
+/// round-off of the residual's own evaluation, `16 ε ‖ |K| |u̇| ‖`, where that is larger: what
+/// a backward-stable direct solve leaves, so that the continuum DSA keeps its agreement with
+/// the dual reference to round-off (`tests/dsa_krylov_solve.rs`: within 1e-11 of the
+/// factorised solve on both reduced paper examples).
+pub const KRYLOV_RTOL: f64 = 1e-14;
+
+/// Arnoldi steps per right-hand side before [`SensitivitySolve::Krylov`] gives up on a step.
+pub const KRYLOV_MAX_ITERATIONS: usize = 30;
+
+/// The tangent a sensitivity solve uses.
+enum StepSolver<'a> {
+    /// Factorised at the converged state.
+    Factorised(&'a LinearSolver),
+    /// The converged tangent's values over `pattern`, and a factorisation of an earlier
+    /// iterate's as the preconditioner.
+    Krylov {
+        pattern: &'a SparsityPattern,
+        values: &'a [f64],
+        preconditioner: &'a LinearSolver,
+    },
 }
 
 /// Where the continuum DSA runs.
@@ -353,6 +407,10 @@ pub struct ContinuumDsa {
     time: Duration,
     timing: ContinuumTiming,
     failure: Option<Failure>,
+    solve: SensitivitySolve,
+    /// The DSA's own factorisation where GMRES gave up ([`SensitivitySolve::Krylov`]), made on
+    /// first use.
+    own_solver: Option<LinearSolver>,
 }
 
 /// What the continuum DSA's failures are reported as.
@@ -390,7 +448,16 @@ impl ContinuumDsa {
             time: Duration::ZERO,
             timing: ContinuumTiming::default(),
             failure: None,
+            solve: SensitivitySolve::default(),
+            own_solver: None,
         })
+    }
+
+    /// Solve the sensitivity systems in the hook as `solve` says (default
+    /// [`SensitivitySolve::Factorised`]).
+    pub fn with_solve(mut self, solve: SensitivitySolve) -> Self {
+        self.solve = solve;
+        self
     }
 
     /// The design variables.
@@ -456,13 +523,113 @@ impl ContinuumDsa {
         problem: &ShellProblem,
         step: &ConvergedStep<'_>,
     ) -> Result<(), ProblemError> {
-        if step.factorised_at != FactorisedAt::Converged {
-            return Err(fatal(
-                "the solver's tangent is not the converged one (the observer must ask for \
-                 ConvergedTangent::Required)",
-            ));
+        let solver = match (step.factorised_at, step.tangent) {
+            (FactorisedAt::Converged, _) => StepSolver::Factorised(step.solver),
+            (FactorisedAt::PreviousIterate, Some((pattern, values))) => StepSolver::Krylov {
+                pattern,
+                values,
+                preconditioner: step.solver,
+            },
+            (FactorisedAt::PreviousIterate, None) => {
+                return Err(fatal(
+                    "the solver's tangent is not the converged one and the converged tangent \
+                     was not assembled (the observer must ask for ConvergedTangent::Required \
+                     or ConvergedTangent::Assembled)",
+                ))
+            }
+        };
+        self.solve_step(problem, step.u, step.load, solver, step.essential)
+    }
+
+    /// Solve the `nv` systems in the columns of `b` in place.
+    fn solve_columns(
+        &mut self,
+        solver: StepSolver<'_>,
+        b: &mut [f64],
+        nv: usize,
+    ) -> Result<(), ProblemError> {
+        let (pattern, values, preconditioner) = match solver {
+            StepSolver::Factorised(s) => return s.solve_columns_in_place(b, nv).map_err(fatal),
+            StepSolver::Krylov {
+                pattern,
+                values,
+                preconditioner,
+            } => (pattern, values, preconditioner),
+        };
+        let n = pattern.n_dofs();
+        // The preconditioner's solutions of all columns in one pass (the factors are read once),
+        // then per column the residual of the converged tangent and, where it is above the
+        // tolerance, GMRES on the correction.
+        let mut x0 = b[..n * nv].to_vec();
+        preconditioner
+            .solve_columns_in_place(&mut x0, nv)
+            .map_err(fatal)?;
+        let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
+        let (mut r, mut scale, mut d) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        let mut solved = vec![false; nv];
+        for (v, col) in b.chunks_mut(n).enumerate().take(nv) {
+            let x = &mut x0[v * n..(v + 1) * n];
+            // r = b − K x.
+            csc_mul(pattern, values, x, &mut r);
+            for (ri, bi) in r.iter_mut().zip(col.iter()) {
+                *ri = bi - *ri;
+            }
+            let norm = |a: &[f64]| a.iter().map(|t| t * t).sum::<f64>().sqrt();
+            let mut tol = KRYLOV_RTOL * norm(col);
+            if norm(&r) > tol {
+                // Not below KRYLOV_RTOL of the right-hand side: nor need it be below the
+                // round-off of its own evaluation, `ε |K| |x|` (the size of the terms that
+                // cancel in r), which a backward-stable solve leaves too.
+                scale.fill(0.0);
+                for j in 0..n {
+                    for p in cp[j]..cp[j + 1] {
+                        scale[ri[p]] += (values[p] * x[j]).abs();
+                    }
+                }
+                tol = tol.max(16.0 * f64::EPSILON * norm(&scale));
+            }
+            if norm(&r) > tol {
+                let info = gmres_to(
+                    pattern,
+                    values,
+                    preconditioner,
+                    &r,
+                    &mut d,
+                    tol,
+                    KRYLOV_MAX_ITERATIONS,
+                    false,
+                )
+                .map_err(fatal)?;
+                match info {
+                    Some(info) => {
+                        self.timing.krylov_iterations += info.iterations;
+                        for (a, c) in x.iter_mut().zip(&d) {
+                            *a += c;
+                        }
+                    }
+                    None => break,
+                }
+            }
+            col.copy_from_slice(x);
+            solved[v] = true;
         }
-        self.solve_step(problem, step.u, step.load, step.solver, step.essential)
+        if solved.iter().all(|&s| s) {
+            return Ok(());
+        }
+        // GMRES gave up: factorise the converged tangent here and solve the rest directly.
+        self.timing.krylov_fallbacks += 1;
+        if self.own_solver.is_none() {
+            self.own_solver = Some(
+                LinearSolver::new(pattern, Method::auto(pattern), SolverOptions::default())
+                    .map_err(fatal)?,
+            );
+        }
+        let own = self.own_solver.as_mut().expect("made above");
+        own.factorize(values).map_err(fatal)?;
+        for (col, _) in b.chunks_mut(n).zip(&solved).filter(|(_, s)| !**s) {
+            own.solve_in_place(col).map_err(fatal)?;
+        }
+        Ok(())
     }
 
     /// The sensitivities of the converged step to `u` at `load` (eq 65 and the history
@@ -474,7 +641,7 @@ impl ContinuumDsa {
         problem: &ShellProblem,
         u: &[f64],
         load: f64,
-        solver: &LinearSolver,
+        solver: StepSolver<'_>,
         essential: &EssentialBc,
     ) -> Result<(), ProblemError> {
         let n = u.len();
@@ -504,7 +671,7 @@ impl ContinuumDsa {
         // 2. One multi-RHS solve with the converged tangent (eq 65).
         self.timing.rhs += t0.elapsed().as_secs_f64();
         let t0 = Instant::now();
-        solver.solve_columns_in_place(&mut b, nv).map_err(fatal)?;
+        self.solve_columns(solver, &mut b, nv)?;
         self.timing.solve += t0.elapsed().as_secs_f64();
         // 3. History and particle updates with Δu̇ (eqs 44–51): the trial histories'
         // derivative is linear in the seeds, so the fictitious loads' pass (Δq̇ = 0) gave its
@@ -898,7 +1065,10 @@ fn fictitious_loads_kept(
 
 impl StepObserver<ShellProblem> for ContinuumDsa {
     fn converged_tangent(&self, _problem: ConvergedTangent) -> ConvergedTangent {
-        ConvergedTangent::Required
+        match self.solve {
+            SensitivitySolve::Factorised => ConvergedTangent::Required,
+            SensitivitySolve::Krylov => ConvergedTangent::Assembled,
+        }
     }
     fn on_converged(
         &mut self,
@@ -1043,7 +1213,13 @@ impl ContinuumDsa {
         let bc = replica.factorise(step).map_err(StepFailure::Hook)?;
         self.timing.tangent += t0.elapsed().as_secs_f64();
         let t0 = Instant::now();
-        let solved = self.solve_step(&replica.problem, &step.u, step.load, &replica.solver, &bc);
+        let solved = self.solve_step(
+            &replica.problem,
+            &step.u,
+            step.load,
+            StepSolver::Factorised(&replica.solver),
+            &bc,
+        );
         self.time += t0.elapsed();
         solved.map_err(StepFailure::Hook)?;
         let t0 = Instant::now();
@@ -1214,6 +1390,7 @@ pub fn run_continuum(analysis: super::DsaAnalysis<'_>) -> Result<ContinuumRun, S
         continuum: true,
         dual: None,
         schedule: ContinuumSchedule::default(),
+        solve: SensitivitySolve::default(),
     };
     let (run, _) = super::run_hooked(analysis, methods, &mut |_| {})?;
     Ok(run.unwrap_or_else(|| unreachable!("run_hooked returns a run per method asked for")))

@@ -984,6 +984,7 @@ pub fn run_dual_on(
         continuum: false,
         dual: Some(mode),
         schedule: super::continuum::ContinuumSchedule::Synchronous,
+        solve: super::continuum::SensitivitySolve::Factorised,
     };
     let (_, run) = super::run_hooked(analysis, methods, &mut |_| {})?;
     Ok(run.unwrap_or_else(|| unreachable!("run_hooked returns a run per method asked for")))

@@ -1599,6 +1599,10 @@ pub struct HookedMethods {
     /// reference needs the converged tangent factorised by the analysis' driver, which the
     /// continuum then uses as well.
     pub schedule: continuum::ContinuumSchedule,
+    /// How the continuum DSA in the hook solves its sensitivity systems. With the dual
+    /// reference in the same run it uses the factorised converged tangent whatever this says
+    /// (the dual reference needs it).
+    pub solve: continuum::SensitivitySolve,
 }
 
 /// The records of a hooked run so far, seen after every converged step.
@@ -1696,6 +1700,12 @@ pub fn run_hooked(
             .continuum
             .then(|| {
                 continuum::ContinuumDsa::new(&problem, surface, variables.clone(), monitors.clone())
+                    .map(|c| {
+                        c.with_solve(match methods.dual {
+                            None => methods.solve,
+                            Some(_) => continuum::SensitivitySolve::Factorised,
+                        })
+                    })
             })
             .transpose()?;
         let d = methods
@@ -1753,6 +1763,7 @@ pub fn run_continuum_and_dual(
         continuum: true,
         dual: Some(mode),
         schedule: continuum::ContinuumSchedule::Synchronous,
+        solve: continuum::SensitivitySolve::Factorised,
     };
     let runs = run_hooked(analysis, methods, &mut |_| {})?;
     match runs {

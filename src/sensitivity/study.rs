@@ -540,6 +540,7 @@ pub fn run_with_output(
         continuum: want_continuum,
         dual: want_dual.then_some(dual_mode),
         schedule: crate::sensitivity::continuum::ContinuumSchedule::default(),
+        solve: crate::sensitivity::continuum::SensitivitySolve::default(),
     };
     let method_names: Vec<&str> = [(want_continuum, "continuum"), (want_dual, "dual")]
         .into_iter()

@@ -59,6 +59,13 @@
 //! (`tests/solver.rs`); one tangent assembly and one factorisation per step are saved. The
 //! converged step then reports [`FactorisedAt::PreviousIterate`].
 //!
+//! A hook that solves with the converged tangent iteratively
+//! ([`ConvergedTangent::Assembled`], the continuum DSA's default) gets the same acceptance with
+//! the residual and the tangent evaluated together at the predicted iterate: accepted, the
+//! hook sees the tangent's values there ([`ConvergedStep::tangent`]) and the earlier
+//! factorisation as a preconditioner, so only the factorisation is saved; not accepted, the
+//! evaluation serves the next Newton update and nothing is evaluated twice.
+//!
 //! **Line search on failure** ([`LineSearch::OnFailure`], the default). An iterate at which
 //! the iteration cannot go on (a recoverable [`ProblemError`] such as an inverted cell or a
 //! return map that did not converge, a non-finite residual, a residual or energy beyond
@@ -240,8 +247,26 @@ pub enum ConvergedTangent {
     /// Factorise the tangent at the accepted iterate (design sensitivity).
     #[default]
     Required,
+    /// Assemble the tangent at the accepted iterate, but do not factorise it: the hook solves
+    /// with it iteratively, preconditioned by the factorisation the solver holds (an earlier
+    /// iterate's). Residual-first acceptance is allowed, with the residual and the tangent
+    /// evaluated together where the iteration predicts convergence ([`ConvergedStep::tangent`]).
+    Assembled,
     /// The hook does not use the factorisation: residual-first acceptance is allowed.
     NotNeeded,
+}
+
+impl ConvergedTangent {
+    /// The policy that serves both `self` and `other`: `Required` over `Assembled` over
+    /// `NotNeeded`.
+    pub fn stricter(self, other: ConvergedTangent) -> ConvergedTangent {
+        use ConvergedTangent::*;
+        match (self, other) {
+            (Required, _) | (_, Required) => Required,
+            (Assembled, _) | (_, Assembled) => Assembled,
+            _ => NotNeeded,
+        }
+    }
 }
 
 /// Which tangent the solver of a [`ConvergedStep`] holds.
@@ -274,6 +299,10 @@ pub struct ConvergedStep<'a> {
     /// The essential conditions eliminated in `solver` (zero their entries in sensitivity
     /// right-hand sides).
     pub essential: &'a EssentialBc,
+    /// The tangent at `u` (essential conditions eliminated) as values over the pattern, when
+    /// `solver` holds an earlier iterate's and the problem asked for
+    /// [`ConvergedTangent::Assembled`]; `None` otherwise.
+    pub tangent: Option<(&'a SparsityPattern, &'a [f64])>,
 }
 
 /// Convergence and divergence settings.
@@ -1033,6 +1062,8 @@ impl NewtonSolver {
                     rec.converged = true;
                     rec.acceptance = Some(acceptance);
                     rec.factorised_at = Some(factorised_at);
+                    let assembled = factorised_at == FactorisedAt::PreviousIterate
+                        && problem.converged_tangent() == ConvergedTangent::Assembled;
                     let hook = problem.on_converged(&ConvergedStep {
                         step: n_converged,
                         load: target,
@@ -1041,6 +1072,7 @@ impl NewtonSolver {
                         solver,
                         factorised_at,
                         essential: &bc,
+                        tangent: assembled.then_some((pattern, work.values.as_slice())),
                     });
                     if let Err(e) = hook {
                         problem.restore();
@@ -1115,7 +1147,11 @@ impl NewtonSolver {
         w: &mut Work,
     ) -> Result<(EssentialBc, Acceptance, FactorisedAt), FailureReason> {
         let o = self.options;
-        let residual_first = problem.converged_tangent() == ConvergedTangent::NotNeeded;
+        let policy = problem.converged_tangent();
+        let residual_first = policy != ConvergedTangent::Required;
+        // Residual and tangent already evaluated at `u` by the residual-first test
+        // (`ConvergedTangent::Assembled`), which did not accept the iterate.
+        let mut evaluated_here = false;
         let mut unknowns_terms = 0.0;
         // Whether the solver holds the factorisation of an iterate of this attempt.
         let mut held_in_step = false;
@@ -1192,12 +1228,10 @@ impl NewtonSolver {
                         problem,
                         pattern,
                         solver,
-                        u,
-                        load,
+                        (u, load),
                         &bc,
-                        r_ref,
-                        e0,
-                        unknowns_terms,
+                        (r_ref, e0, unknowns_terms),
+                        (policy == ConvergedTangent::Assembled).then_some(&mut evaluated_here),
                         rec,
                         w,
                     );
@@ -1210,11 +1244,13 @@ impl NewtonSolver {
                     }
                 }
             }
-            let clock = Instant::now();
-            let evaluated = problem.residual_and_tangent(u, load, &mut w.r, &mut w.values);
-            rec.timing.residual_and_tangent_s += clock.elapsed().as_secs_f64();
-            if let Err(e) = evaluated {
-                reject!(FailureReason::Problem(e));
+            if !std::mem::take(&mut evaluated_here) {
+                let clock = Instant::now();
+                let evaluated = problem.residual_and_tangent(u, load, &mut w.r, &mut w.values);
+                rec.timing.residual_and_tangent_s += clock.elapsed().as_secs_f64();
+                if let Err(e) = evaluated {
+                    reject!(FailureReason::Problem(e));
+                }
             }
             unknowns_terms = unknowns_term_scale(pattern, &w.values, u, u_n, &bc, &mut w.s);
             bc.increments_into(u, &mut w.g);
@@ -1499,18 +1535,21 @@ impl NewtonSolver {
     /// iterate: accepted by the tolerances (residual, and energy with `Δu = K_prev⁻¹ r`) or the
     /// round-off floor (with the previous `S`). `None`: not accepted, or the essential
     /// conditions are not met; the caller then evaluates residual and tangent as usual.
+    ///
+    /// With `tangent` (`ConvergedTangent::Assembled`) the residual and the tangent are
+    /// evaluated together, the tangent's essential conditions eliminated where the residual
+    /// passes, and `*tangent` is set when they were evaluated (the caller then does not evaluate
+    /// them again at `u` if the iterate is not accepted).
     #[allow(clippy::too_many_arguments)]
     fn residual_only<P: NonlinearProblem>(
         &self,
         problem: &mut P,
         pattern: &SparsityPattern,
         solver: &mut LinearSolver,
-        u: &[f64],
-        load: f64,
+        (u, load): (&[f64], f64),
         bc: &EssentialBc,
-        r_ref: f64,
-        e0: f64,
-        unknowns_terms: f64,
+        (r_ref, e0, unknowns_terms): (f64, f64, f64),
+        tangent: Option<&mut bool>,
         rec: &mut StepRecord,
         w: &mut Work,
     ) -> Result<Option<Acceptance>, FailureReason> {
@@ -1519,9 +1558,17 @@ impl NewtonSolver {
             return Ok(None);
         }
         let clock = Instant::now();
-        let evaluated = problem.residual(u, load, &mut w.r);
-        rec.timing.residual_s += clock.elapsed().as_secs_f64();
-        evaluated.map_err(FailureReason::Problem)?;
+        let with_tangent = tangent.is_some();
+        if let Some(flag) = tangent {
+            let evaluated = problem.residual_and_tangent(u, load, &mut w.r, &mut w.values);
+            rec.timing.residual_and_tangent_s += clock.elapsed().as_secs_f64();
+            evaluated.map_err(FailureReason::Problem)?;
+            *flag = true;
+        } else {
+            let evaluated = problem.residual(u, load, &mut w.r);
+            rec.timing.residual_s += clock.elapsed().as_secs_f64();
+            evaluated.map_err(FailureReason::Problem)?;
+        }
         for (x, r) in w.rhs.iter_mut().zip(&w.r) {
             *x = -r;
         }
@@ -1531,6 +1578,13 @@ impl NewtonSolver {
         rec.residual_only.push((k, rnorm));
         if !rnorm.is_finite() || rnorm > (o.residual_rtol * r_ref).max(o.residual_atol) {
             return Ok(None);
+        }
+        if with_tangent {
+            // The conditions hold at `u` (checked above): the increments are zero and the
+            // elimination leaves the right-hand side as it is.
+            bc.increments_into(u, &mut w.g);
+            bc.apply_with(pattern, &mut w.values, &mut w.rhs, &w.g)
+                .map_err(FailureReason::LinearSolver)?;
         }
         let floor = o.roundoff_factor
             * f64::EPSILON
@@ -1944,6 +1998,7 @@ impl NewtonSolver {
                         solver,
                         factorised_at: FactorisedAt::Converged,
                         essential: &bc,
+                        tangent: None,
                     });
                     if let Err(e) = hook {
                         problem.restore();

@@ -40,14 +40,13 @@ pub trait StepObserver<P: ?Sized> {
     }
 }
 
-/// Two observers, called in order (the first one's tangent policy wins if it needs the
-/// converged tangent).
+/// Two observers, called in order (the tangent policy is the stricter of the two,
+/// [`ConvergedTangent::stricter`]).
 impl<P: ?Sized, A: StepObserver<P>, B: StepObserver<P>> StepObserver<P> for (A, B) {
     fn converged_tangent(&self, problem: ConvergedTangent) -> ConvergedTangent {
-        match self.0.converged_tangent(problem) {
-            ConvergedTangent::Required => ConvergedTangent::Required,
-            ConvergedTangent::NotNeeded => self.1.converged_tangent(problem),
-        }
+        self.0
+            .converged_tangent(problem)
+            .stricter(self.1.converged_tangent(problem))
     }
     fn on_converged(&mut self, problem: &P, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
         self.0.on_converged(problem, step)?;
