@@ -9,11 +9,14 @@
 //!
 //! Run: `cargo test --release --test filter_support -- --nocapture`.
 
-use serde_json::Value;
 use shelldsa::io::shell_build;
 use shelldsa::io::shell_case::parse_shell_case;
 use shelldsa::shell::load::Load;
 use std::path::{Path, PathBuf};
+
+#[path = "common/cli.rs"]
+mod cli;
+use cli::run_case_text;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -78,23 +81,7 @@ fn pinched(lines: &str, tag: &str) -> f64 {
     let text =
         std::fs::read_to_string(root().join("verification/pinched-cylinder/case.toml")).unwrap();
     let dir = root().join("target/filter-support-tests").join(tag);
-    std::fs::create_dir_all(&dir).unwrap();
-    let case = dir.join("case.toml");
-    std::fs::write(&case, with_integration(&text, lines)).unwrap();
-    let out = dir.join("out");
-    let code = shelldsa::cli::main_with_args(
-        [
-            "shelldsa",
-            "run",
-            case.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ]
-        .map(String::from),
-    );
-    assert_eq!(code, 0);
-    let r: Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let r = run_case_text(&dir, &with_integration(&text, lines), &[]);
     let last = r["steps"].as_array().unwrap().last().unwrap().clone();
     -last["monitors"]["load"]["displacement"][2]
         .as_f64()

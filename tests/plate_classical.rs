@@ -16,8 +16,11 @@
 //! Each case has D = 1 (E = 1.092e7, ν = 0.3, t = 0.01, a = 1) and a load small enough for the
 //! linear response (w/t ~ 1e-4).
 
-use serde_json::Value;
 use std::path::PathBuf;
+
+#[path = "common/cli.rs"]
+mod cli;
+use cli::run_case_text;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -27,25 +30,7 @@ fn root() -> PathBuf {
 /// the centre deflection `−u_z` of the last converged step.
 fn centre_deflection(name: &str, text: &str) -> f64 {
     let dir = root().join("target").join("plate-classical").join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    let case = dir.join("case.toml");
-    std::fs::write(&case, text).unwrap();
-    let out = dir.join("out");
-    let code = shelldsa::cli::main_with_args(
-        [
-            "shelldsa",
-            "run",
-            case.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--quiet",
-        ]
-        .map(String::from),
-    );
-    assert_eq!(code, 0, "`shelldsa run` of {name} exited with {code}");
-    let r: Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let r = run_case_text(&dir, text, &["--quiet"]);
     assert_eq!(r["status"], "complete", "{name}");
     let steps = r["steps"].as_array().unwrap();
     let last = steps.iter().rev().find(|s| s["converged"] == true).unwrap();

@@ -8,6 +8,10 @@
 use serde_json::Value;
 use std::path::PathBuf;
 
+#[path = "common/cli.rs"]
+mod cli;
+use cli::run_case_text;
+
 /// Run `verification/NAME/case.toml` with the CLI; return the parsed results.json.
 fn run_case(name: &str) -> Value {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
@@ -203,23 +207,7 @@ fn cylindrical_bending_springback_reduced() {
         text.push('\n');
     }
     let dir = root.join("target/verification-tests/cylindrical-bending-reduced");
-    std::fs::create_dir_all(&dir).unwrap();
-    let case = dir.join("case.toml");
-    std::fs::write(&case, text).unwrap();
-    let out = dir.join("out");
-    let code = shelldsa::cli::main_with_args(
-        [
-            "shelldsa",
-            "run",
-            case.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ]
-        .map(String::from),
-    );
-    assert_eq!(code, 0, "the reduced bending case must complete");
-    let r: Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap();
+    let r = run_case_text(&dir, &text, &[]);
     let n = r["n_unknowns"].as_f64().unwrap();
     let steps: Vec<&Value> = r["steps"]
         .as_array()

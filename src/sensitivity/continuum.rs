@@ -351,8 +351,9 @@ pub enum ContinuumSchedule {
     /// the DSA beside the analysis) and the problem has at most [`CONCURRENT_MAX_UNKNOWNS`]
     /// unknowns, else [`ContinuumSchedule::Synchronous`] ([`ContinuumSchedule::resolve`]).
     Auto,
-    /// In the analysis' convergence hook: the driver factorises the tangent at every converged
-    /// iterate for it (`ConvergedTangent::Required`) and the analysis waits for the DSA.
+    /// In the analysis' convergence hook: the driver evaluates the tangent at every converged
+    /// iterate for it, factorised or for GMRES ([`SensitivitySolve`]), and the analysis waits
+    /// for the DSA.
     #[default]
     Synchronous,
     /// On a thread of its own, behind the analysis by the step it is on and at most
@@ -454,7 +455,7 @@ impl ContinuumDsa {
     }
 
     /// Solve the sensitivity systems in the hook as `solve` says (default
-    /// [`SensitivitySolve::Factorised`]).
+    /// [`SensitivitySolve::Krylov`]).
     pub fn with_solve(mut self, solve: SensitivitySolve) -> Self {
         self.solve = solve;
         self

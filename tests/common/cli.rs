@@ -9,3 +9,30 @@ pub fn cli(args: &[&str]) -> i32 {
             .map(String::from),
     )
 }
+
+/// Write the case `text` as `DIR/case.toml` (the directory made afresh), run `shelldsa run` on
+/// it with output in `DIR/out` and the `extra` arguments, check that it exits with 0, and
+/// return its `results.json`.
+#[allow(dead_code)]
+pub fn run_case_text(dir: &std::path::Path, text: &str, extra: &[&str]) -> serde_json::Value {
+    let _ = std::fs::remove_dir_all(dir);
+    std::fs::create_dir_all(dir).unwrap();
+    let case = dir.join("case.toml");
+    std::fs::write(&case, text).unwrap();
+    let out = dir.join("out");
+    let mut args = vec![
+        "run",
+        case.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let code = cli(&args);
+    assert_eq!(
+        code,
+        0,
+        "`shelldsa run` of {} exited with {code}",
+        case.display()
+    );
+    serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap()
+}
