@@ -1043,6 +1043,10 @@ struct Counting {
     policy: ConvergedTangent,
     tangents: usize,
     hooks: Vec<FactorisedAt>,
+    /// Per hook that was handed the converged tangent's values (`ConvergedTangent::Assembled`):
+    /// the largest difference from the tangent evaluated afresh at the step's unknowns, with
+    /// the essential conditions eliminated.
+    handed: Vec<f64>,
 }
 
 impl NonlinearProblem for Counting {
@@ -1077,6 +1081,20 @@ impl NonlinearProblem for Counting {
     }
     fn on_converged(&mut self, s: &ConvergedStep<'_>) -> Result<(), ProblemError> {
         self.hooks.push(s.factorised_at);
+        if let Some((pattern, values)) = s.tangent {
+            let mut v = vec![0.0; pattern.nnz()];
+            self.chain.tangent(s.u, s.load, &mut v)?;
+            let mut rhs = vec![0.0; s.u.len()];
+            let zeros = vec![0.0; s.essential.dofs().len()];
+            s.essential
+                .apply_with(pattern, &mut v, &mut rhs, &zeros)
+                .unwrap();
+            let diff = v
+                .iter()
+                .zip(values)
+                .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+            self.handed.push(diff);
+        }
         Ok(())
     }
     fn commit(&mut self, u: &[f64], l: f64) {
@@ -1115,6 +1133,7 @@ fn residual_first_acceptance_saves_tangents_and_keeps_the_converged_states() {
             },
             tangents: 0,
             hooks: Vec::new(),
+            handed: Vec::new(),
         };
         let report = newton.run(&mut prob, &pattern, &mut solver, &[0.0; 11]);
         (report.unwrap(), prob.tangents, prob.hooks)
@@ -1148,6 +1167,73 @@ fn residual_first_acceptance_saves_tangents_and_keeps_the_converged_states() {
             "{s:?}"
         );
     }
+}
+
+#[test]
+fn assembled_tangent_acceptance_hands_the_hook_the_converged_tangent() {
+    // The softening chain of the residual-first test under the three policies. `Assembled`
+    // tests convergence as `NotNeeded` does (the same accepted iterates, to the bit) but
+    // evaluates the tangent with the residual there: as many tangents as `Required`, and one
+    // factorisation fewer per step accepted on the previous iterate's, whose hook receives the
+    // converged tangent's values (equal to a fresh evaluation at the accepted unknowns).
+    let run = |policy: ConvergedTangent| {
+        let chain = SpringChain::new(10, 0.05, 2.0, None);
+        let pattern = chain.pattern.clone();
+        let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+        let newton = NewtonSolver {
+            options: NewtonOptions::default(),
+            stepping: LoadStepping {
+                initial_step: 0.1,
+                max_step: 0.1,
+                ..Default::default()
+            },
+        };
+        let mut prob = Counting {
+            chain,
+            policy,
+            tangents: 0,
+            hooks: Vec::new(),
+            handed: Vec::new(),
+        };
+        let report = newton
+            .run(&mut prob, &pattern, &mut solver, &[0.0; 11])
+            .unwrap();
+        (report, prob, solver.n_factorizations())
+    };
+    let (full, p_full, f_full) = run(ConvergedTangent::Required);
+    let (plain, _, _) = run(ConvergedTangent::NotNeeded);
+    let (asm, p_asm, f_asm) = run(ConvergedTangent::Assembled);
+    let saved = p_asm
+        .hooks
+        .iter()
+        .filter(|&&f| f == FactorisedAt::PreviousIterate)
+        .count();
+    println!(
+        "tangents {} / {} (required / assembled); factorisations {f_full} / {f_asm}; {saved} \
+         steps handed the converged tangent, largest difference {:e}",
+        p_full.tangents,
+        p_asm.tangents,
+        p_asm.handed.iter().fold(0.0f64, |m, &d| m.max(d))
+    );
+    assert!(saved > 0);
+    assert_eq!(
+        asm.u, plain.u,
+        "the same accepted iterates as residual-first"
+    );
+    assert_eq!(asm.u, full.u);
+    assert_eq!(
+        p_asm.tangents, p_full.tangents,
+        "no evaluation twice, none saved"
+    );
+    assert_eq!(
+        f_full - f_asm,
+        saved,
+        "one factorisation saved per such step"
+    );
+    assert_eq!(p_asm.handed.len(), saved, "the values with every such step");
+    // The same evaluation and elimination: bit for bit.
+    assert!(p_asm.handed.iter().all(|&d| d == 0.0), "{:?}", p_asm.handed);
+    assert!(p_full.handed.is_empty());
 }
 
 /// A spring chain whose residual carries deterministic noise of size `noise` (a stand-in for
@@ -1622,7 +1708,7 @@ fn krylov_updates_near_convergence_keep_the_newton_iterates() {
 #[test]
 fn held_factorisation_updates_keep_the_newton_iterates_across_steps() {
     // The softening chain with direct updates and with every update by GMRES preconditioned by
-    // the held factorisation (`KrylovHeld`), for both converged-tangent policies: the same
+    // the held factorisation (`KrylovHeld`), for the three converged-tangent policies: the same
     // iteration counts and converged unknowns to far below the tolerance, fewer
     // factorisations, factors reused across steps (GMRES at the first iteration of a step),
     // and with the converged tangent required, the solver holds it at every hook.
@@ -1636,6 +1722,7 @@ fn held_factorisation_updates_keep_the_newton_iterates_across_steps() {
             policy,
             tangents: 0,
             hooks: Vec::new(),
+            handed: Vec::new(),
         };
         let report = newton
             .run(&mut prob, &pattern, &mut solver, &[0.0; 11])
@@ -1647,7 +1734,11 @@ fn held_factorisation_updates_keep_the_newton_iterates_across_steps() {
             .map(|s| s.iterations)
             .collect::<Vec<_>>()
     };
-    for policy in [ConvergedTangent::Required, ConvergedTangent::NotNeeded] {
+    for policy in [
+        ConvergedTangent::Required,
+        ConvergedTangent::Assembled,
+        ConvergedTangent::NotNeeded,
+    ] {
         let (direct, f_direct, _) = run(LinearUpdates::Direct, policy);
         let (held, f_held, hooks) = run(LinearUpdates::KrylovHeld, policy);
         let used: usize = held.converged_steps().map(|s| s.krylov.len()).sum();
