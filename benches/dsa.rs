@@ -125,7 +125,7 @@ impl Setup {
         let r = r.unwrap();
         let t = r.timing;
         eprintln!(
-            "continuum ({:?}, {:?}) stages: rhs {:.3} s, solve {:.3} s ({} Arnoldi steps, {} \
+            "continuum ({:?}, {:?}) stages: rhs {:.3} s, solve {:.3} s ({} preconditioned iterations, {} \
              steps factorised by the DSA), update {:.3} s, record {:.3} s; converged tangents \
              on the DSA's thread {:.3} s; analysis {:.3} s of the run's {:.3} s",
             r.schedule,

@@ -463,8 +463,8 @@ fn dsa(
             t.solve,
             if t.krylov_iterations + t.krylov_fallbacks > 0 {
                 format!(
-                    " ({} Arnoldi steps on the converged tangents; {} step(s) factorised for \
-                     the DSA where GMRES gave up)",
+                    " ({} preconditioned iterations on the converged tangents; {} step(s) \
+                     factorised for the DSA where GMRES gave up)",
                     t.krylov_iterations, t.krylov_fallbacks
                 )
             } else {

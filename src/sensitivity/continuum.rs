@@ -282,8 +282,8 @@ pub struct ContinuumTiming {
     /// replayed commits ([`ContinuumSchedule::Concurrent`]; 0 in the synchronous hook, whose
     /// tangent the analysis' driver factorises). Not part of the DSA's own time.
     pub tangent: f64,
-    /// Arnoldi steps of the sensitivity solves ([`SensitivitySolve::Krylov`]), over all
-    /// steps and right-hand sides.
+    /// Preconditioned iterations of the sensitivity solves ([`SensitivitySolve::Krylov`]:
+    /// refinement steps and Arnoldi steps), over all steps and right-hand sides.
     pub krylov_iterations: usize,
     /// Steps whose sensitivity systems GMRES did not solve within its budget
     /// ([`SensitivitySolve::Krylov`]): the DSA factorised the tangent itself there.
@@ -305,11 +305,14 @@ pub enum SensitivitySolve {
     /// With the tangent factorised at the converged state: the driver factorises it once more
     /// per step (`ConvergedTangent::Required`), and one multi-right-hand-side solve follows.
     Factorised,
-    /// With GMRES on the converged tangent, which the driver assembles where it tests
+    /// Iteratively on the converged tangent, which the driver assembles where it tests
     /// convergence but does not factorise (`ConvergedTangent::Assembled`), preconditioned by
     /// the factorisation the driver holds (an earlier iterate's), to a residual of
-    /// [`KRYLOV_RTOL`] of each right-hand side. A step whose systems GMRES does not solve
-    /// within [`KRYLOV_MAX_ITERATIONS`] is solved with a factorisation of the DSA's own.
+    /// [`KRYLOV_RTOL`] of each right-hand side: the preconditioner's solution of all
+    /// right-hand sides and one step of iterative refinement, each one pass over the factors,
+    /// then GMRES on the columns still above the tolerance. A step whose systems GMRES does
+    /// not solve within [`KRYLOV_MAX_ITERATIONS`] is solved with a factorisation of the
+    /// DSA's own.
     #[default]
     Krylov,
 }
@@ -558,44 +561,79 @@ impl ContinuumDsa {
             } => (pattern, values, preconditioner),
         };
         let n = pattern.n_dofs();
-        // The preconditioner's solutions of all columns in one pass (the factors are read once),
-        // then per column the residual of the converged tangent and, where it is above the
-        // tolerance, GMRES on the correction.
-        let mut x0 = b[..n * nv].to_vec();
-        preconditioner
-            .solve_columns_in_place(&mut x0, nv)
-            .map_err(fatal)?;
-        let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
-        let (mut r, mut scale, mut d) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-        let mut solved = vec![false; nv];
-        for (v, col) in b.chunks_mut(n).enumerate().take(nv) {
-            let x = &mut x0[v * n..(v + 1) * n];
-            // r = b − K x.
-            csc_mul(pattern, values, x, &mut r);
-            for (ri, bi) in r.iter_mut().zip(col.iter()) {
-                *ri = bi - *ri;
+        let norm = |a: &[f64]| a.iter().map(|t| t * t).sum::<f64>().sqrt();
+        // The residuals `b − K x` of the columns `cols` of `x` into `r` (one n-block each), and
+        // the columns whose residual is above KRYLOV_RTOL of their right-hand side.
+        let residuals = |x: &[f64], b: &[f64], cols: &[usize], r: &mut Vec<f64>| {
+            r.resize(n * cols.len(), 0.0);
+            let mut above = Vec::new();
+            for (k, &v) in cols.iter().enumerate() {
+                let rk = &mut r[k * n..(k + 1) * n];
+                let (xv, bv) = (&x[v * n..(v + 1) * n], &b[v * n..(v + 1) * n]);
+                csc_mul(pattern, values, xv, rk);
+                for (ri, bi) in rk.iter_mut().zip(bv) {
+                    *ri = bi - *ri;
+                }
+                if norm(rk) > KRYLOV_RTOL * norm(bv) {
+                    above.push(v);
+                }
             }
-            let norm = |a: &[f64]| a.iter().map(|t| t * t).sum::<f64>().sqrt();
-            let mut tol = KRYLOV_RTOL * norm(col);
-            if norm(&r) > tol {
-                // Not below KRYLOV_RTOL of the right-hand side: nor need it be below the
-                // round-off of its own evaluation, `ε |K| |x|` (the size of the terms that
-                // cancel in r), which a backward-stable solve leaves too.
+            above
+        };
+        // The preconditioner's solutions of all columns in one pass (the factors are read
+        // once), then one step of iterative refinement of the columns whose residual with the
+        // converged tangent is above the tolerance, again in one pass.
+        let mut x = b[..n * nv].to_vec();
+        preconditioner
+            .solve_columns_in_place(&mut x, nv)
+            .map_err(fatal)?;
+        let all: Vec<usize> = (0..nv).collect();
+        let mut r = Vec::new();
+        let mut pending = residuals(&x, b, &all, &mut r);
+        if !pending.is_empty() {
+            let mut d = Vec::with_capacity(n * pending.len());
+            for &v in &pending {
+                let k = all.iter().position(|&c| c == v).expect("a column");
+                d.extend_from_slice(&r[k * n..(k + 1) * n]);
+            }
+            preconditioner
+                .solve_columns_in_place(&mut d, pending.len())
+                .map_err(fatal)?;
+            for (k, &v) in pending.iter().enumerate() {
+                for (a, c) in x[v * n..(v + 1) * n].iter_mut().zip(&d[k * n..(k + 1) * n]) {
+                    *a += c;
+                }
+            }
+            self.timing.krylov_iterations += pending.len();
+            let cols = pending.clone();
+            let still = residuals(&x, b, &cols, &mut r);
+            // GMRES on the columns still above it, to KRYLOV_RTOL of the right-hand side or
+            // the round-off of the residual's own evaluation, `ε |K| |x|` (the size of the
+            // terms that cancel in r), which a backward-stable solve leaves too.
+            let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
+            let (mut scale, mut dv) = (vec![0.0; n], vec![0.0; n]);
+            pending.clear();
+            for &v in &still {
+                let k = cols.iter().position(|&c| c == v).expect("a column");
+                let rk = &r[k * n..(k + 1) * n];
+                let xv = &mut x[v * n..(v + 1) * n];
                 scale.fill(0.0);
                 for j in 0..n {
                     for p in cp[j]..cp[j + 1] {
-                        scale[ri[p]] += (values[p] * x[j]).abs();
+                        scale[ri[p]] += (values[p] * xv[j]).abs();
                     }
                 }
-                tol = tol.max(16.0 * f64::EPSILON * norm(&scale));
-            }
-            if norm(&r) > tol {
+                let tol = (KRYLOV_RTOL * norm(&b[v * n..(v + 1) * n]))
+                    .max(16.0 * f64::EPSILON * norm(&scale));
+                if norm(rk) <= tol {
+                    continue;
+                }
                 let info = gmres_to(
                     pattern,
                     values,
                     preconditioner,
-                    &r,
-                    &mut d,
+                    rk,
+                    &mut dv,
                     tol,
                     KRYLOV_MAX_ITERATIONS,
                     false,
@@ -604,15 +642,22 @@ impl ContinuumDsa {
                 match info {
                     Some(info) => {
                         self.timing.krylov_iterations += info.iterations;
-                        for (a, c) in x.iter_mut().zip(&d) {
+                        for (a, c) in xv.iter_mut().zip(&dv) {
                             *a += c;
                         }
                     }
-                    None => break,
+                    None => pending.push(v),
                 }
             }
-            col.copy_from_slice(x);
-            solved[v] = true;
+        }
+        let mut solved = vec![true; nv];
+        for &v in &pending {
+            solved[v] = false;
+        }
+        for (v, col) in b.chunks_mut(n).enumerate().take(nv) {
+            if solved[v] {
+                col.copy_from_slice(&x[v * n..(v + 1) * n]);
+            }
         }
         if solved.iter().all(|&s| s) {
             return Ok(());
