@@ -1105,6 +1105,40 @@ impl NonlinearProblem for Counting {
     }
 }
 
+/// The driver of the residual-first tests: default options, steps of 0.1.
+fn steps_of_a_tenth() -> NewtonSolver {
+    NewtonSolver {
+        options: NewtonOptions::default(),
+        stepping: LoadStepping {
+            initial_step: 0.1,
+            max_step: 0.1,
+            ..Default::default()
+        },
+    }
+}
+
+/// The softening chain run by `newton` under the converged-tangent `policy`: the report, the
+/// problem (its counts and what its hook saw) and the number of factorisations.
+fn run_counting(
+    policy: ConvergedTangent,
+    newton: &NewtonSolver,
+) -> (NewtonReport, Counting, usize) {
+    let chain = SpringChain::new(10, 0.05, 2.0, None);
+    let pattern = chain.pattern.clone();
+    let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+    let mut prob = Counting {
+        chain,
+        policy,
+        tangents: 0,
+        hooks: Vec::new(),
+        handed: Vec::new(),
+    };
+    let report = newton
+        .run(&mut prob, &pattern, &mut solver, &[0.0; 11])
+        .unwrap();
+    (report, prob, solver.n_factorizations())
+}
+
 #[test]
 fn residual_first_acceptance_saves_tangents_and_keeps_the_converged_states() {
     // The same softening chain twice: with the default (converged tangent required) every
@@ -1113,30 +1147,13 @@ fn residual_first_acceptance_saves_tangents_and_keeps_the_converged_states() {
     // Both must accept the same iterates (the same Newton sequence, so the same unknowns to
     // the bit), with fewer tangents in the second run.
     let run = |not_needed: bool| {
-        let chain = SpringChain::new(10, 0.05, 2.0, None);
-        let pattern = chain.pattern.clone();
-        let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
-        let newton = NewtonSolver {
-            options: NewtonOptions::default(),
-            stepping: LoadStepping {
-                initial_step: 0.1,
-                max_step: 0.1,
-                ..Default::default()
-            },
+        let policy = if not_needed {
+            ConvergedTangent::NotNeeded
+        } else {
+            ConvergedTangent::Required
         };
-        let mut prob = Counting {
-            chain,
-            policy: if not_needed {
-                ConvergedTangent::NotNeeded
-            } else {
-                ConvergedTangent::Required
-            },
-            tangents: 0,
-            hooks: Vec::new(),
-            handed: Vec::new(),
-        };
-        let report = newton.run(&mut prob, &pattern, &mut solver, &[0.0; 11]);
-        (report.unwrap(), prob.tangents, prob.hooks)
+        let (report, prob, _) = run_counting(policy, &steps_of_a_tenth());
+        (report, prob.tangents, prob.hooks)
     };
     let (full, t_full, h_full) = run(false);
     let (first, t_first, h_first) = run(true);
@@ -1176,33 +1193,10 @@ fn assembled_tangent_acceptance_hands_the_hook_the_converged_tangent() {
     // evaluates the tangent with the residual there: as many tangents as `Required`, and one
     // factorisation fewer per step accepted on the previous iterate's, whose hook receives the
     // converged tangent's values (equal to a fresh evaluation at the accepted unknowns).
-    let run = |policy: ConvergedTangent| {
-        let chain = SpringChain::new(10, 0.05, 2.0, None);
-        let pattern = chain.pattern.clone();
-        let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
-        let newton = NewtonSolver {
-            options: NewtonOptions::default(),
-            stepping: LoadStepping {
-                initial_step: 0.1,
-                max_step: 0.1,
-                ..Default::default()
-            },
-        };
-        let mut prob = Counting {
-            chain,
-            policy,
-            tangents: 0,
-            hooks: Vec::new(),
-            handed: Vec::new(),
-        };
-        let report = newton
-            .run(&mut prob, &pattern, &mut solver, &[0.0; 11])
-            .unwrap();
-        (report, prob, solver.n_factorizations())
-    };
-    let (full, p_full, f_full) = run(ConvergedTangent::Required);
-    let (plain, _, _) = run(ConvergedTangent::NotNeeded);
-    let (asm, p_asm, f_asm) = run(ConvergedTangent::Assembled);
+    let newton = steps_of_a_tenth();
+    let (full, p_full, f_full) = run_counting(ConvergedTangent::Required, &newton);
+    let (plain, _, _) = run_counting(ConvergedTangent::NotNeeded, &newton);
+    let (asm, p_asm, f_asm) = run_counting(ConvergedTangent::Assembled, &newton);
     let saved = p_asm
         .hooks
         .iter()
@@ -1713,21 +1707,8 @@ fn held_factorisation_updates_keep_the_newton_iterates_across_steps() {
     // factorisations, factors reused across steps (GMRES at the first iteration of a step),
     // and with the converged tangent required, the solver holds it at every hook.
     let run = |updates: LinearUpdates, policy: ConvergedTangent| {
-        let chain = SpringChain::new(10, 0.05, 2.0, None);
-        let pattern = chain.pattern.clone();
-        let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
-        let newton = chain_newton(updates);
-        let mut prob = Counting {
-            chain,
-            policy,
-            tangents: 0,
-            hooks: Vec::new(),
-            handed: Vec::new(),
-        };
-        let report = newton
-            .run(&mut prob, &pattern, &mut solver, &[0.0; 11])
-            .unwrap();
-        (report, solver.n_factorizations(), prob.hooks)
+        let (report, prob, factorisations) = run_counting(policy, &chain_newton(updates));
+        (report, factorisations, prob.hooks)
     };
     let its = |r: &NewtonReport| {
         r.converged_steps()
