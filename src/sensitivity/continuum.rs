@@ -298,8 +298,9 @@ pub struct ContinuumTiming {
 /// plain run per design variable was 3.80 / 3.90 % against 4.48 / 4.29 % on the 17 × 17 plastic
 /// hemisphere (`benches/dsa.rs`, medians of three pairs) and 1.69 / 1.51 % against 4.27 /
 /// 2.93 % on the same case at 33 × 33 (`shelldsa dsa --methods continuum`, single runs, which
-/// spread by about 1.5 points), where one factorisation costs far more than a few
-/// preconditioned iterations; on the bending case the two were within the pairs' spread.
+/// spread by about 1.5 points) and 0.94 % against 4.78 % at 65 × 65, where one factorisation
+/// costs far more than a few preconditioned iterations; on the bending case the two were
+/// within the pairs' spread.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum SensitivitySolve {
     /// With the tangent factorised at the converged state: the driver factorises it once more
