@@ -1367,22 +1367,19 @@ pub(super) fn run_concurrent(
     analysis: super::DsaAnalysis<'_>,
     on_step: &mut dyn FnMut(&ShellProblem, &ContinuumDsa),
 ) -> Result<ContinuumRun, SensitivityError> {
-    let super::DsaAnalysis {
-        problem,
-        surface,
-        variables,
-        monitors,
-        newton,
-        solver,
-    } = analysis;
     let t0 = Instant::now();
-    let pattern = problem.pattern().clone();
-    let method = Method::auto(&pattern);
-    let mut linear = LinearSolver::new(&pattern, method, solver)?;
-    let mut dsa = ContinuumDsa::new(&problem, surface, variables, monitors)?;
+    let (pattern, mut linear) = analysis.linear_solver()?;
+    let (_, replica_solver) = analysis.linear_solver()?;
+    let (problem, newton) = (analysis.problem, analysis.newton);
+    let mut dsa = ContinuumDsa::new(
+        &problem,
+        analysis.surface,
+        analysis.variables,
+        analysis.monitors,
+    )?;
     let mut replica = Replica {
         problem: problem.clone(),
-        solver: LinearSolver::new(&pattern, method, solver)?,
+        solver: replica_solver,
         r: vec![0.0; pattern.n_dofs()],
         values: vec![0.0; pattern.nnz()],
     };

@@ -1587,6 +1587,22 @@ pub struct DsaAnalysis<'a> {
     pub solver: crate::solver::SolverOptions,
 }
 
+impl DsaAnalysis<'_> {
+    /// The problem's sparsity pattern and a linear solver for it (the method for its size,
+    /// [`crate::solver::Method::auto`], with the analysis' options; symbolic analysis done).
+    pub(crate) fn linear_solver(
+        &self,
+    ) -> Result<
+        (crate::solver::SparsityPattern, crate::solver::LinearSolver),
+        crate::solver::SolverError,
+    > {
+        let pattern = self.problem.pattern().clone();
+        let method = crate::solver::Method::auto(&pattern);
+        let linear = crate::solver::LinearSolver::new(&pattern, method, self.solver)?;
+        Ok((pattern, linear))
+    }
+}
+
 /// Which derivative methods observe a hooked run ([`run_hooked`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct HookedMethods {
@@ -1681,21 +1697,10 @@ pub fn run_hooked(
         on_step: &mut dyn FnMut(HookedRecords<'_>),
     ) -> Result<Runs, dual::SensitivityError> {
         use crate::solver::observe::{Observed, StepObserver, Tapped};
-        let DsaAnalysis {
-            problem,
-            surface,
-            variables,
-            monitors,
-            newton,
-            solver,
-        } = analysis;
         let t0 = std::time::Instant::now();
-        let pattern = problem.pattern().clone();
-        let mut linear = crate::solver::LinearSolver::new(
-            &pattern,
-            crate::solver::Method::auto(&pattern),
-            solver,
-        )?;
+        let (pattern, mut linear) = analysis.linear_solver()?;
+        let (problem, surface, newton) = (analysis.problem, analysis.surface, analysis.newton);
+        let (variables, monitors) = (analysis.variables, analysis.monitors);
         let c = methods
             .continuum
             .then(|| {
