@@ -82,6 +82,7 @@ fn point_kernels(
             particles: &parts,
             material: &m.material,
             history: &m.history[k * nl + l],
+            director: m.director,
         };
         let res = point_residual(&inp, &xl).unwrap();
         for (a, b) in r.iter_mut().zip(&res.residual) {

@@ -18,7 +18,7 @@ use shelldsa::scalar::Real;
 use shelldsa::shell::model::commit_particle;
 use shelldsa::shell::model::ShellModel;
 use shelldsa::shell::point::{
-    point_residual, point_residual_with, point_tangent, ParticleState, PointHistory,
+    point_residual, point_residual_with, point_tangent, DirectorField, ParticleState, PointHistory,
     PointIncrement, PointInput, ShapeData, SurfacePoint,
 };
 use shelldsa::shell::point_sensitivity::{
@@ -75,6 +75,7 @@ struct Fixture {
     zeta: f64,
     thickness: f64,
     weight: f64,
+    director: DirectorField,
 }
 
 /// The seeds of one directional derivative.
@@ -181,6 +182,7 @@ impl Fixture {
             zeta: 0.6,
             thickness: 0.2,
             weight: 0.37,
+            director: DirectorField::Interpolated,
         }
     }
 
@@ -194,6 +196,7 @@ impl Fixture {
             particles: &self.particles,
             material: &self.material,
             history: &self.history,
+            director: self.director,
         }
     }
 
@@ -349,6 +352,7 @@ impl Along<'_> {
             particles: &particles,
             material: &material,
             history: &history,
+            director: f.director,
         };
         point_residual(&inp, &dofs).unwrap()
     }
@@ -427,8 +431,9 @@ const GROUPS: [&str; 12] = [
     "all",
 ];
 
-fn three_way(plastic: bool) {
-    let f = Fixture::new(11, plastic);
+fn three_way(plastic: bool, director: DirectorField) {
+    let mut f = Fixture::new(11, plastic);
+    f.director = director;
     assert_eq!(
         f.plastic(),
         plastic,
@@ -485,12 +490,20 @@ fn three_way(plastic: bool) {
 
 #[test]
 fn point_residual_dot_three_ways_plastic_step() {
-    three_way(true);
+    three_way(true, DirectorField::Interpolated);
 }
 
 #[test]
 fn point_residual_dot_three_ways_elastic_step() {
-    three_way(false);
+    three_way(false, DirectorField::Interpolated);
+}
+
+/// The unit director's terms (its maps `N′`, `N″`, `N‴` in the seeds' sums and the rows) under
+/// the same tolerances: the same chain with a few more closed-form stages.
+#[test]
+fn point_residual_dot_three_ways_normalised_director() {
+    three_way(true, DirectorField::Normalised);
+    three_way(false, DirectorField::Normalised);
 }
 
 /// With only `Δq̇ = e_j` seeded, the residual derivative is column j of the consistent tangent
@@ -638,7 +651,7 @@ fn point_level_bad_sizes_are_named_errors() {
 /// (ε = 6e-3, above the yield strain σ0(1 − ν)/E ≈ 2.5e-3) with random rotations of 0.01 rad.
 /// The returned increment of the next step stretches by `8e-3 (x − y)/R`: part of the layer
 /// points yield further, part unload elastically.
-fn committed_model() -> (ShellModel, Vec<f64>) {
+fn committed_model(director: DirectorField) -> (ShellModel, Vec<f64>) {
     let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let path = root.join("verification/hemisphere-plastic/case.toml");
     let text = std::fs::read_to_string(&path).unwrap();
@@ -661,6 +674,7 @@ fn committed_model() -> (ShellModel, Vec<f64>) {
     );
     // Beta = 0.5 so the back stress is non-zero.
     model.material.beta = 0.5;
+    model.director = director;
     let mut rng = Rng::new(21);
     // On the sphere centred at the origin x⁰ = R d⁰ (R = 10).
     let field = |m: &ShellModel, eps: f64, rot: f64, rng: &mut Rng| -> Vec<f64> {
@@ -951,7 +965,16 @@ fn model_dual_tol() -> Tolerance {
 /// bit-identical.
 #[test]
 fn internal_force_dots_match_dual_model() {
-    let (model, q) = committed_model();
+    internal_force_dots_match_dual(DirectorField::Interpolated);
+}
+
+#[test]
+fn internal_force_dots_match_dual_model_normalised_director() {
+    internal_force_dots_match_dual(DirectorField::Normalised);
+}
+
+fn internal_force_dots_match_dual(director: DirectorField) {
+    let (model, q) = committed_model(director);
     let mut rng = Rng::new(77);
     let (f0, h0) = model
         .internal_force_with(
@@ -1034,7 +1057,7 @@ fn internal_force_dots_match_dual_model() {
 /// Model-level input errors are typed and name the seed set and field.
 #[test]
 fn model_level_bad_seeds_are_named_errors() {
-    let (model, q) = committed_model();
+    let (model, q) = committed_model(DirectorField::Interpolated);
     let mut rng = Rng::new(3);
     let mut s = model_seeds(&model, "all", &q, &mut rng);
     s.history.pop();
@@ -1064,7 +1087,7 @@ fn model_level_bad_seeds_are_named_errors() {
 /// overwritten, the rest is replaced.
 #[test]
 fn recycled_storage_changes_nothing() {
-    let (model, q) = committed_model();
+    let (model, q) = committed_model(DirectorField::Interpolated);
     let mut rng = Rng::new(11);
     let owned: Vec<OwnedModelSeeds> = GROUPS
         .iter()
@@ -1123,5 +1146,58 @@ fn recycled_storage_changes_nothing() {
             updated(&got_lin, &got) == fresh_updated,
             "case {c}: history update"
         );
+    }
+}
+
+/// The increment-only history update from a kept linearisation
+/// (`add_increment_history_dots`) plus the fictitious loads' histories equals the trial
+/// histories of `internal_force_dots` seeded with `Δq̇` as well, for both director fields
+/// (linearity; the two compose the same stages in another order, so 1e-10 relative to each
+/// block's largest entry, the model-level dual tolerance).
+#[test]
+fn linearised_history_update_equals_full_dots() {
+    for director in [DirectorField::Interpolated, DirectorField::Normalised] {
+        let (model, q) = committed_model(director);
+        let mut rng = Rng::new(13);
+        let owned: Vec<OwnedModelSeeds> = GROUPS
+            .iter()
+            .map(|g| model_seeds(&model, g, &q, &mut rng))
+            .collect();
+        let full: Vec<ModelSeeds> = owned.iter().map(|s| s.view()).collect();
+        let zero_dofs = vec![0.0; q.len()];
+        let fictitious: Vec<ModelSeeds> = owned
+            .iter()
+            .map(|s| ModelSeeds {
+                dofs: &zero_dofs,
+                ..s.view()
+            })
+            .collect();
+        let reference = model.internal_force_dots(&q, &full).unwrap();
+        let (dots, lin) = model
+            .internal_force_dots_linearised(&q, &fictitious)
+            .unwrap();
+        let dofs_dot: Vec<&[f64]> = owned.iter().map(|s| &s.dofs[..]).collect();
+        let mut h: Vec<_> = dots.iter().map(|d| d.1.clone()).collect();
+        model
+            .add_increment_history_dots(&lin, &dofs_dot, &mut h)
+            .unwrap();
+        for ((group, r), got) in GROUPS.iter().zip(&reference).zip(&h) {
+            for ((name, a), (_, b)) in model_blocks(&r.0, got).iter().zip(model_blocks(&r.0, &r.1))
+            {
+                if *name == "force" {
+                    continue;
+                }
+                let (a, b) = (
+                    DMatrix::from_column_slice(a.len(), 1, a),
+                    DMatrix::from_column_slice(b.len(), 1, &b),
+                );
+                let c =
+                    compare_matrices("update vs full", &a, &b, model_dual_tol(), &[], &|i, _| {
+                        (format!("{name}[{i}]"), group.to_string())
+                    });
+                println!("{director:?} {group:>12} {name:>20}: {:.2e}", c.max_error());
+                assert!(c.passed(), "{director:?} {group} {name}: {c}");
+            }
+        }
     }
 }

@@ -330,6 +330,7 @@ fn errors(model: &ShellModel, problem: &Problem, q: &[f64]) -> (f64, f64) {
                 particles: &parts,
                 material: &md,
                 history: &h,
+                director: model.director,
             };
             let res = point_residual(&inp, &x).unwrap();
             let (_, se) = exact_state(&problem.surface, &problem.field, p.uv, zeta, t, m);

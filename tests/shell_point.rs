@@ -9,7 +9,8 @@ use shelldsa::material::{return_map, MaterialParams, MaterialState, Vec5};
 use shelldsa::meshfree::XorShift64;
 use shelldsa::scalar::Real;
 use shelldsa::shell::point::{
-    point_residual, point_tangent, ParticleState, PointHistory, PointInput, ShapeData, SurfacePoint,
+    point_residual, point_tangent, DirectorField, ParticleState, PointHistory, PointInput,
+    ShapeData, SurfacePoint,
 };
 use shelldsa::verification::{check, CheckOptions, Differentiable, StepSize, Tolerance};
 
@@ -112,6 +113,7 @@ impl Fixture {
             particles: &self.particles,
             material: &self.material,
             history: &self.history,
+            director: DirectorField::Interpolated,
         }
     }
 }
@@ -135,6 +137,7 @@ impl Differentiable for Fixture {
             particles: &ps,
             material: &m,
             history: &h,
+            director: DirectorField::Interpolated,
         };
         point_residual(&inp, x).unwrap().residual
     }

@@ -14,7 +14,7 @@ use shelldsa::meshfree::{regular_grid, Basis, ParamBox};
 use shelldsa::scalar::Real;
 use shelldsa::shell::model::{Discretisation, ShellModel};
 use shelldsa::shell::point::{
-    point_residual, point_residual_with, point_tangent, ParticleState, PointHistory,
+    point_residual, point_residual_with, point_tangent, DirectorField, ParticleState, PointHistory,
     PointIncrement, PointInput, ShapeData, SurfacePoint,
 };
 use shelldsa::shell::tangent::{point_tangent_fast, ThicknessTangent};
@@ -46,6 +46,7 @@ struct Fixture {
     history: Vec<PointHistory<f64>>,
     thickness: f64,
     weight: f64,
+    director: DirectorField,
 }
 
 fn unit_perp(d: &Vector3<f64>) -> [Vector3<f64>; 2] {
@@ -126,6 +127,7 @@ impl Fixture {
             history,
             thickness: 0.2,
             weight: 0.37,
+            director: DirectorField::Interpolated,
         }
     }
 
@@ -140,6 +142,7 @@ impl Fixture {
             particles: &self.particles,
             material: &self.material,
             history: &self.history[l],
+            director: self.director,
         }
     }
 
@@ -183,6 +186,7 @@ impl Differentiable for Fixture {
                 particles: &ps,
                 material: &m,
                 history: &h,
+                director: self.director,
             };
             for (o, r) in out
                 .iter_mut()
@@ -354,6 +358,58 @@ fn plastic_layers_gauss_rule() {
     });
 }
 
+/// The normalised director field (no reference sweep): the fast tangent against the dual
+/// Jacobian, with the same tolerance as the interpolated field's (the added maps `N′`, `N″`,
+/// `N‴` are closed forms evaluated once per point: a few more rounded stages).
+fn check_normalised(f: &mut Fixture, x: &[f64], title: &str) {
+    f.director = DirectorField::Normalised;
+    let mut sum = ThicknessTangent::new(&f.shape, &f.particles, x).unwrap();
+    for l in 0..f.layers.len() {
+        let inp = f.input(l);
+        let res = point_residual(&inp, x).unwrap();
+        assert!(res.kinematics.unit_director.is_some());
+        sum.add_layer(&inp, &res).unwrap();
+    }
+    let mut fast = DMatrix::zeros(ND, ND);
+    sum.add_to(&mut fast).unwrap();
+    let dual = dual_jacobian(&*f, x);
+    let c = compare_matrices(title, &fast, &dual, dual_tol(), &[], &|i, j| {
+        (format!("r{i}"), format!("q{j}"))
+    });
+    println!("{c}");
+    assert!(c.passed(), "{c}");
+    // The field differs from the interpolated one here (rotated, unequal directors): the
+    // comparison is not vacuous.
+    f.director = DirectorField::Interpolated;
+    let (_, interpolated, _) = f.tangents(x);
+    let e = block_scaled_difference(&interpolated, &fast);
+    println!("{title}: normalised vs interpolated tangent, block-scaled difference {e:.3e}");
+    assert!(e > 1e-6, "{title}: {e:e}");
+}
+
+#[test]
+fn normalised_director_field_tangents_equal_the_dual_jacobian() {
+    let s = 0.6f64.sqrt();
+    for (seed, preload, sigma0, layers, u, a) in [
+        (21, 0.0, 2.43e5, lobatto5(), 1e-4, 1e-3),
+        (23, 0.0, 1e9, lobatto5(), 2e-4, 0.3),
+        (25, 3e-3, 2.43e5, lobatto5(), 1e-4, 0.01),
+        (33, 3e-3, 2.43e5, lobatto5(), 1e-3, 0.3),
+        (
+            27,
+            3e-3 / s,
+            2.43e5,
+            vec![(-s, 5.0 / 9.0), (0.0, 8.0 / 9.0), (s, 5.0 / 9.0)],
+            3e-3,
+            0.05,
+        ),
+    ] {
+        let mut f = Fixture::new(seed, preload, sigma0, layers);
+        let x = dofs(seed + 1, u, a);
+        check_normalised(&mut f, &x, &format!("normalised, seed {seed}"));
+    }
+}
+
 #[test]
 fn no_layer_adds_nothing() {
     let f = Fixture::new(29, 0.0, 2.43e5, lobatto5());
@@ -510,6 +566,7 @@ fn model_local_tangents_equal_the_reference_sweep() {
                 particles: &parts,
                 material: &m.material,
                 history: &m.history[k * nl + l],
+                director: m.director,
             };
             let res = point_residual(&inp, &xl).unwrap();
             reference += point_tangent(&inp, &xl, &res).unwrap();

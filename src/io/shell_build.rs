@@ -535,6 +535,7 @@ pub fn connect_with_contact(
     disc.symmetry = symmetry_planes(case)?;
     let mut model = ShellModel::new(&case.surface, disc, case.material)
         .map_err(|e| model_err("kernel.support", e))?;
+    model.director = case.integration.director;
     if case.integration.vci != VciOrder::Off {
         let rule =
             boundary_rule(&model, case.param_box).map_err(|e| model_err("integration.vci", e))?;

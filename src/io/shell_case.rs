@@ -120,6 +120,8 @@ struct IntegrationFile {
     director_stabilisation_floor: Option<f64>,
     #[serde(default)]
     director_stabilisation_support: Option<f64>,
+    #[serde(default)]
+    director: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -386,6 +388,8 @@ pub struct IntegrationSpec {
     /// stabilisation's filter (docs/stability.md §8); by default `kernel.support` (the model's
     /// own functions).
     pub director_stabilisation_support: f64,
+    /// The director field at the quadrature points (docs/stability.md §9).
+    pub director: crate::shell::point::DirectorField,
 }
 
 /// A displacement or rotation component of a particle's 5 DOFs.
@@ -1392,6 +1396,17 @@ impl Checker<'_> {
                 ))
             }
         };
+        let director = match i.director.as_deref() {
+            None | Some("interpolated") => crate::shell::point::DirectorField::Interpolated,
+            Some("normalised") => crate::shell::point::DirectorField::Normalised,
+            Some(other) => {
+                return Err(self.err(
+                    "integration.director",
+                    format!("{other:?}"),
+                    "\"interpolated\" or \"normalised\" (default \"interpolated\")",
+                ))
+            }
+        };
         let integration = IntegrationSpec {
             cells,
             gauss,
@@ -1401,6 +1416,7 @@ impl Checker<'_> {
             director_stabilisation_strength,
             director_stabilisation_floor,
             director_stabilisation_support,
+            director,
         };
 
         let material = material_from_spec(&f.material, self.path)?;

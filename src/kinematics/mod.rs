@@ -38,6 +38,7 @@ mod frames;
 mod hughes_winget;
 mod midstep;
 pub mod rotation;
+pub mod unit_director;
 mod voigt;
 
 pub use frames::{

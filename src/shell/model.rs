@@ -13,8 +13,8 @@
 //! results.
 
 use super::point::{
-    point_residual_with, ParticleState, PointHistory, PointIncrement, PointInput, ShapeData,
-    SurfacePoint, DOFS_PER_PARTICLE,
+    point_residual_with, DirectorField, ParticleState, PointHistory, PointIncrement, PointInput,
+    ShapeData, SurfacePoint, DOFS_PER_PARTICLE,
 };
 use super::symmetry::{SymmetryLayout, SymmetryPlane};
 use super::tangent::{CellSlot, ThicknessTangent};
@@ -147,6 +147,8 @@ pub struct ShellModel {
     pub symmetry: SymmetryLayout,
     /// Parameter domain `[[u0, u1], [v0, v1]]` of the surface.
     pub domain: [[f64; 2]; 2],
+    /// The director field at the quadrature points.
+    pub director: DirectorField,
 }
 
 /// The DOF map of a shape-function particle: `x_j = T_j q_source`, `T_j = diag(Q, det I₂)`.
@@ -330,6 +332,7 @@ impl ShellModel {
             shape_functions: sf,
             symmetry: layout,
             domain,
+            director: DirectorField::default(),
         })
     }
 
@@ -815,6 +818,7 @@ impl ShellModel {
             particles,
             material: &self.material,
             history: &self.history[k * self.thickness_rule.len() + l],
+            director: self.director,
         }
     }
 
@@ -1048,6 +1052,7 @@ impl ShellModel {
                         particles: &parts,
                         material,
                         history: &history[k * nl + l],
+                        director: self.director,
                     };
                     let res = point_residual_with(&inp, &inc)?;
                     for (r, v) in residual.iter_mut().zip(&res.residual) {

@@ -29,6 +29,17 @@ type V3<T> = Vector3<T>;
 /// Degrees of freedom per particle: 3 translations, 2 director rotations.
 pub const DOFS_PER_PARTICLE: usize = 5;
 
+/// How the director at a quadrature point follows from the particles' directors.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum DirectorField {
+    /// The RK interpolant `d = n⁰ + Σ Ψ_I (d_I − d_I⁰)`, whose length may differ from 1.
+    #[default]
+    Interpolated,
+    /// The interpolant normalised at the point, `d = r/|r|`
+    /// ([`crate::kinematics::unit_director`], docs/stability.md §9).
+    Normalised,
+}
+
 /// Initial (CAD) geometry at an in-plane quadrature point: position derivatives and the unit
 /// normal with its derivatives. Generic: a shape design variable enters here.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -176,6 +187,8 @@ pub struct PointInput<'a, T> {
     pub material: &'a MaterialParams<T>,
     /// Committed history at the point.
     pub history: &'a PointHistory<T>,
+    /// The director field at the point.
+    pub director: DirectorField,
 }
 
 /// Intermediate kinematics of a point evaluation, kept for the tangent (and the DSA), so that
@@ -196,6 +209,20 @@ pub struct PointKinematics<T> {
     pub sigma_g: M3<T>,
     /// `P = w det(J) σᵍ J⁻ᵀ`.
     pub p: M3<T>,
+    /// With [`DirectorField::Normalised`]: the end-of-step unit director at the point.
+    pub unit_director: Option<UnitDirector<T>>,
+}
+
+/// The end-of-step unit director at a point and the interpolant it normalises: what the
+/// virtual director fields and the tangent need (`N′`, `N″` at `r₁`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UnitDirector<T> {
+    /// `d₁ = r₁/|r₁|`.
+    pub d: V3<T>,
+    /// `|r₁|`.
+    pub l: T,
+    /// `r₁,α`.
+    pub r_a: [V3<T>; 2],
 }
 
 /// Result of a point evaluation.
@@ -228,6 +255,65 @@ fn step_start_jacobian<T: Real>(inp: &PointInput<T>) -> M3<T> {
     let half_t = inp.thickness * 0.5;
     let z = half_t * inp.zeta;
     M3::from_columns(&[xa[0] + da[0] * z, xa[1] + da[1] * z, d * half_t])
+}
+
+/// The interpolant of the directors at the point, `r = n⁰ + Σ Ψ_I (d_I − d_I⁰)`, with its
+/// ξ-derivatives, and the increment's `δ = Σ Ψ_I Δd_I`, `δ,α = Σ Ψ_I,α Δd_I`.
+#[allow(clippy::type_complexity)]
+fn interpolated_directors<T: Real>(
+    inp: &PointInput<T>,
+    dd: &[V3<T>],
+) -> (V3<T>, [V3<T>; 2], V3<T>, [V3<T>; 2]) {
+    let s = inp.surface;
+    let (mut r, mut r_a) = (s.n, s.n_a);
+    let (mut delta, mut delta_a) = (V3::zeros(), [V3::zeros(), V3::zeros()]);
+    for ((sh, p), d) in inp.shape.iter().zip(inp.particles).zip(dd) {
+        let v = p.d - p.d0;
+        r += v * T::cst(sh.psi);
+        delta += *d * T::cst(sh.psi);
+        for a in 0..2 {
+            r_a[a] += v * T::cst(sh.dpsi[a]);
+            delta_a[a] += *d * T::cst(sh.dpsi[a]);
+        }
+    }
+    (r, r_a, delta, delta_a)
+}
+
+/// `Jⁿ` and `G` with the unit director ([`DirectorField::Normalised`]):
+/// `Jⁿ = [x̄,α + z dₙ,α | t/2 dₙ]`, `G = [Σ Ψ_I,α Δū_I + z (d₁,α − dₙ,α) | t/2 (d₁ − dₙ)]`.
+fn unit_director_jacobians<T: Real>(
+    inp: &PointInput<T>,
+    du: &[V3<T>],
+    dd: &[V3<T>],
+) -> (M3<T>, M3<T>, UnitDirector<T>) {
+    let half_t = inp.thickness * 0.5;
+    let z = half_t * inp.zeta;
+    let mut xa = inp.surface.x_a;
+    let mut ga = [V3::zeros(), V3::zeros()];
+    for ((sh, p), u) in inp.shape.iter().zip(inp.particles).zip(du) {
+        for a in 0..2 {
+            xa[a] += p.u * T::cst(sh.dpsi[a]);
+            ga[a] += *u * T::cst(sh.dpsi[a]);
+        }
+    }
+    let (r, r_a, delta, delta_a) = interpolated_directors(inp, dd);
+    let st = crate::kinematics::unit_director::step_change(&r, &r_a, &delta, &delta_a);
+    let jn = M3::from_columns(&[
+        xa[0] + st.dn_a[0] * z,
+        xa[1] + st.dn_a[1] * z,
+        st.dn * half_t,
+    ]);
+    let g = M3::from_columns(&[
+        ga[0] + st.dd_a[0] * z,
+        ga[1] + st.dd_a[1] * z,
+        st.dd * half_t,
+    ]);
+    let unit = UnitDirector {
+        d: st.d1,
+        l: st.l1,
+        r_a: st.r1_a,
+    };
+    (jn, g, unit)
 }
 
 /// Gradient of the increment `G = ∂Δz/∂(ξ, ζ)` from per-particle `(Δū_I, Δd_I)`.
@@ -336,8 +422,17 @@ pub fn point_residual_with<T: Real>(
             return Err(ShellError::Dimension { expected: n, got });
         }
     }
-    let jn = step_start_jacobian(inp);
-    let g = increment_gradient(inp, &incr.du, &incr.dd);
+    let (jn, g, unit_director) = match inp.director {
+        DirectorField::Interpolated => (
+            step_start_jacobian(inp),
+            increment_gradient(inp, &incr.du, &incr.dd),
+            None,
+        ),
+        DirectorField::Normalised => {
+            let (jn, g, unit) = unit_director_jacobians(inp, &incr.du, &incr.dd);
+            (jn, g, Some(unit))
+        }
+    };
     let (_, jn_inv) = invert(&jn, "Jⁿ (step-start configuration)")?;
     let h = g * jn_inv;
     let l = mid_step_gradient(&h)?;
@@ -357,10 +452,32 @@ pub fn point_residual_with<T: Real>(
     let half_t = inp.thickness * 0.5;
     let z = half_t * inp.zeta;
     let mut residual = Vec::with_capacity(DOFS_PER_PARTICLE * n);
-    for (sh, da) in inp.shape.iter().zip(&incr.d_alpha) {
-        let f = p.column(0) * T::cst(sh.dpsi_test[0]) + p.column(1) * T::cst(sh.dpsi_test[1]);
-        let m = f * z + p.column(2) * (half_t * sh.psi);
-        residual.extend_from_slice(&[f[0], f[1], f[2], da[0].dot(&m), da[1].dot(&m)]);
+    match &unit_director {
+        None => {
+            for (sh, da) in inp.shape.iter().zip(&incr.d_alpha) {
+                let f =
+                    p.column(0) * T::cst(sh.dpsi_test[0]) + p.column(1) * T::cst(sh.dpsi_test[1]);
+                let m = f * z + p.column(2) * (half_t * sh.psi);
+                residual.extend_from_slice(&[f[0], f[1], f[2], da[0].dot(&m), da[1].dot(&m)]);
+            }
+        }
+        Some(u) => {
+            // Virtual fields of the unit director: δd = N′ δr, δd,α = N′ δr,α + N″[δr, r,α]
+            // with δr = Ψ_I δd_I, δr,α = Ψ̃_I,α δd_I. So the moment m_I of the interpolant
+            // becomes N′ m_I + Ψ_I Σ_α H(z P:α) r,α (module `unit_director`).
+            let np = |y: V3<T>| (y - u.d * u.d.dot(&y)) / u.l;
+            let h_of = |y: V3<T>, b: V3<T>| {
+                let (yd, bd) = (y.dot(&u.d), b.dot(&u.d));
+                (u.d * (yd * bd * 3.0) - y * bd - u.d * y.dot(&b) - b * yd) / (u.l * u.l)
+            };
+            let geo = h_of(p.column(0) * z, u.r_a[0]) + h_of(p.column(1) * z, u.r_a[1]);
+            for (sh, da) in inp.shape.iter().zip(&incr.d_alpha) {
+                let f =
+                    p.column(0) * T::cst(sh.dpsi_test[0]) + p.column(1) * T::cst(sh.dpsi_test[1]);
+                let m = np(f * z + p.column(2) * (half_t * sh.psi)) + geo * T::cst(sh.psi);
+                residual.extend_from_slice(&[f[0], f[1], f[2], da[0].dot(&m), da[1].dot(&m)]);
+            }
+        }
     }
     Ok(PointResult {
         residual,
@@ -377,6 +494,7 @@ pub fn point_residual_with<T: Real>(
             det1,
             sigma_g,
             p,
+            unit_director,
         },
     })
 }
@@ -421,6 +539,13 @@ pub fn point_tangent(
             director_derivatives(&p.d, &p.e[0], &p.e[1], [q[3], q[4]])
         })
         .collect();
+    if inp.director != DirectorField::Interpolated {
+        return Err(ShellError::InvalidInput(
+            "point_tangent (the reference sweep) takes the interpolated director field; the \
+             normalised one's tangent is ThicknessTangent's"
+                .into(),
+        ));
+    }
     let PointKinematics {
         jn_inv,
         h,
@@ -429,6 +554,7 @@ pub fn point_tangent(
         det1,
         sigma_g,
         p,
+        ..
     } = res.kinematics;
     let q_n = inp.history.frame;
     let dep = consistent_tangent(inp.material, &res.return_map);

@@ -40,11 +40,12 @@
 
 use super::model::ShellModel;
 use super::point::{
-    ParticleState, PointHistory, PointIncrement, PointInput, PointKinematics, PointResult,
-    ShapeData, SurfacePoint, DOFS_PER_PARTICLE,
+    DirectorField, ParticleState, PointHistory, PointIncrement, PointInput, PointKinematics,
+    PointResult, ShapeData, SurfacePoint, DOFS_PER_PARTICLE,
 };
 use super::ShellError;
 use crate::kinematics::rotation::rodrigues_coefficient_derivatives;
+use crate::kinematics::unit_director::{n_prime, n_second, n_third, step_change, UnitDirectorStep};
 use crate::kinematics::{
     frame_update, global_stress, hughes_winget, local_strain_increment, mid_step_gradient,
     strain_to_vec5, stress_from_vec5, M3,
@@ -503,8 +504,148 @@ impl ValueSums {
                 det1,
                 sigma_g,
                 p,
+                unit_director: None,
             },
         })
+    }
+}
+
+/// The unit director's maps at one in-plane point ([`DirectorField::Normalised`], module
+/// [`crate::kinematics::unit_director`]): the step-start and end-of-step directors of the
+/// interpolants `rₙ` and `r₁ = rₙ + Σ Ψ_I Δd_I`, with `N′` and `H(r,α)` at both.
+struct UnitPoint {
+    step: UnitDirectorStep<f64>,
+    np_n: M3<f64>,
+    h_n: [M3<f64>; 2],
+    np_1: M3<f64>,
+    h_1: [M3<f64>; 2],
+    /// `N′₁ − N′ₙ` and `H₁(r,α) − Hₙ(r,α)`, formed without cancellation.
+    dnp: M3<f64>,
+    dh: [M3<f64>; 2],
+}
+
+impl UnitPoint {
+    /// From the value sums of the interpolant (`d = rₙ`, `d,α = rₙ,α`, `g_d3 = δ`,
+    /// `g_d = δ,α`).
+    fn new(raw: &ValueSums) -> Self {
+        let step = step_change(&raw.d, &raw.da, &raw.g_d3, &raw.g_d);
+        let ln = raw.d.norm();
+        let (dn, d1, l1) = (step.dn, step.d1, step.l1);
+        UnitPoint {
+            np_n: n_prime(&dn, ln),
+            h_n: [n_second(&dn, ln, &raw.da[0]), n_second(&dn, ln, &raw.da[1])],
+            np_1: n_prime(&d1, l1),
+            h_1: [
+                n_second(&d1, l1, &step.r1_a[0]),
+                n_second(&d1, l1, &step.r1_a[1]),
+            ],
+            dnp: step.n_prime_change(),
+            dh: [
+                step.n_second_change(0, &raw.da[0]),
+                step.n_second_change(1, &raw.da[1]),
+            ],
+            step,
+        }
+    }
+
+    /// The value sums of the unit director: `d = dₙ`, `d,α = dₙ,α`, `g_d3 = d₁ − dₙ`,
+    /// `g_d = d₁,α − dₙ,α`.
+    fn values(&self, raw: &ValueSums) -> ValueSums {
+        let st = &self.step;
+        SeedSums {
+            d: st.dn,
+            da: st.dn_a,
+            g_d3: st.dd,
+            g_d: st.dd_a,
+            ..*raw
+        }
+    }
+
+    /// The seed sums of the unit director from those of the interpolant:
+    /// `ḋ = N′ ṙ`, `ḋ,α = N′ ṙ,α + H(r,α) ṙ` at both ends of the step (`ṙ₁ = ṙₙ + δ̇`).
+    ///
+    /// The changes over the step are formed from the changes of the maps
+    /// ([`UnitDirectorStep::n_prime_change`], [`UnitDirectorStep::n_second_change`]):
+    /// `ḋ₁ − ḋₙ = N′₁ δ̇ + ΔN′ ṙₙ` and
+    /// `ḋ₁,α − ḋₙ,α = N′₁ δ̇,α + ΔN′ ṙₙ,α + H₁(r,α) δ̇ + ΔH(r,α) ṙₙ`, not as differences of
+    /// the two ends, whose cancellation would leave an absolute error of order ε |ṙₙ| in a
+    /// change of order |δ̇| (the small increments of an elastic step).
+    fn seeds(&self, raw: &SeedSums) -> SeedSums {
+        let dn_dot = self.np_n * raw.d;
+        let dn_a = [0, 1].map(|a| self.np_n * raw.da[a] + self.h_n[a] * raw.d);
+        let dnp = &self.dnp;
+        let g_d = [0, 1].map(|a| {
+            self.np_1 * raw.g_d[a] + dnp * raw.da[a] + self.h_1[a] * raw.g_d3 + self.dh[a] * raw.d
+        });
+        SeedSums {
+            d: dn_dot,
+            da: dn_a,
+            g_d3: self.np_1 * raw.g_d3 + dnp * raw.d,
+            g_d,
+            ..*raw
+        }
+    }
+
+    /// The rows' maps of the unit director for the layer sums `val` and, per seed set, the
+    /// interpolant's seed sums `raw[s]`, their stress sums `dots[s]` and `ṫ/2`.
+    fn rows(
+        &self,
+        val: &StressSums,
+        raw: &[SeedSums],
+        dots: &[StressSums],
+        half_t_dot: &[f64],
+    ) -> UnitRows {
+        let (d1, l1) = (self.step.d1, self.step.l1);
+        let r1_a = self.step.r1_a;
+        let y = [val.pz.column(0).into_owned(), val.pz.column(1).into_owned()];
+        let hy = [n_second(&d1, l1, &y[0]), n_second(&d1, l1, &y[1])];
+        let t_sum = n_third(&d1, l1, &y[0], &r1_a[0]) + n_third(&d1, l1, &y[1], &r1_a[1]);
+        let geo = self.h_1[0] * y[0] + self.h_1[1] * y[1];
+        let mut r1_dot = Vec::with_capacity(raw.len());
+        let mut geo_dot = Vec::with_capacity(raw.len());
+        for ((rs, dot), &htd) in raw.iter().zip(dots).zip(half_t_dot) {
+            let rd = rs.d + rs.g_d3;
+            let rad = [rs.da[0] + rs.g_d[0], rs.da[1] + rs.g_d[1]];
+            // ẏ_α = Σ (z Ṗ + ż P):α, ż = ζ ṫ/2.
+            let yd = |a: usize| dot.pz.column(a) + val.pzeta.column(a) * htd;
+            geo_dot.push(
+                t_sum * rd
+                    + self.h_1[0] * yd(0)
+                    + self.h_1[1] * yd(1)
+                    + hy[0] * rad[0]
+                    + hy[1] * rad[1],
+            );
+            r1_dot.push(rd);
+        }
+        UnitRows {
+            np: self.np_1,
+            d: d1,
+            l: l1,
+            geo,
+            r1_dot,
+            geo_dot,
+        }
+    }
+}
+
+/// What the residual rows' derivative needs of a unit director ([`UnitPoint::rows`]): with the
+/// interpolant's moment `m_I`, the row moment is `m̂_I = N′ m_I + Ψ_I g`,
+/// `g = Σ_α H(r,α) y_α`, `y_α = Σ z P:α`, and
+/// `m̂̇_I = N′ ṁ_I + H(m_I) ṙ + Ψ_I ġ`, `ġ = Σ_α [T(y_α, r,α) ṙ + H(r,α) ẏ_α + H(y_α) ṙ,α]`.
+struct UnitRows {
+    np: M3<f64>,
+    d: V3,
+    l: f64,
+    geo: V3,
+    r1_dot: Vec<V3>,
+    geo_dot: Vec<V3>,
+}
+
+impl UnitRows {
+    /// `H(y) b` without forming `H(y)`.
+    fn h_apply(&self, y: &V3, b: &V3) -> V3 {
+        let (yd, bd) = (y.dot(&self.d), b.dot(&self.d));
+        (self.d * (3.0 * yd * bd) - y * bd - self.d * y.dot(b) - b * yd) / (self.l * self.l)
     }
 }
 
@@ -773,6 +914,7 @@ fn add_rows_dot_all(
     half_t_dot: &[f64],
     val: &StressSums,
     dots: &[StressSums],
+    unit: Option<&UnitRows>,
     rows: &mut Vec<[f64; DOFS_PER_PARTICLE]>,
     mut emit: impl FnMut(usize, &[[f64; DOFS_PER_PARTICLE]]),
 ) {
@@ -792,6 +934,13 @@ fn add_rows_dot_all(
                 + mz * htd
                 + pd3 * (half_t * sh.psi)
                 + p3 * (htd * sh.psi);
+            let (m, m_dot) = match unit {
+                None => (m, m_dot),
+                Some(u) => (
+                    u.np * m + u.geo * sh.psi,
+                    u.np * m_dot + u.h_apply(&m, &u.r1_dot[s]) + u.geo_dot[s] * sh.psi,
+                ),
+            };
             *o = [
                 f_dot[0],
                 f_dot[1],
@@ -819,10 +968,15 @@ pub fn point_residual_dot(
 ) -> Result<PointDot, ShellError> {
     let n = inp.shape.len();
     check_point_sizes(inp, incr, incr_dot, res, seeds)?;
-    let values = ValueSums::of_values(inp.surface, inp.shape, inp.particles, incr);
-    let sums = SeedSums::new(inp.shape, seeds.surface, |i| {
+    let raw_values = ValueSums::of_values(inp.surface, inp.shape, inp.particles, incr);
+    let raw_sums = SeedSums::new(inp.shape, seeds.surface, |i| {
         (&seeds.particles[i], incr_dot.du[i], incr_dot.dd[i])
     });
+    let unit = (inp.director == DirectorField::Normalised).then(|| UnitPoint::new(&raw_values));
+    let (values, sums) = match &unit {
+        None => (raw_values, raw_sums),
+        Some(u) => (u.values(&raw_values), u.seeds(&raw_sums)),
+    };
     let layer = LayerData::new(inp, res);
     let mut dot = StressSums::zero();
     let history = layer.apply(
@@ -836,14 +990,24 @@ pub fn point_residual_dot(
     let mut val = StressSums::zero();
     val.add_value(&layer.p, layer.z, layer.zeta);
     let mut residual = vec![0.0; DOFS_PER_PARTICLE * n];
+    let half_t_dot = [seeds.thickness * 0.5];
+    let unit_rows = unit.as_ref().map(|u| {
+        u.rows(
+            &val,
+            std::slice::from_ref(&raw_sums),
+            std::slice::from_ref(&dot),
+            &half_t_dot,
+        )
+    });
     add_rows_dot_all(
         inp.shape,
         &incr.d_alpha,
         |_, i| incr_dot.d_alpha[i],
         layer.half_t,
-        &[seeds.thickness * 0.5],
+        &half_t_dot,
         &val,
         std::slice::from_ref(&dot),
+        unit_rows.as_ref(),
         &mut Vec::new(),
         |i, rows| {
             let at = DOFS_PER_PARTICLE * i;
@@ -910,6 +1074,10 @@ pub struct ModelSeeds<'a> {
     pub dofs: &'a [f64],
 }
 
+/// One in-plane point's kept data in [`ShellModel::internal_force_dots_linearised`]: its layers'
+/// [`LayerKeep`] and its unit director's end-of-step maps.
+type KeepSlot<'a> = (&'a mut [LayerKeep], &'a mut Option<[M3<f64>; 3]>);
+
 /// The number of fixed point chunks of [`ShellModel::internal_force_dots`] (a few per
 /// thread for load balance; each holds one force vector per seed set).
 const POINT_CHUNKS: usize = 32;
@@ -921,6 +1089,7 @@ struct Scratch {
     parts: Vec<ParticleState<f64>>,
     d_alpha: Vec<[V3; 2]>,
     sums: Vec<SeedSums>,
+    unit_sums: Vec<SeedSums>,
     dots: Vec<StressSums>,
 }
 
@@ -1162,8 +1331,19 @@ impl ShellModel {
         if keep_layers {
             layers.resize(n_hist, LayerKeep::default());
         }
-        let mut keep_slots: Vec<Option<&mut [LayerKeep]>> = if keep_layers {
-            layers.chunks_exact_mut(nl).map(Some).collect()
+        // Per point, the unit director's end-of-step maps `N′, H(r,α)` (normalised director
+        // field) for the increment-only history part.
+        let mut units: Vec<Option<[M3<f64>; 3]>> = if keep_layers {
+            vec![None; self.points.len()]
+        } else {
+            Vec::new()
+        };
+        let mut keep_slots: Vec<Option<KeepSlot<'_>>> = if keep_layers {
+            layers
+                .chunks_exact_mut(nl)
+                .zip(units.iter_mut())
+                .map(Some)
+                .collect()
         } else {
             (0..self.points.len()).map(|_| None).collect()
         };
@@ -1194,13 +1374,31 @@ impl ShellModel {
                     for (sh, &j) in p.shape.iter().zip(nb) {
                         values.add(sh, &per[j].row);
                     }
-                    let values = values.sums();
+                    let raw_values = values.sums();
                     FlatSums::fill_all(
                         &mut sc.sums,
                         &p.shape,
                         seeds.iter().map(|sd| sd.surface.map(|sp| &sp[k])),
                         |s, i| &per_dot[s * n_sf + nb[i]].row,
                     );
+                    let unit = (self.director == DirectorField::Normalised)
+                        .then(|| UnitPoint::new(&raw_values));
+                    let values = match &unit {
+                        None => raw_values,
+                        Some(u) => {
+                            sc.unit_sums.clear();
+                            sc.unit_sums.extend(sc.sums.iter().map(|r| u.seeds(r)));
+                            u.values(&raw_values)
+                        }
+                    };
+                    if let (Some(u), Some((_, slot))) = (&unit, kept.as_mut()) {
+                        **slot = Some([u.np_1, u.h_1[0], u.h_1[1]]);
+                    }
+                    let layer_sums = if unit.is_some() {
+                        &sc.unit_sums
+                    } else {
+                        &sc.sums
+                    };
                     sc.dots.clear();
                     sc.dots.resize(ns, StressSums::zero());
                     let mut val = StressSums::zero();
@@ -1208,14 +1406,14 @@ impl ShellModel {
                         let inp = self.layer_input(k, l, &sc.parts);
                         let res = values.layer(&inp)?;
                         let layer = LayerData::new(&inp, &res);
-                        if let Some(kept) = kept.as_deref_mut() {
+                        if let Some((kept, _)) = kept.as_mut() {
                             kept[l] = layer.keep;
                         }
                         val.add_value(&layer.p, layer.z, layer.zeta);
                         for (s, (sd, acc)) in seeds.iter().zip(sc.dots.iter_mut()).enumerate() {
                             hist[s][l] = layer.apply(
                                 &values,
-                                &sc.sums[s],
+                                &layer_sums[s],
                                 sd.thickness,
                                 &sd.material,
                                 &sd.history[k * nl + l],
@@ -1223,6 +1421,9 @@ impl ShellModel {
                             );
                         }
                     }
+                    let unit_rows = unit
+                        .as_ref()
+                        .map(|u| u.rows(&val, &sc.sums, &sc.dots, &half_t_dot));
                     add_rows_dot_all(
                         &p.shape,
                         &sc.d_alpha,
@@ -1231,6 +1432,7 @@ impl ShellModel {
                         &half_t_dot,
                         &val,
                         &sc.dots,
+                        unit_rows.as_ref(),
                         &mut sc.rows,
                         |i, rows| {
                             // Scattered at once (ShellModel::scatter_particle, the source's map
@@ -1277,6 +1479,7 @@ impl ShellModel {
         let lin = keep_layers.then(|| StepLinearisation {
             particles: per.into_iter().map(|v| (v.state, v.x, v.k)).collect(),
             layers,
+            units,
         });
         Ok((out, lin))
     }
@@ -1381,6 +1584,12 @@ impl ShellModel {
                         sums.g_d[a] += dd * sh.dpsi[a];
                     }
                     sums.g_d3 += dd * sh.psi;
+                }
+                if let Some(Some([np, h1, h2])) = lin.units.get(k) {
+                    // ḋ₁ = N′ δ̇, ḋ₁,α = N′ δ̇,α + H(r,α) δ̇ (ṙₙ = 0 for Δq̇ alone).
+                    let d3 = sums.g_d3;
+                    sums.g_d = [np * sums.g_d[0] + h1 * d3, np * sums.g_d[1] + h2 * d3];
+                    sums.g_d3 = np * d3;
                 }
                 for (l, (&(zeta, _), hl)) in
                     self.thickness_rule.iter().zip(h.iter_mut()).enumerate()
@@ -1495,6 +1704,9 @@ pub struct StepLinearisation {
     particles: Vec<(ParticleState<f64>, [f64; DOFS_PER_PARTICLE], Coefficients)>,
     /// Per layer point, point-major (as [`ShellModel::history`]).
     layers: Vec<LayerKeep>,
+    /// Per in-plane point of a normalised director field: `N′, H(r,₁), H(r,₂)` at the end of
+    /// the step (`None` for the interpolated field).
+    units: Vec<Option<[M3<f64>; 3]>>,
 }
 
 impl StepLinearisation {
@@ -1503,5 +1715,6 @@ impl StepLinearisation {
         self.particles.capacity()
             * std::mem::size_of::<(ParticleState<f64>, [f64; 5], Coefficients)>()
             + self.layers.capacity() * std::mem::size_of::<LayerKeep>()
+            + self.units.capacity() * std::mem::size_of::<Option<[M3<f64>; 3]>>()
     }
 }

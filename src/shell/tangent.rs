@@ -27,13 +27,16 @@
 //! `5nL` chain passes and `25n²L` row contractions.
 
 use super::point::{
-    ParticleState, PointInput, PointKinematics, PointResult, ShapeData, DOFS_PER_PARTICLE,
+    ParticleState, PointInput, PointKinematics, PointResult, ShapeData, UnitDirector,
+    DOFS_PER_PARTICLE,
 };
 use super::ShellError;
 use crate::kinematics::rotation::{director_derivatives, DirectorDerivatives};
+use crate::kinematics::unit_director::{n_prime, n_second, n_third};
 use crate::kinematics::{skew, strain_to_vec5, stress_from_vec5, sym, M3};
 use crate::material::consistent_tangent;
 use nalgebra::DMatrix;
+use nalgebra::Vector3;
 
 /// A 9×9 linear map on column-major flattened 3×3 tensors, stored by input:
 /// `map[k]` is the image of the `k`-th unit tensor (`k = 3 col + row`).
@@ -140,6 +143,8 @@ pub struct ThicknessTangent<'a> {
     moments: [LayerMap; 3],
     /// `Σ_ℓ P_ℓ`, `Σ_ℓ ζ_ℓ P_ℓ`.
     p_moments: [M3<f64>; 2],
+    /// The end-of-step unit director of a normalised director field (the same at every layer).
+    unit: Option<UnitDirector<f64>>,
 }
 
 impl<'a> ThicknessTangent<'a> {
@@ -178,6 +183,7 @@ impl<'a> ThicknessTangent<'a> {
             layers: 0,
             moments: [[[0.0; 9]; 9]; 3],
             p_moments: [M3::zeros(); 2],
+            unit: None,
         })
     }
 
@@ -203,6 +209,7 @@ impl<'a> ThicknessTangent<'a> {
             layers: 0,
             moments: [[[0.0; 9]; 9]; 3],
             p_moments: [M3::zeros(); 2],
+            unit: None,
         })
     }
 
@@ -257,6 +264,9 @@ impl<'a> ThicknessTangent<'a> {
                     *x += y * zk;
                 }
             }
+        }
+        if self.layers == 0 {
+            self.unit = res.kinematics.unit_director;
         }
         self.p_moments[0] += res.kinematics.p;
         self.p_moments[1] += res.kinematics.p * zeta;
@@ -352,6 +362,7 @@ impl<'a> ThicknessTangent<'a> {
         };
         let ht = self.half_t;
         let [m0, m1, m2] = &self.moments;
+        let unit = self.unit.map(|u| UnitMaps::new(&u, &self.p_moments, ht));
         ROW_IMAGES.with(|buf| {
             let mut x = buf.borrow_mut();
             x.clear();
@@ -385,6 +396,18 @@ impl<'a> ThicknessTangent<'a> {
                         };
                     }
                 }
+                if let Some(un) = &unit {
+                    // Rows of the unit director: u ↦ N′u on t/2 Ψ and t/2 Ψ̃,α, plus
+                    // t/2 Ψ H(r,α) u on the ζ-moment's column α (module docs).
+                    for (o, to) in t.iter_mut().enumerate() {
+                        let m = if o < 9 { &m1[o] } else { &m2[o - 9] };
+                        let b1 = Vector3::new(m[0], m[1], m[2]);
+                        let b2 = Vector3::new(m[3], m[4], m[5]);
+                        let v = un.np * Vector3::new(to[0], to[1], to[2])
+                            + (un.h[0] * b1 + un.h[1] * b2) * w2;
+                        *to = [v[0], v[1], v[2]];
+                    }
+                }
                 let mut u = dir.d_a;
                 if let Some((q, det)) = cs.image {
                     // Rows of Tᵀ K: translation row c is Σ_r Q[r, c] (row e_r), rotations × det.
@@ -407,6 +430,25 @@ impl<'a> ThicknessTangent<'a> {
                     }
                 }
             }
+            if let Some(un) = &unit {
+                // Columns of the unit director: the direction v enters as N′v on t/2 Ψ and
+                // t/2 Ψ,α and as t/2 Ψ H(r,α) v on the ζ-moment's column α, so each row's
+                // entries met by rotation columns are mapped once (N′, H symmetric).
+                for r in 0..nr {
+                    let at = |o: usize| {
+                        Vector3::new(x[o * nr + r], x[(o + 1) * nr + r], x[(o + 2) * nr + r])
+                    };
+                    let (x3, x1, x2) = (at(6), at(9), at(12));
+                    let y3 = un.np * x3 + un.h[0] * x1 + un.h[1] * x2;
+                    let y1 = un.np * x1;
+                    let y2 = un.np * x2;
+                    for (o, y) in [(6, y3), (9, y1), (12, y2)] {
+                        for i in 0..3 {
+                            x[(o + i) * nr + r] = y[i];
+                        }
+                    }
+                }
+            }
             add_columns(&x, nr, ht, self.shape, &self.dirs, slots, k);
         });
         // Change of the rotation virtual field: ∂²d_I/∂α_b∂α_γ · m_I,
@@ -419,6 +461,12 @@ impl<'a> ThicknessTangent<'a> {
                 + p1.column(1) * sh.dpsi_test[1]
                 + p0.column(2) * sh.psi)
                 * ht;
+            let m = match &unit {
+                None => m,
+                Some(un) => {
+                    un.np * m + (un.h[0] * p1.column(0) + un.h[1] * p1.column(1)) * (ht * sh.psi)
+                }
+            };
             let f = cs.image.map_or(1.0, |(_, det)| det * det);
             let r0 = DOFS_PER_PARTICLE * cs.slot + 3;
             for b in 0..2 {
@@ -427,7 +475,72 @@ impl<'a> ThicknessTangent<'a> {
                 }
             }
         }
+        if let Some(un) = &unit {
+            // The unit director couples every pair of rotations through N″ and N‴:
+            // K[(I, b), (J, γ)] += a_Ibᵀ [Ψ_I Ψ_J S + Σ_α (Ψ_I Ψ_J,α + Ψ̃_I,α Ψ_J) H(y_α)] v_Jγ,
+            // S = H(y₃) + Σ_α T(y_α, r,α), y₃ = t/2 (Σ P)_{:3}, y_α = t/2 (Σ ζP)_{:α}.
+            let n = self.shape.len();
+            let scaled = |i: usize| -> [Vector3<f64>; 2] {
+                let det = slot_of(i).image.map_or(1.0, |(_, det)| det);
+                self.dirs[i].d_a.map(|v| v * det)
+            };
+            // c_J = Ψ_J S v + Σ_α Ψ_J,α H(y_α) v; r_I = Σ_α Ψ̃_I,α H(y_α) a.
+            let cols: Vec<[Vector3<f64>; 2]> = (0..n)
+                .map(|j| {
+                    let sh = &self.shape[j];
+                    let m = un.s * sh.psi + un.hy[0] * sh.dpsi[0] + un.hy[1] * sh.dpsi[1];
+                    scaled(j).map(|v| m * v)
+                })
+                .collect();
+            let rows: Vec<[Vector3<f64>; 2]> = (0..n)
+                .map(|i| {
+                    let sh = &self.shape[i];
+                    let m = un.hy[0] * sh.dpsi_test[0] + un.hy[1] * sh.dpsi_test[1];
+                    scaled(i).map(|a| m * a)
+                })
+                .collect();
+            let dirs: Vec<[Vector3<f64>; 2]> = (0..n).map(scaled).collect();
+            for i in 0..n {
+                let r0 = DOFS_PER_PARTICLE * slot_of(i).slot + 3;
+                let psi_i = self.shape[i].psi;
+                for j in 0..n {
+                    let c0 = DOFS_PER_PARTICLE * slot_of(j).slot + 3;
+                    let psi_j = self.shape[j].psi;
+                    for b in 0..2 {
+                        for g in 0..2 {
+                            k[(c0 + g) * nr + r0 + b] += dirs[i][b].dot(&cols[j][g]) * psi_i
+                                + rows[i][b].dot(&dirs[j][g]) * psi_j;
+                        }
+                    }
+                }
+            }
+        }
         Ok(())
+    }
+}
+
+/// The maps of a normalised director field at one in-plane point (module
+/// [`crate::kinematics::unit_director`]): `N′`, `H(r,α)`, `H(y_α)` and `S`.
+struct UnitMaps {
+    np: M3<f64>,
+    h: [M3<f64>; 2],
+    hy: [M3<f64>; 2],
+    s: M3<f64>,
+}
+
+impl UnitMaps {
+    fn new(u: &UnitDirector<f64>, p: &[M3<f64>; 2], ht: f64) -> Self {
+        let (d, l) = (&u.d, u.l);
+        let y3: Vector3<f64> = p[0].column(2) * ht;
+        let y: [Vector3<f64>; 2] = [p[1].column(0) * ht, p[1].column(1) * ht];
+        UnitMaps {
+            np: n_prime(d, l),
+            h: [n_second(d, l, &u.r_a[0]), n_second(d, l, &u.r_a[1])],
+            hy: [n_second(d, l, &y[0]), n_second(d, l, &y[1])],
+            s: n_second(d, l, &y3)
+                + n_third(d, l, &y[0], &u.r_a[0])
+                + n_third(d, l, &y[1], &u.r_a[1]),
+        }
     }
 }
 
