@@ -34,6 +34,10 @@ use std::path::{Path, PathBuf};
 mod cli;
 use cli::cli;
 
+#[path = "common/dsa_checks.rs"]
+mod dsa_checks;
+use dsa_checks::assert_three_ways;
+
 #[path = "common/director_filter.rs"]
 mod director_filter;
 use director_filter::filter;
@@ -441,59 +445,5 @@ fn stabilised_hemisphere_three_ways_through_the_cli() {
         }
     }
 
-    let vars = a["variables"].as_array().unwrap();
-    assert_eq!(vars.len(), 6);
-    for v in vars {
-        let name = v["name"].as_str().unwrap();
-        let big = v["steps"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .flat_map(|s| s["monitors"].as_object().unwrap().values())
-            .map(|c| c["dual"].as_f64().unwrap().abs())
-            .fold(0.0, f64::max);
-        assert!(big > 0.0, "{name}");
-        let (mut worst_cd, mut worst_fd, mut compared) = (0.0f64, 0.0f64, 0);
-        for s in v["steps"].as_array().unwrap() {
-            for (label, c) in s["monitors"].as_object().unwrap() {
-                let dual = c["dual"].as_f64().unwrap();
-                let cont = c["continuum"].as_f64().unwrap();
-                if dual.abs() < 1e-6 * big {
-                    continue;
-                }
-                // Continuum = dual: 1e-8 relative on components with |ψ'| ≥ 1e-6 max|ψ'|.
-                let e = (cont / dual - 1.0).abs();
-                worst_cd = worst_cd.max(e);
-                assert!(
-                    e < 1e-8,
-                    "{name} step {} {label}: {cont} vs {dual}",
-                    s["step"]
-                );
-                if s["fd_flagged"][1].as_bool().unwrap() {
-                    continue;
-                }
-                // Central differences at h/τ = 1e-4 (as tests/dsa_cli.rs: truncation ~1e-8,
-                // re-run noise up to 1e-10 of the response over h/τ).
-                let fd = c["fd_central"][1].as_f64().unwrap();
-                let rel = (fd / dual - 1.0).abs();
-                worst_fd = worst_fd.max(rel);
-                assert!(
-                    rel < 1e-6,
-                    "{name} step {} {label}: fd {fd}, dual {dual}",
-                    s["step"]
-                );
-                compared += 1;
-            }
-        }
-        println!(
-            "{name:>6}: continuum − dual {worst_cd:.2e}, dual − central (h/τ 1e-4) {worst_fd:.2e} \
-             over {compared} components"
-        );
-        assert!(compared > 0, "{name}");
-        for f in v["taylor"]["per_step"].as_array().unwrap() {
-            if let Some(r) = f["rate"].as_f64() {
-                assert!((r - 2.0).abs() < 0.1, "{name} step {}: rate {r}", f["step"]);
-            }
-        }
-    }
+    assert_eq!(assert_three_ways(&a), 6);
 }

@@ -82,6 +82,7 @@ pub fn step_change<T: Real>(
         ln,
         inv_diff,
         inv2_diff,
+        delta_a: *delta_a,
     }
 }
 
@@ -110,6 +111,8 @@ pub struct UnitDirectorStep<T> {
     pub inv_diff: T,
     /// `1/ℓ₁² − 1/ℓₙ²`.
     pub inv2_diff: T,
+    /// `δ,α = r₁,α − rₙ,α` as given.
+    pub delta_a: [V3<T>; 2],
 }
 
 impl UnitDirectorStep<f64> {
@@ -128,7 +131,7 @@ impl UnitDirectorStep<f64> {
     pub fn n_second_change(&self, a: usize, rn_a: &V3<f64>) -> M3<f64> {
         let (dn, d1, dd) = (&self.dn, &self.d1, &self.dd);
         let (yn, y1) = (rn_a, &self.r1_a[a]);
-        let dy = y1 - yn;
+        let dy = self.delta_a[a];
         let (sn, ds) = (yn.dot(dn), dy.dot(d1) + yn.dot(dd));
         let id = M3::identity();
         let dn2 = dn * dn.transpose();

@@ -1,0 +1,70 @@
+//! The normalised director field (`integration.director = "normalised"`, docs/stability.md §9)
+//! through the case file and the command line: a bad value names the key; the reduced plastic
+//! hemisphere's derivatives three ways through `shelldsa dsa` (the kernels' and the model's
+//! checks: tests/unit_director.rs, tests/shell_tangent_fast.rs, tests/point_sensitivity.rs).
+
+use serde_json::Value;
+use shelldsa::io::shell_case::parse_shell_case;
+use shelldsa::shell::point::DirectorField;
+use std::path::{Path, PathBuf};
+
+#[path = "common/cli.rs"]
+mod cli;
+use cli::cli;
+
+#[path = "common/dsa_checks.rs"]
+mod dsa_checks;
+use dsa_checks::assert_three_ways;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The reduced plastic hemisphere (9 × 9, 14 steps to P = 35) with `lines` added to its
+/// `[integration]` table.
+fn hemisphere(lines: &str) -> String {
+    let t = std::fs::read_to_string(root().join("verification/hemisphere-plastic-dsa/ci.toml"))
+        .unwrap();
+    assert!(t.contains("[integration]\n"));
+    t.replacen("[integration]\n", &format!("[integration]\n{lines}\n"), 1)
+}
+
+#[test]
+fn the_key_selects_the_field_and_a_bad_value_is_named() {
+    let path = Path::new("case.toml");
+    let default = parse_shell_case(&hemisphere(""), path).unwrap();
+    assert_eq!(default.integration.director, DirectorField::Interpolated);
+    let n = parse_shell_case(&hemisphere("director = \"normalised\""), path).unwrap();
+    assert_eq!(n.integration.director, DirectorField::Normalised);
+    let e = parse_shell_case(&hemisphere("director = \"unit\""), path)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("integration.director") && e.contains("\"unit\"") && e.contains("normalised"),
+        "{e}"
+    );
+}
+
+/// `shelldsa dsa` on the reduced hemisphere with the normalised field, its four design
+/// variables (R, φ1 shape, t, σ0 after first yield in step 11): continuum = dual, dual =
+/// central differences of complete re-runs, Taylor rate 2.
+#[test]
+fn normalised_hemisphere_three_ways_through_the_cli() {
+    let dir = root().join("target/normalised-director-tests");
+    std::fs::create_dir_all(&dir).unwrap();
+    let case = dir.join("case.toml");
+    std::fs::write(&case, hemisphere("director = \"normalised\"")).unwrap();
+    let out = dir.join("out");
+    let code = cli(&[
+        "dsa",
+        case.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0);
+    let a: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("sensitivity.json")).unwrap())
+            .unwrap();
+    assert!(a["dual_state_mismatch"].as_f64().unwrap() < 1e-12);
+    assert_eq!(assert_three_ways(&a), 4);
+}
