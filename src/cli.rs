@@ -750,6 +750,21 @@ fn run_shell(con: &Console, c: &ShellCase, out: &Path, quiet: bool) -> i32 {
                 summary.wall_time_s,
                 out.display()
             );
+            if matches!(summary.status, RunStatus::Failed(_))
+                && c.integration.director == crate::shell::point::DirectorField::Interpolated
+                && c.integration.director_stabilisation == 0.0
+                && c.steps.arc_length.is_none()
+            {
+                say!(
+                    con,
+                    "note: under load control a run stops at a limit point, a bifurcation or where \
+                     a spurious mode loses its stiffness. With the interpolated director field \
+                     (the default) a director checkerboard can soften under compression until \
+                     it stops the run; integration.director = \"normalised\" keeps its \
+                     stiffness (docs/stability.md §9). A true limit point needs [steps] control \
+                     = \"arc-length\"."
+                );
+            }
             match summary.status {
                 RunStatus::Complete => EXIT_OK,
                 RunStatus::Failed(_) => EXIT_STOPPED,
