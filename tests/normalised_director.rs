@@ -68,3 +68,48 @@ fn normalised_hemisphere_three_ways_through_the_cli() {
     assert!(a["dual_state_mismatch"].as_f64().unwrap() < 1e-12);
     assert_eq!(assert_three_ways(&a), 4);
 }
+
+/// A run that stops under load control with the interpolated field and no stabilisation says
+/// that the normalised field exists (the semi-cylinder on 9 × 17 without its stabilisation stops
+/// at the checkerboard's false limit point at P/P_max = 0.12, docs/stability.md §2); with
+/// the stabilisation on it completes, and a completed run prints no such note.
+#[test]
+fn a_stopped_interpolated_run_points_to_the_normalised_field() {
+    let text = std::fs::read_to_string(root().join("verification/semi-cylinder/case.toml"))
+        .unwrap()
+        .replace("grid = [17, 33]", "grid = [9, 17]")
+        .replace("final_load = 1000.0", "final_load = 150.0")
+        .replace("plot = true", "plot = false");
+    let start = text.find("stops = [").unwrap();
+    let end = start + text[start..].find(']').unwrap() + 1;
+    let text = format!("{}stops = [50.0, 100.0]{}", &text[..start], &text[end..]);
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("director_stabilisation = "))
+        .unwrap()
+        .to_string();
+    let dir = root().join("target/normalised-director-note");
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = |name: &str, text: &str| {
+        let case = dir.join(format!("{name}.toml"));
+        std::fs::write(&case, text).unwrap();
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_shelldsa"))
+            .args(["run", case.to_str().unwrap(), "--out"])
+            .arg(dir.join(name))
+            .output()
+            .unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+        )
+    };
+    let (code, stdout) = run("stopped", &text.replace(&line, ""));
+    assert_eq!(code, Some(3), "{stdout}");
+    assert!(
+        stdout.contains("note: ") && stdout.contains("integration.director = \"normalised\""),
+        "{stdout}"
+    );
+    let (code, stdout) = run("complete", &text);
+    assert_eq!(code, Some(0), "{stdout}");
+    assert!(!stdout.contains("note: "), "{stdout}");
+}
