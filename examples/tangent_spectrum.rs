@@ -19,9 +19,11 @@
 //! particles' geometric director blocks at the committed state, `−Σ_I (m_I·d_I) |α_I|²`
 //! (`ShellModel::director_force_normals`), and the rest, and prints the largest and the median
 //! of `m_I·d_I` over the particles against the bending stiffness `E t³/(12(1 − ν²))` (the
-//! director filter's `κ` at ε = 1).
+//! director filter's `κ` at ε = 1). With `integration.director = "normalised"` the geometric
+//! terms couple the particles, so the split is not printed.
 use shelldsa::io::shell_build::build;
 use shelldsa::io::shell_case::{read_shell_case, CellLayout};
+use shelldsa::shell::point::DirectorField;
 use shelldsa::shell::problem::ShellProblem;
 use shelldsa::solver::newton::ConvergedStep;
 use shelldsa::solver::observe::{Observed, StepObserver};
@@ -218,12 +220,22 @@ impl StepObserver<&mut ShellProblem> for Probe {
             let max = sorted.last().copied().unwrap_or(0.0);
             let median = sorted[sorted.len() / 2];
             let positive = s.iter().filter(|x| **x > 0.0).count();
-            println!(
-                "  lowest mode: λ/k̄ {:+.3e} = geometric blocks {:+.3e} + rest {:+.3e}",
-                value / self.scale,
-                geo / self.scale,
-                (value - geo) / self.scale
-            );
+            if problem.model.director == DirectorField::Interpolated {
+                println!(
+                    "  lowest mode: λ/k̄ {:+.3e} = geometric blocks {:+.3e} + rest {:+.3e}",
+                    value / self.scale,
+                    geo / self.scale,
+                    (value - geo) / self.scale
+                );
+            } else {
+                // The normalised field's geometric terms couple the particles (N″, N‴): the
+                // per-particle blocks above are those of the interpolant only.
+                println!(
+                    "  lowest mode: λ/k̄ {:+.3e} (normalised director field: no split into \
+                     per-particle geometric blocks)",
+                    value / self.scale
+                );
+            }
             println!(
                 "  m·d: max {:+.3e}, median {:+.3e}, > 0 at {} of {} particles; κ(ε = 1) = {:.3e}, max/κ(ε = 1) = {:.3e}",
                 max,
