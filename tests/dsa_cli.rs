@@ -15,6 +15,10 @@ use std::path::{Path, PathBuf};
 mod cli;
 use cli::cli;
 
+#[path = "common/dsa_checks.rs"]
+mod dsa_checks;
+use dsa_checks::{assert_three_ways, largest_dual};
+
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
@@ -454,69 +458,7 @@ fn hemisphere_dual_against_fd_through_the_cli() {
         .collect();
     assert!(plastic[9] == 0 && plastic[10] > 0, "{plastic:?}");
 
-    for v in vars {
-        let name = v["name"].as_str().unwrap();
-        // The variable's largest |ψ'| over steps and monitors (for the 1e-6 cut-off of
-        // components that carry no sensitivity, e.g. σ0 before first yield).
-        let big = v["steps"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .flat_map(|s| s["monitors"].as_object().unwrap().values())
-            .map(|c| c["dual"].as_f64().unwrap().abs())
-            .fold(0.0, f64::max);
-        assert!(big > 0.0, "{name}");
-        let mut compared = 0;
-        for s in v["steps"].as_array().unwrap() {
-            // Step size 1: h/τ = 1e-4. Central-difference truncation at this size was measured
-            // at ~1e-8 relative (and 1e-6 at h/τ = 1e-3: it falls as h²); the bound 1e-6 leaves
-            // room for re-run noise up to 1e-10 of the response (1e-6 · h/τ), far above the
-            // round-off of converged runs and far below any real disagreement (the three-way check asks
-            // 0.1 % of continuum against FD).
-            if s["fd_flagged"][1].as_bool().unwrap() {
-                continue;
-            }
-            for (label, c) in s["monitors"].as_object().unwrap() {
-                let dual = c["dual"].as_f64().unwrap();
-                let fd = c["fd_central"][1].as_f64().unwrap();
-                let cont = c["continuum"].as_f64().unwrap();
-                // Continuum = dual (required: 1e-8 relative on components with
-                // |ψ'| ≥ 1e-6 max|ψ'|); zero where the dual is exactly zero.
-                if dual == 0.0 {
-                    assert_eq!(cont, 0.0, "{name} {label}");
-                } else if dual.abs() >= 1e-6 * big {
-                    let e = (cont / dual - 1.0).abs();
-                    assert!(
-                        e < 1e-8,
-                        "{name} step {} {label}: cont {cont}, dual {dual}",
-                        s["step"]
-                    );
-                }
-                if dual.abs() < 1e-6 * big {
-                    // No sensitivity: FD must find none either, to its noise.
-                    assert!(
-                        fd.abs() < 1e-5 * big,
-                        "{name} {label}: fd {fd}, dual {dual}"
-                    );
-                    continue;
-                }
-                let rel = (fd / dual - 1.0).abs();
-                assert!(
-                    rel < 1e-6,
-                    "{name} step {} {label}: dual {dual}, fd {fd}, rel {rel:e}",
-                    s["step"]
-                );
-                compared += 1;
-            }
-        }
-        assert!(compared > 0, "{name}: no component compared");
-        // Taylor rate 2 (required: 2.0 ± 0.1) wherever two unflagged, non-exact sizes exist.
-        for f in v["taylor"]["per_step"].as_array().unwrap() {
-            if let Some(r) = f["rate"].as_f64() {
-                assert!((r - 2.0).abs() < 0.1, "{name} step {}: rate {r}", f["step"]);
-            }
-        }
-    }
+    assert_eq!(assert_three_ways(&a), 4);
     // σ0 has no influence before first yield: exactly zero from both methods at step 1.
     let s0 = &vars[3]["steps"][0]["monitors"]["A.ux"];
     assert_eq!(s0["dual"].as_f64().unwrap(), 0.0);
@@ -551,11 +493,7 @@ fn bending_three_ways_through_the_cli() {
             assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n"), "{file}");
         }
         let steps = v["steps"].as_array().unwrap();
-        let big = steps
-            .iter()
-            .flat_map(|s| s["monitors"].as_object().unwrap().values())
-            .map(|c| c["dual"].as_f64().unwrap().abs())
-            .fold(0.0, f64::max);
+        let big = largest_dual(v);
         assert!(big > 0.0, "{name}");
         let (mut vs_dual, mut vs_fd, mut compared) = (0.0f64, 0.0f64, 0);
         for s in steps {

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 #[path = "common/cli.rs"]
 mod cli;
-use cli::cli;
+use cli::dsa_case_text;
 
 #[path = "common/dsa_checks.rs"]
 mod dsa_checks;
@@ -50,17 +50,12 @@ fn the_key_selects_the_field_and_a_bad_value_is_named() {
 /// central differences of complete re-runs, Taylor rate 2.
 #[test]
 fn normalised_hemisphere_three_ways_through_the_cli() {
-    let dir = root().join("target/normalised-director-tests");
-    std::fs::create_dir_all(&dir).unwrap();
-    let case = dir.join("case.toml");
-    std::fs::write(&case, hemisphere("director = \"normalised\"")).unwrap();
-    let out = dir.join("out");
-    let code = cli(&[
-        "dsa",
-        case.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let (code, out) = dsa_case_text(
+        &root().join("target/normalised-director-tests"),
+        "case",
+        &hemisphere("director = \"normalised\""),
+        &[],
+    );
     assert_eq!(code, 0);
     let a: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("sensitivity.json")).unwrap())

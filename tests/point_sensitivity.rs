@@ -1088,19 +1088,9 @@ fn model_level_bad_seeds_are_named_errors() {
 #[test]
 fn recycled_storage_changes_nothing() {
     let (model, q) = committed_model(DirectorField::Interpolated);
-    let mut rng = Rng::new(11);
-    let owned: Vec<OwnedModelSeeds> = GROUPS
-        .iter()
-        .map(|g| model_seeds(&model, g, &q, &mut rng))
-        .collect();
+    let owned = all_groups(&model, &q, 11);
     let zero_dofs = vec![0.0; q.len()];
-    let views: Vec<ModelSeeds> = owned
-        .iter()
-        .map(|s| ModelSeeds {
-            dofs: &zero_dofs,
-            ..s.view()
-        })
-        .collect();
+    let views = fictitious(&owned, &zero_dofs);
     let (fresh, lin) = model.internal_force_dots_linearised(&q, &views).unwrap();
     let dofs_dot: Vec<&[f64]> = owned.iter().map(|s| &s.dofs[..]).collect();
     let updated =
@@ -1149,6 +1139,26 @@ fn recycled_storage_changes_nothing() {
     }
 }
 
+/// Seeds of every group of [`GROUPS`] (random, from `seed`).
+fn all_groups(model: &ShellModel, q: &[f64], seed: u64) -> Vec<OwnedModelSeeds> {
+    let mut rng = Rng::new(seed);
+    GROUPS
+        .iter()
+        .map(|g| model_seeds(model, g, q, &mut rng))
+        .collect()
+}
+
+/// The seeds' views with `Δq̇ = 0` (the fictitious loads' seeds).
+fn fictitious<'a>(owned: &'a [OwnedModelSeeds], zero_dofs: &'a [f64]) -> Vec<ModelSeeds<'a>> {
+    owned
+        .iter()
+        .map(|s| ModelSeeds {
+            dofs: zero_dofs,
+            ..s.view()
+        })
+        .collect()
+}
+
 /// The increment-only history update from a kept linearisation
 /// (`add_increment_history_dots`) plus the fictitious loads' histories equals the trial
 /// histories of `internal_force_dots` seeded with `Δq̇` as well, for both director fields
@@ -1158,20 +1168,10 @@ fn recycled_storage_changes_nothing() {
 fn linearised_history_update_equals_full_dots() {
     for director in [DirectorField::Interpolated, DirectorField::Normalised] {
         let (model, q) = committed_model(director);
-        let mut rng = Rng::new(13);
-        let owned: Vec<OwnedModelSeeds> = GROUPS
-            .iter()
-            .map(|g| model_seeds(&model, g, &q, &mut rng))
-            .collect();
+        let owned = all_groups(&model, &q, 13);
         let full: Vec<ModelSeeds> = owned.iter().map(|s| s.view()).collect();
         let zero_dofs = vec![0.0; q.len()];
-        let fictitious: Vec<ModelSeeds> = owned
-            .iter()
-            .map(|s| ModelSeeds {
-                dofs: &zero_dofs,
-                ..s.view()
-            })
-            .collect();
+        let fictitious = fictitious(&owned, &zero_dofs);
         let reference = model.internal_force_dots(&q, &full).unwrap();
         let (dots, lin) = model
             .internal_force_dots_linearised(&q, &fictitious)

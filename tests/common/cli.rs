@@ -16,18 +16,7 @@ pub fn cli(args: &[&str]) -> i32 {
 #[allow(dead_code)]
 pub fn run_case_text(dir: &std::path::Path, text: &str, extra: &[&str]) -> serde_json::Value {
     let _ = std::fs::remove_dir_all(dir);
-    std::fs::create_dir_all(dir).unwrap();
-    let case = dir.join("case.toml");
-    std::fs::write(&case, text).unwrap();
-    let out = dir.join("out");
-    let mut args = vec![
-        "run",
-        case.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    args.extend_from_slice(extra);
-    let code = cli(&args);
+    let (code, case, out) = command_on_text("run", dir, "case", "out", text, extra);
     assert_eq!(
         code,
         0,
@@ -35,4 +24,41 @@ pub fn run_case_text(dir: &std::path::Path, text: &str, extra: &[&str]) -> serde
         case.display()
     );
     serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap()
+}
+
+/// Write the case `text` as `DIR/NAME.toml`, run `shelldsa dsa` on it with output in
+/// `DIR/NAME` and the `extra` arguments; return the exit code and the output directory.
+#[allow(dead_code)]
+pub fn dsa_case_text(
+    dir: &std::path::Path,
+    name: &str,
+    text: &str,
+    extra: &[&str],
+) -> (i32, std::path::PathBuf) {
+    let (code, _, out) = command_on_text("dsa", dir, name, name, text, extra);
+    (code, out)
+}
+
+/// Write `text` as `DIR/CASE.toml` and run `shelldsa COMMAND` on it with output in `DIR/OUT`
+/// and the `extra` arguments: the exit code, the case file and the output directory.
+fn command_on_text(
+    command: &str,
+    dir: &std::path::Path,
+    case: &str,
+    out: &str,
+    text: &str,
+    extra: &[&str],
+) -> (i32, std::path::PathBuf, std::path::PathBuf) {
+    std::fs::create_dir_all(dir).unwrap();
+    let case = dir.join(format!("{case}.toml"));
+    std::fs::write(&case, text).unwrap();
+    let out = dir.join(out);
+    let mut args = vec![
+        command,
+        case.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    (cli(&args), case, out)
 }
