@@ -5,7 +5,9 @@
 
 use nalgebra::{Matrix3, Vector3};
 use num_dual::Dual64;
-use shelldsa::kinematics::unit_director::{n_prime, n_second, n_third, normalise, step_change};
+use shelldsa::kinematics::unit_director::{
+    n_prime, n_second, n_second_apply, n_third, normalise, step_change,
+};
 use shelldsa::meshfree::XorShift64;
 
 type V3 = Vector3<f64>;
@@ -65,6 +67,9 @@ fn derivatives_of_the_normalisation_equal_dual_numbers() {
         // Full symmetry of ∇³ℓ and ∇⁴ℓ: H(y) b = H(b) y, T(y, b) = T(b, y), all symmetric.
         let (hy, hb) = (n_second(&d, l, &y), n_second(&d, l, &b));
         assert!((hy * b - hb * y).amax() < 1e-14 * (hy * b).amax());
+        // The generic product form equals the matrix's.
+        let applied = n_second_apply(&d, l, &y, &b);
+        assert!((applied - hy * b).amax() < 1e-14 * applied.amax());
         let t = n_third(&d, l, &y, &b);
         assert!((t - n_third(&d, l, &b, &y)).amax() < 1e-14 * t.amax());
         assert!((t - t.transpose()).amax() < 1e-14 * t.amax());

@@ -32,6 +32,13 @@ pub fn normalise<T: Real>(r: &V3<T>, r_a: &[V3<T>; 2]) -> (V3<T>, [V3<T>; 2], T)
     (d, d_a, l)
 }
 
+/// `H(y) b = (y·N″[·, b])` without forming `H(y)` ([`n_second`]), generic:
+/// `[3 (y·d)(b·d) d − (b·d) y − (y·b) d − (y·d) b]/ℓ²`.
+pub fn n_second_apply<T: Real>(d: &V3<T>, l: T, y: &V3<T>, b: &V3<T>) -> V3<T> {
+    let (yd, bd) = (y.dot(d), b.dot(d));
+    (d * (yd * bd * 3.0) - y * bd - d * y.dot(b) - b * yd) / (l * l)
+}
+
 /// The change of the unit director and its derivatives over a step, `(d₁ − dₙ, d₁,α − dₙ,α)`,
 /// for `r₁ = rₙ + δ`, `r₁,α = rₙ,α + δ,α`, formed without cancellation (its absolute error is
 /// of the order of ε |δ|, not ε: the transverse shear stiffness would turn the latter into a

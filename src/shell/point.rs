@@ -2,7 +2,8 @@
 //! consistent tangent from hand-derived directional derivatives (docs/shell-formulation.md §3–5).
 //!
 //! Configuration at step n and at a point:
-//! `x̄ⁿ,α = x̄⁰,α + Σ Ψ_I,α ū_Iⁿ`, `dⁿ = n⁰ + Σ Ψ_I (d_Iⁿ − d_I⁰)` (and its ξ-derivatives),
+//! `x̄ⁿ,α = x̄⁰,α + Σ Ψ_I,α ū_Iⁿ`, `dⁿ = n⁰ + Σ Ψ_I (d_Iⁿ − d_I⁰)` (and its ξ-derivatives;
+//! with [`DirectorField::Normalised`] that interpolant divided by its length),
 //! `Jⁿ = ∂ⁿx/∂(ξ1, ξ2, ζ) = [x̄ⁿ,1 + ζt/2 dⁿ,1 | x̄ⁿ,2 + ζt/2 dⁿ,2 | t/2 dⁿ]`.
 //! Increment with DOFs `(Δū_I, α_I)`: `Δd_I = d_I(α_I) − d_Iⁿ`, and
 //! `G = ∂Δz/∂(ξ, ζ) = [Σ Ψ_I,1 (Δū_I + ζt/2 Δd_I) | Σ Ψ_I,2 (…) | t/2 Σ Ψ_I Δd_I]`.
@@ -465,12 +466,10 @@ pub fn point_residual_with<T: Real>(
             // Virtual fields of the unit director: δd = N′ δr, δd,α = N′ δr,α + N″[δr, r,α]
             // with δr = Ψ_I δd_I, δr,α = Ψ̃_I,α δd_I. So the moment m_I of the interpolant
             // becomes N′ m_I + Ψ_I Σ_α H(z P:α) r,α (module `unit_director`).
+            use crate::kinematics::unit_director::n_second_apply;
             let np = |y: V3<T>| (y - u.d * u.d.dot(&y)) / u.l;
-            let h_of = |y: V3<T>, b: V3<T>| {
-                let (yd, bd) = (y.dot(&u.d), b.dot(&u.d));
-                (u.d * (yd * bd * 3.0) - y * bd - u.d * y.dot(&b) - b * yd) / (u.l * u.l)
-            };
-            let geo = h_of(p.column(0) * z, u.r_a[0]) + h_of(p.column(1) * z, u.r_a[1]);
+            let geo = n_second_apply(&u.d, u.l, &(p.column(0) * z), &u.r_a[0])
+                + n_second_apply(&u.d, u.l, &(p.column(1) * z), &u.r_a[1]);
             for (sh, da) in inp.shape.iter().zip(&incr.d_alpha) {
                 let f =
                     p.column(0) * T::cst(sh.dpsi_test[0]) + p.column(1) * T::cst(sh.dpsi_test[1]);

@@ -45,7 +45,9 @@ use super::point::{
 };
 use super::ShellError;
 use crate::kinematics::rotation::rodrigues_coefficient_derivatives;
-use crate::kinematics::unit_director::{n_prime, n_second, n_third, step_change, UnitDirectorStep};
+use crate::kinematics::unit_director::{
+    n_prime, n_second, n_second_apply, n_third, step_change, UnitDirectorStep,
+};
 use crate::kinematics::{
     frame_update, global_stress, hughes_winget, local_strain_increment, mid_step_gradient,
     strain_to_vec5, stress_from_vec5, M3,
@@ -644,8 +646,7 @@ struct UnitRows {
 impl UnitRows {
     /// `H(y) b` without forming `H(y)`.
     fn h_apply(&self, y: &V3, b: &V3) -> V3 {
-        let (yd, bd) = (y.dot(&self.d), b.dot(&self.d));
-        (self.d * (3.0 * yd * bd) - y * bd - self.d * y.dot(b) - b * yd) / (self.l * self.l)
+        n_second_apply(&self.d, self.l, y, b)
     }
 }
 
