@@ -584,10 +584,22 @@ fn describe(c: &Case) -> String {
             m.design_name
         ),
         Case::Shell(s) => {
+            let mut director = match s.integration.director {
+                crate::shell::point::DirectorField::Interpolated => "interpolated",
+                crate::shell::point::DirectorField::Normalised => "normalised",
+            }
+            .to_string()
+                + " director field";
+            if s.integration.director_stabilisation > 0.0 {
+                director += &format!(
+                    ", director stabilisation ε = {}",
+                    s.integration.director_stabilisation
+                );
+            }
             format!(
                 "shell on a {} surface, {} × {} particles, {} basis, {} kernel on supports of {} \
-             spacings, {} boundary condition(s), {} load(s), {} tool(s), {} monitor(s), load \
-             factor to {}",
+             spacings, {director}, {} boundary condition(s), {} load(s), {} tool(s), {} \
+             monitor(s), load factor to {}",
                 s.surface.kind(),
                 s.particles.counts[0],
                 s.particles.counts[1],
