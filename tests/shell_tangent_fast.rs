@@ -364,10 +364,17 @@ fn plastic_layers_gauss_rule() {
 fn check_normalised(f: &mut Fixture, x: &[f64], title: &str) {
     f.director = DirectorField::Normalised;
     let mut sum = ThicknessTangent::new(&f.shape, &f.particles, x).unwrap();
+    let cached = PointIncrement::new(&f.particles, x)
+        .unwrap()
+        .with_unit_director(&f.input(0));
+    assert!(cached.unit.is_some());
     for l in 0..f.layers.len() {
         let inp = f.input(l);
         let res = point_residual(&inp, x).unwrap();
         assert!(res.kinematics.unit_director.is_some());
+        // The unit director's step formed once for the point: the same layer, bit for bit.
+        let again = point_residual_with(&inp, &cached).unwrap();
+        assert_eq!(res.residual, again.residual);
         sum.add_layer(&inp, &res).unwrap();
     }
     let mut fast = DMatrix::zeros(ND, ND);

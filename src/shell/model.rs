@@ -760,10 +760,13 @@ impl ShellModel {
                         .collect(),
                     dd: p.neighbours.iter().map(|&j| c.dd[j]).collect(),
                     d_alpha: p.neighbours.iter().map(|&j| c.d_alpha[j]).collect(),
+                    unit: None,
                 };
                 (parts, x, inc, None)
             }
         };
+        // The unit director's step, once for all layers.
+        let inc = inc.with_unit_director(&self.layer_input(k, 0, &parts));
         let mut residual = vec![0.0; x.len()];
         if tangent.is_some() {
             k_sum = Some(match cache.and_then(|c| c.dirs.as_ref()) {
@@ -1038,12 +1041,10 @@ impl ShellModel {
                         }
                     })
                     .collect();
-                let inc = PointIncrement::new(&parts, &x)?;
                 let s = surfaces.map_or_else(|| p.surface.lift::<T>(), |s| s[k]);
-                let mut residual = vec![T::zero(); x.len()];
-                let mut trial = Vec::with_capacity(nl);
-                for (l, &(zeta, wz)) in self.thickness_rule.iter().enumerate() {
-                    let inp = PointInput {
+                let input = |l: usize| {
+                    let (zeta, wz) = self.thickness_rule[l];
+                    PointInput {
                         surface: &s,
                         zeta,
                         thickness,
@@ -1053,8 +1054,13 @@ impl ShellModel {
                         material,
                         history: &history[k * nl + l],
                         director: self.director,
-                    };
-                    let res = point_residual_with(&inp, &inc)?;
+                    }
+                };
+                let inc = PointIncrement::new(&parts, &x)?.with_unit_director(&input(0));
+                let mut residual = vec![T::zero(); x.len()];
+                let mut trial = Vec::with_capacity(nl);
+                for l in 0..nl {
+                    let res = point_residual_with(&input(l), &inc)?;
                     for (r, v) in residual.iter_mut().zip(&res.residual) {
                         *r += *v;
                     }

@@ -15,6 +15,7 @@
 
 use super::ShellError;
 use crate::kinematics::rotation::{director_derivatives, rodrigues_coefficients};
+use crate::kinematics::unit_director::{step_change, UnitDirectorStep};
 use crate::kinematics::HwIncrement;
 use crate::kinematics::{
     frame_update, frame_update_dot, global_stress, global_stress_dot, hughes_winget,
@@ -280,12 +281,18 @@ fn interpolated_directors<T: Real>(
     (r, r_a, delta, delta_a)
 }
 
-/// `Jⁿ` and `G` with the unit director ([`DirectorField::Normalised`]):
+/// The unit director's step at the point from the interpolant and the increments `Δd_I`.
+fn unit_director_step<T: Real>(inp: &PointInput<T>, dd: &[V3<T>]) -> UnitDirectorStep<T> {
+    let (r, r_a, delta, delta_a) = interpolated_directors(inp, dd);
+    step_change(&r, &r_a, &delta, &delta_a)
+}
+
+/// `Jⁿ` and `G` with the unit director ([`DirectorField::Normalised`]) of the step `st`:
 /// `Jⁿ = [x̄,α + z dₙ,α | t/2 dₙ]`, `G = [Σ Ψ_I,α Δū_I + z (d₁,α − dₙ,α) | t/2 (d₁ − dₙ)]`.
 fn unit_director_jacobians<T: Real>(
     inp: &PointInput<T>,
     du: &[V3<T>],
-    dd: &[V3<T>],
+    st: &UnitDirectorStep<T>,
 ) -> (M3<T>, M3<T>, UnitDirector<T>) {
     let half_t = inp.thickness * 0.5;
     let z = half_t * inp.zeta;
@@ -297,8 +304,6 @@ fn unit_director_jacobians<T: Real>(
             ga[a] += *u * T::cst(sh.dpsi[a]);
         }
     }
-    let (r, r_a, delta, delta_a) = interpolated_directors(inp, dd);
-    let st = crate::kinematics::unit_director::step_change(&r, &r_a, &delta, &delta_a);
     let jn = M3::from_columns(&[
         xa[0] + st.dn_a[0] * z,
         xa[1] + st.dn_a[1] * z,
@@ -358,6 +363,9 @@ pub struct PointIncrement<T> {
     pub dd: Vec<V3<T>>,
     /// `∂d_I/∂α_1`, `∂d_I/∂α_2` at `α_I`.
     pub d_alpha: Vec<[V3<T>; 2]>,
+    /// The step of the unit director at the in-plane point ([`DirectorField::Normalised`]),
+    /// once set by [`PointIncrement::with_unit_director`]; without it each layer forms it.
+    pub unit: Option<UnitDirectorStep<T>>,
 }
 
 impl<T: Real> PointIncrement<T> {
@@ -386,7 +394,21 @@ impl<T: Real> PointIncrement<T> {
             // Virtual director of the rotation DOFs: the exact ∂d_I/∂α_β of Rodrigues' formula.
             d_alpha.push(director_first_derivatives(p, [q[3], q[4]]));
         }
-        Ok(PointIncrement { du, dd, d_alpha })
+        Ok(PointIncrement {
+            du,
+            dd,
+            d_alpha,
+            unit: None,
+        })
+    }
+
+    /// With the normalised director field of `inp` (any layer of the in-plane point): the
+    /// unit director's step formed once here for all layers (it does not depend on ζ).
+    pub fn with_unit_director(mut self, inp: &PointInput<T>) -> Self {
+        if inp.director == DirectorField::Normalised {
+            self.unit = Some(unit_director_step(inp, &self.dd));
+        }
+        self
     }
 }
 
@@ -430,7 +452,15 @@ pub fn point_residual_with<T: Real>(
             None,
         ),
         DirectorField::Normalised => {
-            let (jn, g, unit) = unit_director_jacobians(inp, &incr.du, &incr.dd);
+            let formed;
+            let st = match &incr.unit {
+                Some(st) => st,
+                None => {
+                    formed = unit_director_step(inp, &incr.dd);
+                    &formed
+                }
+            };
+            let (jn, g, unit) = unit_director_jacobians(inp, &incr.du, st);
             (jn, g, Some(unit))
         }
     };
