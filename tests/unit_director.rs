@@ -6,7 +6,7 @@
 use nalgebra::{Matrix3, Vector3};
 use num_dual::Dual64;
 use shelldsa::kinematics::unit_director::{
-    n_prime, n_second, n_second_apply, n_third, normalise, step_change,
+    n_prime, n_prime_apply, n_second, n_second_apply, n_third, normalise, step_change,
 };
 use shelldsa::meshfree::XorShift64;
 
@@ -67,7 +67,9 @@ fn derivatives_of_the_normalisation_equal_dual_numbers() {
         // Full symmetry of ∇³ℓ and ∇⁴ℓ: H(y) b = H(b) y, T(y, b) = T(b, y), all symmetric.
         let (hy, hb) = (n_second(&d, l, &y), n_second(&d, l, &b));
         assert!((hy * b - hb * y).amax() < 1e-14 * (hy * b).amax());
-        // The generic product form equals the matrix's.
+        // The generic product forms equal the matrices'.
+        let nb = n_prime_apply(&d, l, &b);
+        assert!((nb - np * b).amax() < 1e-15 * nb.amax());
         let applied = n_second_apply(&d, l, &y, &b);
         assert!((applied - hy * b).amax() < 1e-14 * applied.amax());
         let t = n_third(&d, l, &y, &b);

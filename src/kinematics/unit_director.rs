@@ -32,6 +32,11 @@ pub fn normalise<T: Real>(r: &V3<T>, r_a: &[V3<T>; 2]) -> (V3<T>, [V3<T>; 2], T)
     (d, d_a, l)
 }
 
+/// `N′ y = (y − d (d·y))/ℓ` without forming `N′` ([`n_prime`]), generic.
+pub fn n_prime_apply<T: Real>(d: &V3<T>, l: T, y: &V3<T>) -> V3<T> {
+    (y - d * d.dot(y)) / l
+}
+
 /// `H(y) b = (y·N″[·, b])` without forming `H(y)` ([`n_second`]), generic:
 /// `[3 (y·d)(b·d) d − (b·d) y − (y·b) d − (y·d) b]/ℓ²`.
 pub fn n_second_apply<T: Real>(d: &V3<T>, l: T, y: &V3<T>, b: &V3<T>) -> V3<T> {

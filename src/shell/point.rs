@@ -496,14 +496,14 @@ pub fn point_residual_with<T: Real>(
             // Virtual fields of the unit director: δd = N′ δr, δd,α = N′ δr,α + N″[δr, r,α]
             // with δr = Ψ_I δd_I, δr,α = Ψ̃_I,α δd_I. So the moment m_I of the interpolant
             // becomes N′ m_I + Ψ_I Σ_α H(z P:α) r,α (module `unit_director`).
-            use crate::kinematics::unit_director::n_second_apply;
-            let np = |y: V3<T>| (y - u.d * u.d.dot(&y)) / u.l;
+            use crate::kinematics::unit_director::{n_prime_apply, n_second_apply};
             let geo = n_second_apply(&u.d, u.l, &(p.column(0) * z), &u.r_a[0])
                 + n_second_apply(&u.d, u.l, &(p.column(1) * z), &u.r_a[1]);
             for (sh, da) in inp.shape.iter().zip(&incr.d_alpha) {
                 let f =
                     p.column(0) * T::cst(sh.dpsi_test[0]) + p.column(1) * T::cst(sh.dpsi_test[1]);
-                let m = np(f * z + p.column(2) * (half_t * sh.psi)) + geo * T::cst(sh.psi);
+                let m = n_prime_apply(&u.d, u.l, &(f * z + p.column(2) * (half_t * sh.psi)))
+                    + geo * T::cst(sh.psi);
                 residual.extend_from_slice(&[f[0], f[1], f[2], da[0].dot(&m), da[1].dot(&m)]);
             }
         }

@@ -531,8 +531,7 @@ impl UnitPoint {
     /// `g_d = δ,α`).
     fn new(raw: &ValueSums) -> Self {
         let step = step_change(&raw.d, &raw.da, &raw.g_d3, &raw.g_d);
-        let ln = raw.d.norm();
-        let (dn, d1, l1) = (step.dn, step.d1, step.l1);
+        let (dn, d1, l1, ln) = (step.dn, step.d1, step.l1, step.ln);
         UnitPoint {
             np_n: n_prime(&dn, ln),
             h_n: [n_second(&dn, ln, &raw.da[0]), n_second(&dn, ln, &raw.da[1])],

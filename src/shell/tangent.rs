@@ -480,26 +480,32 @@ impl<'a> ThicknessTangent<'a> {
             // K[(I, b), (J, γ)] += a_Ibᵀ [Ψ_I Ψ_J S + Σ_α (Ψ_I Ψ_J,α + Ψ̃_I,α Ψ_J) H(y_α)] v_Jγ,
             // S = H(y₃) + Σ_α T(y_α, r,α), y₃ = t/2 (Σ P)_{:3}, y_α = t/2 (Σ ζP)_{:α}.
             let n = self.shape.len();
-            let scaled = |i: usize| -> [Vector3<f64>; 2] {
-                let det = slot_of(i).image.map_or(1.0, |(_, det)| det);
-                self.dirs[i].d_a.map(|v| v * det)
-            };
-            // c_J = Ψ_J S v + Σ_α Ψ_J,α H(y_α) v; r_I = Σ_α Ψ̃_I,α H(y_α) a.
-            let cols: Vec<[Vector3<f64>; 2]> = (0..n)
-                .map(|j| {
-                    let sh = &self.shape[j];
-                    let m = un.s * sh.psi + un.hy[0] * sh.dpsi[0] + un.hy[1] * sh.dpsi[1];
-                    scaled(j).map(|v| m * v)
-                })
-                .collect();
-            let rows: Vec<[Vector3<f64>; 2]> = (0..n)
+            // The rotation directions ∂d/∂α of each neighbour, × det Q for an image.
+            let dirs: Vec<[Vector3<f64>; 2]> = (0..n)
                 .map(|i| {
-                    let sh = &self.shape[i];
-                    let m = un.hy[0] * sh.dpsi_test[0] + un.hy[1] * sh.dpsi_test[1];
-                    scaled(i).map(|a| m * a)
+                    let det = slot_of(i).image.map_or(1.0, |(_, det)| det);
+                    self.dirs[i].d_a.map(|v| v * det)
                 })
                 .collect();
-            let dirs: Vec<[Vector3<f64>; 2]> = (0..n).map(scaled).collect();
+            // c_J = Ψ_J S v + Σ_α Ψ_J,α H(y_α) v; r_I = Σ_α Ψ̃_I,α H(y_α) a.
+            let cols: Vec<[Vector3<f64>; 2]> = self
+                .shape
+                .iter()
+                .zip(&dirs)
+                .map(|(sh, d)| {
+                    let m = un.s * sh.psi + un.hy[0] * sh.dpsi[0] + un.hy[1] * sh.dpsi[1];
+                    d.map(|v| m * v)
+                })
+                .collect();
+            let rows: Vec<[Vector3<f64>; 2]> = self
+                .shape
+                .iter()
+                .zip(&dirs)
+                .map(|(sh, d)| {
+                    let m = un.hy[0] * sh.dpsi_test[0] + un.hy[1] * sh.dpsi_test[1];
+                    d.map(|a| m * a)
+                })
+                .collect();
             for i in 0..n {
                 let r0 = DOFS_PER_PARTICLE * slot_of(i).slot + 3;
                 let psi_i = self.shape[i].psi;
