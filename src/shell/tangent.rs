@@ -488,24 +488,16 @@ impl<'a> ThicknessTangent<'a> {
                 })
                 .collect();
             // c_J = Ψ_J S v + Σ_α Ψ_J,α H(y_α) v; r_I = Σ_α Ψ̃_I,α H(y_α) a.
-            let cols: Vec<[Vector3<f64>; 2]> = self
+            let (cols, rows): (Vec<Pair>, Vec<Pair>) = self
                 .shape
                 .iter()
                 .zip(&dirs)
                 .map(|(sh, d)| {
-                    let m = un.s * sh.psi + un.hy[0] * sh.dpsi[0] + un.hy[1] * sh.dpsi[1];
-                    d.map(|v| m * v)
+                    let c = un.s * sh.psi + un.hy[0] * sh.dpsi[0] + un.hy[1] * sh.dpsi[1];
+                    let r = un.hy[0] * sh.dpsi_test[0] + un.hy[1] * sh.dpsi_test[1];
+                    (d.map(|v| c * v), d.map(|a| r * a))
                 })
-                .collect();
-            let rows: Vec<[Vector3<f64>; 2]> = self
-                .shape
-                .iter()
-                .zip(&dirs)
-                .map(|(sh, d)| {
-                    let m = un.hy[0] * sh.dpsi_test[0] + un.hy[1] * sh.dpsi_test[1];
-                    d.map(|a| m * a)
-                })
-                .collect();
+                .unzip();
             for i in 0..n {
                 let r0 = DOFS_PER_PARTICLE * slot_of(i).slot + 3;
                 let psi_i = self.shape[i].psi;
@@ -524,6 +516,9 @@ impl<'a> ThicknessTangent<'a> {
         Ok(())
     }
 }
+
+/// The two rotation directions of a neighbour (or their images under a map).
+type Pair = [Vector3<f64>; 2];
 
 /// The maps of a normalised director field at one in-plane point (module
 /// [`crate::kinematics::unit_director`]): `N′`, `H(r,α)`, `H(y_α)` and `S`.
