@@ -3,8 +3,10 @@
 //! front) under the orderings on offer, and the time of one numeric factorisation with each
 //! method.
 //!
-//! `cargo run --release --example solver_probe -- CASE.toml [GRID] [--methods lu,sym,dense]`
-//! (`GRID` overrides `particles.grid` with `GRID × GRID`).
+//! `cargo run --release --example solver_probe -- CASE.toml [GRID] [--methods sn,nd,metis,amd,lu,dense]`
+//! (`GRID` overrides `particles.grid` with `GRID × GRID`; `sn` is the supernodal LU with its
+//! default ordering, the fewest operations of `nd`, `metis` and `amd`; `lu` faer's sparse LU,
+//! `dense` the dense LU).
 use shelldsa::io::shell_build::build;
 use shelldsa::io::shell_case::read_shell_case;
 use shelldsa::solver::{
@@ -23,7 +25,7 @@ fn main() {
         .iter()
         .position(|a| a == "--methods")
         .map(|i| args[i + 1].clone())
-        .unwrap_or_else(|| "sym".into());
+        .unwrap_or_else(|| "sn".into());
     let mut built = build(&case).unwrap();
     let pattern = built.problem.pattern().clone();
     let n = pattern.n_dofs();
@@ -71,8 +73,13 @@ fn main() {
         let (method, par) = match m {
             "lu" => (Method::Lu, Parallelism::Sequential),
             "dense" => (Method::DenseLu, Parallelism::Rayon(0)),
-            "nd" | "amd" => (Method::SupernodalLu, Parallelism::Sequential),
-            _ => panic!("method {m}"),
+            "sn" | "nd" | "amd" | "metis" => (Method::SupernodalLu, Parallelism::Sequential),
+            _ => {
+                eprintln!(
+                    "--methods: unknown method `{m}`; expected sn, nd, metis, amd, lu or dense"
+                );
+                std::process::exit(1);
+            }
         };
         let t = Instant::now();
         let options = SolverOptions {
@@ -81,6 +88,8 @@ fn main() {
         };
         let mut solver = match m {
             "amd" => LinearSolver::supernodal(&pattern, FillOrdering::Amd, options),
+            "metis" => LinearSolver::supernodal(&pattern, FillOrdering::Metis, options),
+            "nd" => LinearSolver::supernodal(&pattern, FillOrdering::NestedDissection, options),
             _ => LinearSolver::new(&pattern, method, options),
         }
         .unwrap();

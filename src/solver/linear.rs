@@ -315,7 +315,7 @@ impl LinearSolver {
     }
 
     /// [`Method::SupernodalLu`] with the given fill-reducing ordering (the default is
-    /// [`FillOrdering::NestedDissection`]).
+    /// [`FillOrdering::Fewest`]).
     pub fn supernodal(
         pattern: &SparsityPattern,
         ordering: FillOrdering,
@@ -352,7 +352,9 @@ impl LinearSolver {
     pub fn structure(&self) -> Option<String> {
         match &self.factor {
             Factor::Supernodal { symbolic, .. } => Some(format!(
-                "{} supernodes, {} entries in L+U ({:.1} per row), {:.3e} flops, largest front {}",
+                "{:?} ordering, {} supernodes, {} entries in L+U ({:.1} per row), {:.3e} flops, \
+                 largest front {}",
+                symbolic.ordering,
                 symbolic.n_supernodes(),
                 symbolic.factor_entries,
                 symbolic.factor_entries as f64 / self.n.max(1) as f64,

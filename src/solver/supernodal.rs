@@ -3,7 +3,7 @@
 //! The meshfree tangents are structurally symmetric (every pair of DOFs of a cell is stored
 //! both ways) but numerically unsymmetric (the Petrov–Galerkin VCI gradients, the follower loads,
 //! the plastic update). LU with partial row pivoting over all rows must bound its fill by the
-//! Cholesky factor of `AᵀA`; here instead the fill-reducing ordering (AMD on the pattern) and the
+//! Cholesky factor of `AᵀA`; here instead the fill-reducing ordering ([`FillOrdering`]) and the
 //! supernodes of the Cholesky factor of `A` are computed once, and the numeric LU keeps that
 //! structure: `L` has the Cholesky factor's pattern and `U` its transpose. Row pivoting is
 //! allowed inside each supernode's diagonal block, which does not change the structure (the
@@ -49,12 +49,20 @@ const PAR_SOLVE_ENTRIES: usize = 1 << 16;
 /// Fill-reducing ordering of [`super::Method::SupernodalLu`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum FillOrdering {
+    /// Of the three orderings below, the one whose factorisation takes the fewest operations
+    /// (each one's symbolic analysis is done; the pattern alone decides, so the choice is the
+    /// same for every factorisation of a run and any number of threads). None is best on every
+    /// grid of the shell tangents: `verification/hemisphere-plastic/README.md`.
+    #[default]
+    Fewest,
     /// Nested dissection by level-set separators of the graph of supervariables (DOFs with
     /// identical columns), leaves of at most [`ND_LEAF`] DOFs kept in their numbering.
-    #[default]
     NestedDissection,
     /// faer's approximate minimum degree.
     Amd,
+    /// METIS's multilevel nested dissection (`METIS_NodeND`) of the graph of supervariables,
+    /// each weighted by its DOFs.
+    Metis,
 }
 
 /// Largest part (in DOFs) nested dissection does not cut further.
@@ -94,6 +102,8 @@ pub(crate) struct SupernodalSymbolic {
     pub factor_entries: usize,
     /// Order of the largest front.
     pub max_front: usize,
+    /// The ordering used (never [`FillOrdering::Fewest`]: the one it chose).
+    pub ordering: FillOrdering,
 }
 
 /// The numeric factors of every supernode.
@@ -164,14 +174,33 @@ impl FrontPool {
 }
 
 impl SupernodalSymbolic {
-    /// Ordering and supernodes of `pattern` (AMD on its structure, faer's supernodal symbolic
-    /// Cholesky), with the maps the numeric phase uses.
+    /// Ordering and supernodes of `pattern` (the ordering on its structure, faer's supernodal
+    /// symbolic Cholesky), with the maps the numeric phase uses.
     pub fn new(pattern: &SparsityPattern, ordering: FillOrdering) -> Result<Self, SolverError> {
+        if ordering == FillOrdering::Fewest {
+            let mut best: Option<(Self, FillOrdering)> = None;
+            for o in [
+                FillOrdering::NestedDissection,
+                FillOrdering::Metis,
+                FillOrdering::Amd,
+            ] {
+                let s = Self::new(pattern, o)?;
+                // Ties keep the earlier candidate.
+                if best.as_ref().is_none_or(|(b, _)| s.flops < b.flops) {
+                    best = Some((s, o));
+                }
+            }
+            let (mut s, o) = best.expect("three candidates");
+            s.ordering = o;
+            return Ok(s);
+        }
         let n = pattern.n_dofs();
         let faer_err = |e: faer::sparse::FaerError| SolverError::Faer(format!("{e:?}"));
         let fwd = match ordering {
+            FillOrdering::Fewest => unreachable!("resolved above"),
             FillOrdering::NestedDissection => nested_dissection(pattern),
             FillOrdering::Amd => amd(pattern).map_err(faer_err)?,
+            FillOrdering::Metis => metis_order(pattern)?,
         };
         let fwd = delay_multipliers(pattern, fwd);
         let mut inv = vec![0usize; n];
@@ -350,6 +379,7 @@ impl SupernodalSymbolic {
             flops: flops_of.iter().sum(),
             factor_entries,
             max_front,
+            ordering,
         })
     }
 
@@ -964,82 +994,161 @@ fn delay_multipliers(pattern: &SparsityPattern, order: Vec<usize>) -> Vec<usize>
 /// it move to the first side. Parts are ordered first, separators last, recursively down to
 /// parts of at most [`ND_LEAF`] DOFs. Everything depends on the pattern only.
 pub fn nested_dissection(pattern: &SparsityPattern) -> Vec<usize> {
-    let n = pattern.n_dofs();
-    let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
-    // Supervariables: columns with identical row patterns.
-    let hash = |j: usize| {
-        ri[cp[j]..cp[j + 1]]
-            .iter()
-            .fold(0xcbf2_9ce4_8422_2325u64, |h, &r| {
-                (h ^ r as u64).wrapping_mul(0x0100_0000_01b3)
-            })
-    };
-    let mut cols: Vec<(usize, u64, usize)> =
-        (0..n).map(|j| (cp[j + 1] - cp[j], hash(j), j)).collect();
-    cols.sort_unstable();
-    let mut sv_of = vec![0usize; n];
-    let mut sv_cols: Vec<Vec<usize>> = Vec::new();
-    for (idx, &(len, h, j)) in cols.iter().enumerate() {
-        let same = idx > 0 && {
-            let (l0, h0, j0) = cols[idx - 1];
-            l0 == len && h0 == h && ri[cp[j0]..cp[j0 + 1]] == ri[cp[j]..cp[j + 1]]
-        };
-        if !same {
-            sv_cols.push(Vec::new());
-        }
-        let s = sv_cols.len() - 1;
-        sv_cols[s].push(j);
-        sv_of[j] = s;
-    }
-    // Number supervariables by their first column (the DOF numbering's locality).
-    let mut by_first: Vec<usize> = (0..sv_cols.len()).collect();
-    by_first.sort_unstable_by_key(|&s| sv_cols[s].iter().min().copied());
-    let mut renumber = vec![0usize; sv_cols.len()];
-    for (new, &old) in by_first.iter().enumerate() {
-        renumber[old] = new;
-    }
-    let sv_cols: Vec<Vec<usize>> = by_first
-        .iter()
-        .map(|&s| {
-            let mut c = sv_cols[s].clone();
-            c.sort_unstable();
-            c
-        })
-        .collect();
-    for s in sv_of.iter_mut() {
-        *s = renumber[*s];
-    }
-    let ns = sv_cols.len();
-    let weight: Vec<usize> = sv_cols.iter().map(Vec::len).collect();
-    let mut adj_ptr = vec![0usize];
-    let mut adj = Vec::new();
-    let mut mark = vec![usize::MAX; ns];
-    for (s, c) in sv_cols.iter().enumerate() {
-        let j = c[0];
-        mark[s] = s;
-        for &r in &ri[cp[j]..cp[j + 1]] {
-            let t = sv_of[r];
-            if mark[t] != s {
-                mark[t] = s;
-                adj.push(t);
-            }
-        }
-        adj_ptr.push(adj.len());
-    }
+    let g = SupervariableGraph::new(pattern);
+    let ns = g.cols.len();
     let mut nd = Dissection {
-        adj_ptr: &adj_ptr,
-        adj: &adj,
-        weight: &weight,
+        adj_ptr: &g.adj_ptr,
+        adj: &g.adj,
+        weight: &g.weight,
         stamp: vec![0usize; ns],
         level: vec![0usize; ns],
         next_stamp: 0,
         order: Vec::with_capacity(ns),
     };
     nd.dissect((0..ns).collect());
-    nd.order
+    g.expand(&nd.order)
+}
+
+/// METIS's nested dissection of the graph of supervariables (`perm[new] = old` on the DOFs).
+fn metis_order(pattern: &SparsityPattern) -> Result<Vec<usize>, SolverError> {
+    let g = SupervariableGraph::new(pattern);
+    let ns = g.cols.len();
+    let too_large = |what: &str, v: usize| {
+        SolverError::Faer(format!(
+            "METIS ordering: {what} {v} exceeds its 32-bit index range"
+        ))
+    };
+    let idx = |v: usize, what: &str| i32::try_from(v).map_err(|_| too_large(what, v));
+    let mut nvtxs = idx(ns, "vertex count")?;
+    let mut xadj = g
+        .adj_ptr
         .iter()
-        .flat_map(|&s| sv_cols[s].iter().copied())
-        .collect()
+        .map(|&v| idx(v, "adjacency length"))
+        .collect::<Result<Vec<i32>, _>>()?;
+    let mut adjncy: Vec<i32> = g.adj.iter().map(|&v| v as i32).collect();
+    let mut vwgt = g
+        .weight
+        .iter()
+        .map(|&v| idx(v, "vertex weight"))
+        .collect::<Result<Vec<i32>, _>>()?;
+    let mut options = [0i32; metis_sys::METIS_NOPTIONS as usize];
+    let mut perm = vec![0i32; ns];
+    let mut iperm = vec![0i32; ns];
+    if ns == 0 {
+        return Ok(Vec::new());
+    }
+    // SAFETY: every array has the length METIS reads (nvtxs + 1 offsets, xadj[nvtxs] neighbours
+    // without self-loops in 0..nvtxs, nvtxs weights and outputs, METIS_NOPTIONS options), and
+    // all outlive the call, which keeps no pointer to them.
+    let status = unsafe {
+        metis_sys::METIS_SetDefaultOptions(options.as_mut_ptr());
+        metis_sys::METIS_NodeND(
+            &mut nvtxs,
+            xadj.as_mut_ptr(),
+            adjncy.as_mut_ptr(),
+            vwgt.as_mut_ptr(),
+            options.as_mut_ptr(),
+            perm.as_mut_ptr(),
+            iperm.as_mut_ptr(),
+        )
+    };
+    if status != metis_sys::rstatus_et_METIS_OK {
+        return Err(SolverError::Faer(format!(
+            "METIS_NodeND returned status {status} on {ns} supervariables"
+        )));
+    }
+    let order: Vec<usize> = perm.iter().map(|&p| p as usize).collect();
+    Ok(g.expand(&order))
+}
+
+/// Supervariables of a pattern (DOFs with identical columns), numbered by their first DOF,
+/// with their adjacency (no self-loops) and weights (DOFs each).
+struct SupervariableGraph {
+    cols: Vec<Vec<usize>>,
+    adj_ptr: Vec<usize>,
+    adj: Vec<usize>,
+    weight: Vec<usize>,
+}
+
+impl SupervariableGraph {
+    /// The DOF order of a supervariable order.
+    fn expand(&self, order: &[usize]) -> Vec<usize> {
+        order
+            .iter()
+            .flat_map(|&s| self.cols[s].iter().copied())
+            .collect()
+    }
+
+    fn new(pattern: &SparsityPattern) -> Self {
+        let n = pattern.n_dofs();
+        let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
+        // Supervariables: columns with identical row patterns.
+        let hash = |j: usize| {
+            ri[cp[j]..cp[j + 1]]
+                .iter()
+                .fold(0xcbf2_9ce4_8422_2325u64, |h, &r| {
+                    (h ^ r as u64).wrapping_mul(0x0100_0000_01b3)
+                })
+        };
+        let mut cols: Vec<(usize, u64, usize)> =
+            (0..n).map(|j| (cp[j + 1] - cp[j], hash(j), j)).collect();
+        cols.sort_unstable();
+        let mut sv_of = vec![0usize; n];
+        let mut sv_cols: Vec<Vec<usize>> = Vec::new();
+        for (idx, &(len, h, j)) in cols.iter().enumerate() {
+            let same = idx > 0 && {
+                let (l0, h0, j0) = cols[idx - 1];
+                l0 == len && h0 == h && ri[cp[j0]..cp[j0 + 1]] == ri[cp[j]..cp[j + 1]]
+            };
+            if !same {
+                sv_cols.push(Vec::new());
+            }
+            let s = sv_cols.len() - 1;
+            sv_cols[s].push(j);
+            sv_of[j] = s;
+        }
+        // Number supervariables by their first column (the DOF numbering's locality).
+        let mut by_first: Vec<usize> = (0..sv_cols.len()).collect();
+        by_first.sort_unstable_by_key(|&s| sv_cols[s].iter().min().copied());
+        let mut renumber = vec![0usize; sv_cols.len()];
+        for (new, &old) in by_first.iter().enumerate() {
+            renumber[old] = new;
+        }
+        let sv_cols: Vec<Vec<usize>> = by_first
+            .iter()
+            .map(|&s| {
+                let mut c = sv_cols[s].clone();
+                c.sort_unstable();
+                c
+            })
+            .collect();
+        for s in sv_of.iter_mut() {
+            *s = renumber[*s];
+        }
+        let ns = sv_cols.len();
+        let weight: Vec<usize> = sv_cols.iter().map(Vec::len).collect();
+        let mut adj_ptr = vec![0usize];
+        let mut adj = Vec::new();
+        let mut mark = vec![usize::MAX; ns];
+        for (s, c) in sv_cols.iter().enumerate() {
+            let j = c[0];
+            mark[s] = s;
+            for &r in &ri[cp[j]..cp[j + 1]] {
+                let t = sv_of[r];
+                if mark[t] != s {
+                    mark[t] = s;
+                    adj.push(t);
+                }
+            }
+            adj_ptr.push(adj.len());
+        }
+        SupervariableGraph {
+            cols: sv_cols,
+            adj_ptr,
+            adj,
+            weight,
+        }
+    }
 }
 
 struct Dissection<'a> {
