@@ -752,7 +752,10 @@ pub fn run(
     )?;
     output.set_info(
         "linear_solver",
-        json!(format!("{method:?} ({parallelism:?})")),
+        json!(match solver.structure() {
+            Some(s) => format!("{method:?} ({parallelism:?}): {s}"),
+            None => format!("{method:?} ({parallelism:?})"),
+        }),
     );
     let surface = &case.surface;
     let contact = built.contact.clone();

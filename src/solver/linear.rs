@@ -347,6 +347,15 @@ impl LinearSolver {
         }
     }
 
+    /// Operations of one numeric factorisation and the fill-reducing ordering used, for
+    /// [`Method::SupernodalLu`] (`None` for the other methods).
+    pub fn ordering_and_flops(&self) -> Option<(FillOrdering, f64)> {
+        match &self.factor {
+            Factor::Supernodal { symbolic, .. } => Some((symbolic.ordering, symbolic.flops)),
+            _ => None,
+        }
+    }
+
     /// Size of the factorisation for [`Method::SupernodalLu`]: supernodes, stored entries of
     /// `L` and `U`, operations of one numeric factorisation and the largest front.
     pub fn structure(&self) -> Option<String> {
