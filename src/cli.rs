@@ -718,8 +718,18 @@ fn run_shell(con: &Console, c: &ShellCase, out: &Path, quiet: bool) -> i32 {
         b
     });
     let final_load = c.steps.final_load;
+    let mut checkerboard_seen = false;
     let result = shell_build::run(c, &mut built, out, start, |s| {
-        let line = step_line(c, s);
+        let mut line = step_line(c, s);
+        let share = s.director_unresolved.unwrap_or(0.0);
+        if !checkerboard_seen && share > crate::shell::stabilisation::UNRESOLVED_SHARE_WARNING {
+            checkerboard_seen = true;
+            line.push_str(&format!(
+                "\nwarning: {:.0} % of the director changes unresolved: a director checkerboard \
+                 (details at the end of the run)",
+                100.0 * share
+            ));
+        }
         match &bar {
             Some(b) => {
                 b.println(printable(&line));
@@ -762,6 +772,35 @@ fn run_shell(con: &Console, c: &ShellCase, out: &Path, quiet: bool) -> i32 {
                 summary.wall_time_s,
                 out.display()
             );
+            let threshold = crate::shell::stabilisation::UNRESOLVED_SHARE_WARNING;
+            if let Some(s) = summary
+                .steps
+                .iter()
+                .find(|s| s.director_unresolved.is_some_and(|v| v > threshold))
+            {
+                let remedy = match c.integration.director {
+                    crate::shell::point::DirectorField::Interpolated => {
+                        "integration.director = \"normalised\" or \
+                         integration.director_stabilisation"
+                    }
+                    crate::shell::point::DirectorField::Normalised => {
+                        "integration.director_stabilisation or more particles"
+                    }
+                };
+                say!(
+                    con,
+                    "warning: from converged step {} (load factor {:e}) on, {:.0} % of the \
+                     particles' director changes is a pattern that the RK approximation does not \
+                     pass to the shell (more than {:.0} %: a checkerboard of the director \
+                     rotations, docs/stability.md; per step in results.json, \
+                     `director_unresolved`); the path from there is likely spurious. Remedy: {}.",
+                    s.step,
+                    s.load_factor,
+                    100.0 * s.director_unresolved.unwrap_or(0.0),
+                    100.0 * threshold,
+                    remedy
+                );
+            }
             if matches!(summary.status, RunStatus::Failed(_))
                 && c.integration.director == crate::shell::point::DirectorField::Interpolated
                 && c.integration.director_stabilisation == 0.0

@@ -115,3 +115,51 @@ fn smaller_support_stiffens_the_pinched_cylinder_less() {
     assert!((smaller / reference - 1.0).abs() <= 0.02);
     assert!((model_support / reference - 1.0).abs() > 0.02);
 }
+
+/// `DirectorResolution`: the share of the director changes that the RK approximation leaves out
+/// is round-off for changes that are samples of a quadratic of the parameter coordinates (the
+/// rows reproduce them), and near 1 for a checkerboard (passed with about 2 % of its amplitude;
+/// the edges of a patch without symmetry planes resist it a little).
+#[test]
+fn the_unresolved_share_is_zero_on_quadratics_and_near_one_on_a_checkerboard() {
+    use shelldsa::shell::stabilisation::DirectorResolution;
+    let text = std::fs::read_to_string(root().join("verification/scordelis-lo/case.toml")).unwrap();
+    assert!(!text.contains("kind = \"symmetry\""));
+    let case = parse_shell_case(&text, Path::new("scordelis-lo.toml")).unwrap();
+    let counts = case.particles.counts;
+    let mut model = shell_build::build(&case).unwrap().problem.model;
+    let resolution = DirectorResolution::new(&model).unwrap();
+    assert_eq!(resolution.unresolved_share(&model), 0.0);
+    let n = model.n_particles();
+    let dom = model.domain;
+    let uv = model.particle_uv[..n].to_vec();
+    let d0: Vec<_> = model.particles.iter().map(|p| p.d0).collect();
+    // Smooth: a quadratic of (u, v) in every component.
+    let quadratic = |[u, v]: [f64; 2]| {
+        let m = [1.0, u, v, u * u, u * v, v * v];
+        nalgebra::Vector3::from_fn(|c, _| {
+            (0..6)
+                .map(|k| m[k] * (0.01 * (1 + k + 7 * c) as f64).sin())
+                .sum()
+        })
+    };
+    for (p, (q, d)) in model.particles.iter_mut().zip(uv.iter().zip(&d0)) {
+        p.d = d + 1e-3 * quadratic(*q);
+    }
+    let smooth = resolution.unresolved_share(&model);
+    // Round-off of the rows against changes of order 1e-3.
+    assert!(smooth < 1e-10, "smooth share {smooth:e}");
+    // Checkerboard of the particle grid.
+    for (p, (q, d)) in model.particles.iter_mut().zip(uv.iter().zip(&d0)) {
+        let i = ((q[0] - dom[0][0]) / (dom[0][1] - dom[0][0]) * (counts[0] - 1) as f64).round();
+        let j = ((q[1] - dom[1][0]) / (dom[1][1] - dom[1][0]) * (counts[1] - 1) as f64).round();
+        let sign = if (i + j) as i64 % 2 == 0 { 1.0 } else { -1.0 };
+        p.d = d + nalgebra::Vector3::new(0.0, 1e-3 * sign, 0.0);
+    }
+    let checkerboard = resolution.unresolved_share(&model);
+    assert!(
+        checkerboard > 0.9 && checkerboard < 1.1,
+        "checkerboard share {checkerboard}"
+    );
+    println!("unresolved share: quadratic {smooth:.1e}, checkerboard {checkerboard:.3}");
+}

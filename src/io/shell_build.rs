@@ -32,6 +32,7 @@ use crate::shell::load;
 use crate::shell::model::{Discretisation, ShellModel};
 use crate::shell::point::DOFS_PER_PARTICLE;
 use crate::shell::problem::ShellProblem;
+use crate::shell::stabilisation::DirectorResolution;
 use crate::shell::symmetry::SymmetryPlane;
 use crate::shell::ShellError;
 use crate::solver::observe::{Observed, StepObserver};
@@ -759,6 +760,8 @@ pub fn run(
     );
     let surface = &case.surface;
     let contact = built.contact.clone();
+    let resolution = DirectorResolution::new(problem_model(&built.problem))
+        .map_err(|e| model_err("kernel.support", e))?;
     let hook = CommitHook {
         record: None,
         error: None,
@@ -773,6 +776,7 @@ pub fn run(
                 None => None,
             };
             output.set_step_reactions(prescribed_reactions(case, p));
+            output.set_step_director_unresolved(resolution.unresolved_share(model));
             let s = output.converged_with_contact(model, surface, rec, report.as_ref())?;
             progress(s);
             Ok::<(), OutputError>(())

@@ -567,6 +567,9 @@ pub struct StepSummary {
     /// Reactions of the `prescribed` entries (displacement control): `(boundary[k], the force
     /// or moment the support exerts on the shell along the prescribed component)`.
     pub reactions: Vec<(String, f64)>,
+    /// The share of the particles' director changes that the RK approximation leaves out
+    /// ([`crate::shell::stabilisation::DirectorResolution`]): near 1 for the checkerboard mode.
+    pub director_unresolved: Option<f64>,
 }
 
 /// The tools at one converged step.
@@ -622,6 +625,7 @@ pub struct ShellOutput {
     displacement_control: Option<f64>,
     /// Reactions of the step being recorded (set before [`Self::converged_with_contact`]).
     pending_reactions: Vec<(String, f64)>,
+    pending_director_unresolved: Option<f64>,
 }
 
 /// What [`ShellOutput`] tracks of the contact over the run.
@@ -692,6 +696,7 @@ impl ShellOutput {
             directions: Vec::new(),
             displacement_control: None,
             pending_reactions: Vec::new(),
+            pending_director_unresolved: None,
         })
     }
 
@@ -711,6 +716,11 @@ impl ShellOutput {
     /// The reactions of the `prescribed` entries at the step recorded next.
     pub fn set_step_reactions(&mut self, reactions: Vec<(String, f64)>) {
         self.pending_reactions = reactions;
+    }
+
+    /// The unresolved share of the director changes at the step recorded next.
+    pub fn set_step_director_unresolved(&mut self, share: f64) {
+        self.pending_director_unresolved = Some(share);
     }
 
     /// Record contact with the named tools (in case order): per-step tool positions, forces
@@ -876,6 +886,7 @@ impl ShellOutput {
             contact,
             separation,
             reactions: std::mem::take(&mut self.pending_reactions),
+            director_unresolved: self.pending_director_unresolved.take(),
         });
         let summary = self.steps.last().expect("just pushed");
         let line = serde_json::to_string(&self.step_json(summary))?;
@@ -1076,6 +1087,9 @@ impl ShellOutput {
         }
         if let (false, Value::Object(o)) = (s.continuation.is_empty(), &mut v) {
             o.insert("continuation".into(), json!(s.continuation));
+        }
+        if let (Some(share), Value::Object(o)) = (s.director_unresolved, &mut v) {
+            o.insert("director_unresolved".into(), json!(share));
         }
         if let (false, Value::Object(o)) = (s.reactions.is_empty(), &mut v) {
             let r: serde_json::Map<String, Value> = s
