@@ -721,14 +721,12 @@ fn run_shell(con: &Console, c: &ShellCase, out: &Path, quiet: bool) -> i32 {
     let mut checkerboard_seen = false;
     let result = shell_build::run(c, &mut built, out, start, |s| {
         let mut line = step_line(c, s);
-        let share = s.director_unresolved.unwrap_or(0.0);
-        if !checkerboard_seen && share > crate::shell::stabilisation::UNRESOLVED_SHARE_WARNING {
+        if !checkerboard_seen && checkerboard_warning(s).is_some() {
             checkerboard_seen = true;
-            line.push_str(&format!(
-                "\nwarning: {:.0} % of the director changes unresolved: a director checkerboard \
-                 (details at the end of the run)",
-                100.0 * share
-            ));
+            line.push_str(
+                "\nwarning: the director changes are mostly a pattern the RK approximation does \
+                 not resolve: a director checkerboard (details at the end of the run)",
+            );
         }
         match &bar {
             Some(b) => {
@@ -772,11 +770,10 @@ fn run_shell(con: &Console, c: &ShellCase, out: &Path, quiet: bool) -> i32 {
                 summary.wall_time_s,
                 out.display()
             );
-            let threshold = crate::shell::stabilisation::UNRESOLVED_SHARE_WARNING;
-            if let Some(s) = summary
+            if let Some((s, what)) = summary
                 .steps
                 .iter()
-                .find(|s| s.director_unresolved.is_some_and(|v| v > threshold))
+                .find_map(|s| checkerboard_warning(s).map(|w| (s, w)))
             {
                 let remedy = match c.integration.director {
                     crate::shell::point::DirectorField::Interpolated => {
@@ -789,15 +786,13 @@ fn run_shell(con: &Console, c: &ShellCase, out: &Path, quiet: bool) -> i32 {
                 };
                 say!(
                     con,
-                    "warning: from converged step {} (load factor {:e}) on, {:.0} % of the \
-                     particles' director changes is a pattern that the RK approximation does not \
-                     pass to the shell (more than {:.0} %: a checkerboard of the director \
-                     rotations, docs/stability.md; per step in results.json, \
-                     `director_unresolved`); the path from there is likely spurious. Remedy: {}.",
+                    "warning: at converged step {} (load factor {:e}) {what} are a pattern that \
+                     the RK approximation does not pass to the shell: a checkerboard of the \
+                     director rotations (docs/stability.md §10; per step in results.json, \
+                     `director_unresolved` and `director_unresolved_step`); the path from there \
+                     is likely spurious. Remedy: {}.",
                     s.step,
                     s.load_factor,
-                    100.0 * s.director_unresolved.unwrap_or(0.0),
-                    100.0 * threshold,
                     remedy
                 );
             }
@@ -828,6 +823,29 @@ fn run_shell(con: &Console, c: &ShellCase, out: &Path, quiet: bool) -> i32 {
                 _ => EXIT_BAD_INPUT,
             }
         }
+    }
+}
+
+/// What of a converged step's director changes is unresolved beyond the warning levels
+/// (`shell::stabilisation`), in words; `None` below both.
+fn checkerboard_warning(s: &StepSummary) -> Option<String> {
+    use crate::shell::stabilisation::{UNRESOLVED_SHARE_WARNING, UNRESOLVED_STEP_SHARE_WARNING};
+    let total = s.director_unresolved.unwrap_or(0.0);
+    let step = s.director_unresolved_step.unwrap_or(0.0);
+    if total > UNRESOLVED_SHARE_WARNING {
+        Some(format!(
+            "{:.0} % of the particles' director changes since the start (more than {:.0} %)",
+            100.0 * total,
+            100.0 * UNRESOLVED_SHARE_WARNING
+        ))
+    } else if step > UNRESOLVED_STEP_SHARE_WARNING {
+        Some(format!(
+            "{:.0} % of the step's director changes (more than {:.0} %)",
+            100.0 * step,
+            100.0 * UNRESOLVED_STEP_SHARE_WARNING
+        ))
+    } else {
+        None
     }
 }
 

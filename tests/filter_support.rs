@@ -128,7 +128,7 @@ fn the_unresolved_share_is_zero_on_quadratics_and_near_one_on_a_checkerboard() {
     let case = parse_shell_case(&text, Path::new("scordelis-lo.toml")).unwrap();
     let counts = case.particles.counts;
     let mut model = shell_build::build(&case).unwrap().problem.model;
-    let resolution = DirectorResolution::new(&model).unwrap();
+    let mut resolution = DirectorResolution::new(&model).unwrap();
     assert_eq!(resolution.unresolved_share(&model), 0.0);
     let n = model.n_particles();
     let dom = model.domain;
@@ -161,5 +161,15 @@ fn the_unresolved_share_is_zero_on_quadratics_and_near_one_on_a_checkerboard() {
         checkerboard > 0.9 && checkerboard < 1.1,
         "checkerboard share {checkerboard}"
     );
+    // The step's share: the checkerboard taken as the start of a step, a quadratic added in it.
+    assert!((resolution.step_share(&model) - checkerboard).abs() < 1e-12);
+    resolution.advance(&model);
+    assert_eq!(resolution.step_share(&model), 0.0);
+    for (p, q) in model.particles.iter_mut().zip(&uv) {
+        p.d += 1e-3 * quadratic(*q);
+    }
+    let step = resolution.step_share(&model);
+    assert!(step < 1e-10, "quadratic step on a checkerboard: {step:e}");
+    assert!(resolution.unresolved_share(&model) > 0.1);
     println!("unresolved share: quadratic {smooth:.1e}, checkerboard {checkerboard:.3}");
 }

@@ -760,7 +760,7 @@ pub fn run(
     );
     let surface = &case.surface;
     let contact = built.contact.clone();
-    let resolution = DirectorResolution::new(problem_model(&built.problem))
+    let mut resolution = DirectorResolution::new(problem_model(&built.problem))
         .map_err(|e| model_err("kernel.support", e))?;
     let hook = CommitHook {
         record: None,
@@ -776,7 +776,11 @@ pub fn run(
                 None => None,
             };
             output.set_step_reactions(prescribed_reactions(case, p));
-            output.set_step_director_unresolved(resolution.unresolved_share(model));
+            output.set_step_director_unresolved(
+                resolution.unresolved_share(model),
+                resolution.step_share(model),
+            );
+            resolution.advance(model);
             let s = output.converged_with_contact(model, surface, rec, report.as_ref())?;
             progress(s);
             Ok::<(), OutputError>(())

@@ -570,6 +570,8 @@ pub struct StepSummary {
     /// The share of the particles' director changes that the RK approximation leaves out
     /// ([`crate::shell::stabilisation::DirectorResolution`]): near 1 for the checkerboard mode.
     pub director_unresolved: Option<f64>,
+    /// The same share of the step's own director changes.
+    pub director_unresolved_step: Option<f64>,
 }
 
 /// The tools at one converged step.
@@ -625,7 +627,7 @@ pub struct ShellOutput {
     displacement_control: Option<f64>,
     /// Reactions of the step being recorded (set before [`Self::converged_with_contact`]).
     pending_reactions: Vec<(String, f64)>,
-    pending_director_unresolved: Option<f64>,
+    pending_director_unresolved: Option<[f64; 2]>,
 }
 
 /// What [`ShellOutput`] tracks of the contact over the run.
@@ -718,9 +720,10 @@ impl ShellOutput {
         self.pending_reactions = reactions;
     }
 
-    /// The unresolved share of the director changes at the step recorded next.
-    pub fn set_step_director_unresolved(&mut self, share: f64) {
-        self.pending_director_unresolved = Some(share);
+    /// The unresolved shares of the director changes, since the reference state and in the
+    /// step, at the step recorded next.
+    pub fn set_step_director_unresolved(&mut self, total: f64, step: f64) {
+        self.pending_director_unresolved = Some([total, step]);
     }
 
     /// Record contact with the named tools (in case order): per-step tool positions, forces
@@ -886,7 +889,8 @@ impl ShellOutput {
             contact,
             separation,
             reactions: std::mem::take(&mut self.pending_reactions),
-            director_unresolved: self.pending_director_unresolved.take(),
+            director_unresolved: self.pending_director_unresolved.map(|s| s[0]),
+            director_unresolved_step: self.pending_director_unresolved.take().map(|s| s[1]),
         });
         let summary = self.steps.last().expect("just pushed");
         let line = serde_json::to_string(&self.step_json(summary))?;
@@ -1090,6 +1094,9 @@ impl ShellOutput {
         }
         if let (Some(share), Value::Object(o)) = (s.director_unresolved, &mut v) {
             o.insert("director_unresolved".into(), json!(share));
+        }
+        if let (Some(share), Value::Object(o)) = (s.director_unresolved_step, &mut v) {
+            o.insert("director_unresolved_step".into(), json!(share));
         }
         if let (false, Value::Object(o)) = (s.reactions.is_empty(), &mut v) {
             let r: serde_json::Map<String, Value> = s

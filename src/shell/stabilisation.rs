@@ -300,6 +300,11 @@ const ROT: usize = 3;
 /// checkerboard has taken over the director field.
 pub const UNRESOLVED_SHARE_WARNING: f64 = 0.5;
 
+/// The [`DirectorResolution::step_share`] above which `shelldsa run` warns that a step's
+/// director changes are mostly a checkerboard (docs/stability.md §10: at most 0.57 on the
+/// shipped cases that follow their references, 0.95–0.98 where the mode takes a path over).
+pub const UNRESOLVED_STEP_SHARE_WARNING: f64 = 0.75;
+
 /// How much of the particles' director changes the RK approximation leaves out: the
 /// diagnostic of the checkerboard mode (docs/stability.md), for any director field and
 /// stabilisation.
@@ -328,6 +333,9 @@ pub const UNRESOLVED_SHARE_WARNING: f64 = 0.5;
 #[derive(Debug, Clone)]
 pub struct DirectorResolution {
     rows: Vec<Vec<(usize, f64)>>,
+    /// The directors of every shape-function particle (images included) at the last
+    /// [`DirectorResolution::advance`].
+    last: Vec<Vector3<f64>>,
 }
 
 impl DirectorResolution {
@@ -337,15 +345,35 @@ impl DirectorResolution {
         for i in 0..model.n_particles() {
             rows.push(filter_row(i, &model.shape_values(model.particle_uv[i])?));
         }
-        Ok(DirectorResolution { rows })
+        let last = (0..model.shape_functions.particles().len())
+            .map(|j| model.particle_state(j).d)
+            .collect();
+        Ok(DirectorResolution { rows, last })
     }
 
     /// The share `s` on the model's committed state (0 where no director has changed).
     pub fn unresolved_share(&self, model: &ShellModel) -> f64 {
-        let change = |j: usize| {
+        self.share_of(|j| {
             let st = model.particle_state(j);
             st.d - st.d0
-        };
+        })
+    }
+
+    /// The share of the changes since the last [`DirectorResolution::advance`] (since
+    /// construction before the first): of the last step's changes when advanced once per
+    /// committed step.
+    pub fn step_share(&self, model: &ShellModel) -> f64 {
+        self.share_of(|j| model.particle_state(j).d - self.last[j])
+    }
+
+    /// Take the model's committed directors as the start of the next step.
+    pub fn advance(&mut self, model: &ShellModel) {
+        for (j, d) in self.last.iter_mut().enumerate() {
+            *d = model.particle_state(j).d;
+        }
+    }
+
+    fn share_of(&self, change: impl Fn(usize) -> Vector3<f64>) -> f64 {
         let (mut left_out, mut all) = (0.0, 0.0);
         for (i, row) in self.rows.iter().enumerate() {
             let g: Vector3<f64> = row.iter().map(|&(j, c)| change(j) * c).sum();
