@@ -5,7 +5,7 @@
 //!
 //! `cargo run --release --example solver_probe -- CASE.toml [GRID] [--methods sn,nd,metis,amd,lu,dense]`
 //! (`GRID` overrides `particles.grid` with `GRID × GRID`; `sn` is the supernodal LU with its
-//! default ordering, the fewest operations of `nd`, `metis` and `amd`; `lu` faer's sparse LU,
+//! default ordering, the cheapest of `nd`, `metis` and `amd` by estimate; `lu` faer's sparse LU,
 //! `dense` the dense LU).
 use shelldsa::io::shell_build::build;
 use shelldsa::io::shell_case::read_shell_case;
@@ -127,7 +127,7 @@ fn main() {
             .sqrt()
             / rhs.iter().map(|b| b * b).sum::<f64>().sqrt();
         println!(
-            "  {m} ({par:?}): symbolic {t_sym:.3} s, numeric {t_num:.3} s wall, {c_num:.3} s CPU (incl. probe), \
+            "  {m} ({par:?}): symbolic {t_sym:.3} s, numeric {t_num:.5} s wall, {c_num:.3} s CPU (incl. probe), \
              solve {t_solve:.4} s, product {t_mv:.4} s, relative residual {res:.1e}, \
              {} of {} factorisations redone by the sparse LU",
             solver.n_fallbacks(),

@@ -315,7 +315,7 @@ impl LinearSolver {
     }
 
     /// [`Method::SupernodalLu`] with the given fill-reducing ordering (the default is
-    /// [`FillOrdering::Fewest`]).
+    /// [`FillOrdering::Cheapest`]).
     pub fn supernodal(
         pattern: &SparsityPattern,
         ordering: FillOrdering,
@@ -347,11 +347,12 @@ impl LinearSolver {
         }
     }
 
-    /// Operations of one numeric factorisation and the fill-reducing ordering used, for
+    /// The fill-reducing ordering used and the estimated cost of one numeric factorisation
+    /// (operations plus front entries, [`super::FRONT_ENTRY_FLOPS`] each), for
     /// [`Method::SupernodalLu`] (`None` for the other methods).
-    pub fn ordering_and_flops(&self) -> Option<(FillOrdering, f64)> {
+    pub fn ordering_and_cost(&self) -> Option<(FillOrdering, f64)> {
         match &self.factor {
-            Factor::Supernodal { symbolic, .. } => Some((symbolic.ordering, symbolic.flops)),
+            Factor::Supernodal { symbolic, .. } => Some((symbolic.ordering, symbolic.cost())),
             _ => None,
         }
     }
@@ -362,13 +363,14 @@ impl LinearSolver {
         match &self.factor {
             Factor::Supernodal { symbolic, .. } => Some(format!(
                 "{:?} ordering, {} supernodes, {} entries in L+U ({:.1} per row), {:.3e} flops, \
-                 largest front {}",
+                 largest front {}, {} front entries",
                 symbolic.ordering,
                 symbolic.n_supernodes(),
                 symbolic.factor_entries,
                 symbolic.factor_entries as f64 / self.n.max(1) as f64,
                 symbolic.flops,
-                symbolic.max_front
+                symbolic.max_front,
+                symbolic.front_entries
             )),
             _ => None,
         }

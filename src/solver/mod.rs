@@ -39,7 +39,7 @@ pub use newton::{
     BACKTRACK_LENGTHS,
 };
 pub use pattern::SparsityPattern;
-pub use supernodal::FillOrdering;
+pub use supernodal::{FillOrdering, FRONT_ENTRY_FLOPS, ORDERING_MARGIN};
 
 /// Errors of the linear-algebra layer. Every variant names where the problem was found.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
