@@ -136,10 +136,7 @@ impl DirectorFilter {
     ) -> Result<Self, ShellError> {
         let mp = &model.material;
         let kappa = Self::stiffness(epsilon, mp.young, mp.poisson, model.thickness);
-        let mut rows = Vec::with_capacity(model.n_particles());
-        for i in 0..model.n_particles() {
-            rows.push(filter_row(i, &model.shape_values(model.particle_uv[i])?));
-        }
+        let rows = model_rows(model)?;
         let mut filter = DirectorFilter {
             epsilon,
             strength,
@@ -341,10 +338,7 @@ pub struct DirectorResolution {
 impl DirectorResolution {
     /// The rows of `model`'s own RK functions at its real particles.
     pub fn new(model: &ShellModel) -> Result<Self, ShellError> {
-        let mut rows = Vec::with_capacity(model.n_particles());
-        for i in 0..model.n_particles() {
-            rows.push(filter_row(i, &model.shape_values(model.particle_uv[i])?));
-        }
+        let rows = model_rows(model)?;
         let last = (0..model.shape_functions.particles().len())
             .map(|j| model.particle_state(j).d)
             .collect();
@@ -374,11 +368,12 @@ impl DirectorResolution {
     }
 
     fn share_of(&self, change: impl Fn(usize) -> Vector3<f64>) -> f64 {
+        let changes: Vec<Vector3<f64>> = (0..self.last.len()).map(change).collect();
         let (mut left_out, mut all) = (0.0, 0.0);
         for (i, row) in self.rows.iter().enumerate() {
-            let g: Vector3<f64> = row.iter().map(|&(j, c)| change(j) * c).sum();
+            let g: Vector3<f64> = row.iter().map(|&(j, c)| changes[j] * c).sum();
             left_out += g.norm_squared();
-            all += change(i).norm_squared();
+            all += changes[i].norm_squared();
         }
         if all > 0.0 {
             (left_out / all).sqrt()
@@ -386,6 +381,13 @@ impl DirectorResolution {
             0.0
         }
     }
+}
+
+/// The filter rows of `model`'s own RK functions at its real particles.
+fn model_rows(model: &ShellModel) -> Result<Vec<Vec<(usize, f64)>>, ShellError> {
+    (0..model.n_particles())
+        .map(|i| Ok(filter_row(i, &model.shape_values(model.particle_uv[i])?)))
+        .collect()
 }
 
 /// Row `i` of the filter, `(j, δ_ij − Ψ_j(ξ_i))`, from the RK functions `sv` at particle `i`.
