@@ -584,12 +584,7 @@ fn describe(c: &Case) -> String {
             m.design_name
         ),
         Case::Shell(s) => {
-            let mut director = match s.integration.director {
-                crate::shell::point::DirectorField::Interpolated => "interpolated",
-                crate::shell::point::DirectorField::Normalised => "normalised",
-            }
-            .to_string()
-                + " director field";
+            let mut director = s.integration.director.name().to_string() + " director field";
             if s.integration.director_stabilisation > 0.0 {
                 director += &format!(
                     ", director stabilisation ε = {}",

@@ -42,6 +42,16 @@ pub enum DirectorField {
     Normalised,
 }
 
+impl DirectorField {
+    /// The name of the case format (`integration.director`).
+    pub fn name(self) -> &'static str {
+        match self {
+            DirectorField::Interpolated => "interpolated",
+            DirectorField::Normalised => "normalised",
+        }
+    }
+}
+
 /// Initial (CAD) geometry at an in-plane quadrature point: position derivatives and the unit
 /// normal with its derivatives. Generic: a shape design variable enters here.
 #[derive(Clone, Copy, Debug, PartialEq)]
