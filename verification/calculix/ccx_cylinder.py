@@ -80,7 +80,15 @@ class CylinderMesh:
         return [self.nid(p, q, k) for p, q in pts for k in layers if self.exists(p, q, k)]
 
 
-def write_mesh(f, mesh, young, poisson):
+LAWS = ("svk", "neo-hooke")
+
+
+def write_mesh(f, mesh, young, poisson, law="svk"):
+    """The nodes, the C3D20R elements and the material. `law`: "svk" (ccx's `*ELASTIC` under
+    NLGEOM: St Venant-Kirchhoff, the second Piola-Kirchhoff stress linear in the Green-Lagrange
+    strain) or "neo-hooke" (`*HYPERELASTIC, NEO HOOKE` with the same small-strain shear and bulk
+    moduli: C10 = mu / 2, D1 = 2 / K). The two agree to first order in the strain and differ
+    at the next."""
     f.write("*NODE, NSET=NALL\n")
     for i, j, k in mesh.nodes():
         x = mesh.coords(i, j, k)
@@ -90,8 +98,15 @@ def write_mesh(f, mesh, young, poisson):
         row = [n] + ids
         f.write(", ".join(str(v) for v in row[:16]) + ",\n")
         f.write(", ".join(str(v) for v in row[16:]) + "\n")
-    f.write("*MATERIAL, NAME=MAT\n*ELASTIC\n")
-    f.write(f"{young:.10g}, {poisson:.10g}\n")
+    f.write("*MATERIAL, NAME=MAT\n")
+    if law == "svk":
+        f.write(f"*ELASTIC\n{young:.10g}, {poisson:.10g}\n")
+    elif law == "neo-hooke":
+        mu = young / (2.0 * (1.0 + poisson))
+        bulk = young / (3.0 * (1.0 - 2.0 * poisson))
+        f.write(f"*HYPERELASTIC, NEO HOOKE\n{mu / 2.0:.10g}, {2.0 / bulk:.10g}\n")
+    else:
+        raise ValueError(f"law = {law!r}: expected one of {LAWS}")
     f.write("*SOLID SECTION, ELSET=EALL, MATERIAL=MAT\n")
 
 

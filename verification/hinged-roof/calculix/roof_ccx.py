@@ -4,7 +4,8 @@ of the hinged-edge condition. Writes the ccx input, runs ccx (displacement contr
 point through the limit point and the minimum) and prints the limit load, the minimum and
 P/P_max at Sze's 36 deflections. Requires the `ccx` executable (Debian package calculix-ccx).
 
-Usage: roof_ccx.py [--grid N [N ...]] [--edge a b c] [--load all|mid] [--ours RESULTS_JSON]
+Usage: roof_ccx.py [--grid N [N ...]] [--edge a b c] [--load all|mid] [--material svk|neo-hooke]
+                   [--ours RESULTS_JSON]
 
 Quarter model as the shipped case.toml: axis y, crown along z, symmetry planes x = 0 (the crown
 line) and y = 0 (mid-length), the straight edge at th = 0.1 rad hinged, the curved edge y = 254
@@ -22,7 +23,7 @@ sys.dont_write_bytecode = True  # no __pycache__ beside the shared modules
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "..", "calculix"))
 sys.path.insert(0, os.path.join(HERE, ".."))
-from ccx_cylinder import CylinderMesh, parse_dat, run_ccx, write_mesh, write_nset  # noqa: E402
+from ccx_cylinder import LAWS, CylinderMesh, parse_dat, run_ccx, write_mesh, write_nset  # noqa: E402
 from compare import P_MAX, REF  # noqa: E402  (Sze's table and P_max, one copy)
 
 R, HALF_L, H = 2540.0, 254.0, 12.7
@@ -38,7 +39,7 @@ def time_points():
     return sorted(pts)
 
 
-def write_input(path, n, edge, load):
+def write_input(path, n, edge, load, law="svk"):
     # e1 = z (the crown, th = 0), e2 = x, axis y: th in [0, 0.1 rad], s in [0, 254].
     m = CylinderMesh(R, H, [0, 0, 1], [1, 0, 0], [0, 1, 0], (0.0, HALF_ANGLE_DEG),
                      (0.0, HALF_L), n, n)
@@ -46,7 +47,7 @@ def write_input(path, n, edge, load):
     dofs = (1, 2, 3) if edge in ("a", "b") else (1, 3)
     with open(path, "w") as f:
         f.write(f"*HEADING\nhinged roof h = 12.7, quarter model, edge {edge}, load {load}\n")
-        write_mesh(f, m, E, NU)
+        write_mesh(f, m, E, NU, law)
         write_nset(f, "SYMX", m.line(i=0))
         write_nset(f, "SYMY", m.line(j=0))
         write_nset(f, "EDGEALL", m.line(i=ie))
@@ -123,6 +124,8 @@ def main():
     ap.add_argument("--edge", nargs="+", default=["a", "b", "c"])
     ap.add_argument("--load", choices=["all", "mid"], default="all",
                     help="u_z prescribed on all three load-point nodes or the mid-surface one")
+    ap.add_argument("--material", choices=LAWS, default="svk",
+                    help="the elastic law at finite strain (ccx_cylinder.write_mesh)")
     ap.add_argument("--ours", help="a shelldsa results.json of the shipped case, for a column")
     ap.add_argument("--workdir", default="out/hinged-roof-ccx")
     ap.add_argument("--timeout", type=float, default=1200.0)
@@ -131,12 +134,15 @@ def main():
     ours = ours_path(args.ours) if args.ours else None
     for n in args.grid:
         for edge in args.edge:
-            job = f"roof_{edge}_{n}x{n}" + ("" if args.load == "all" else "_mid")
-            write_input(os.path.join(args.workdir, job + ".inp"), n, edge, args.load)
+            job = (f"roof_{edge}_{n}x{n}" + ("" if args.load == "all" else "_mid")
+                   + ("" if args.material == "svk" else "_neo"))
+            write_input(os.path.join(args.workdir, job + ".inp"), n, edge, args.load,
+                        args.material)
             text, rc = run_ccx(args.workdir, job, args.timeout)
             pts = read_path(text)
-            print(f"\nedge {edge}, {n} x {n} C3D20R, load-point u_z on {args.load}, ccx exit {rc}, "
-                  f"{len(pts) - 1} output points, last -W {pts[-1][0]:.3f}")
+            print(f"\nedge {edge}, {n} x {n} C3D20R, {args.material}, load-point u_z on "
+                  f"{args.load}, ccx exit {rc}, {len(pts) - 1} output points, "
+                  f"last -W {pts[-1][0]:.3f}")
             lim, mn = extrema(pts)
             for name, v, (p_ref, w_ref) in (("limit load", lim, (0.7421, 11.293)),
                                             ("minimum", mn, (0.1729, 19.852))):

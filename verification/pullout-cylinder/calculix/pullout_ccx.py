@@ -3,7 +3,7 @@
 displacement control of the pulled point. Writes the ccx input, runs ccx and prints the load and
 the displacements at Sze's tabulated W_A. Requires the `ccx` executable (Debian calculix-ccx).
 
-Usage: pullout_ccx.py [--grid NU NV] [--workdir DIR]
+Usage: pullout_ccx.py [--grid NU NV] [--material svk|neo-hooke] [--workdir DIR]
 
 Axis x, the pulled generator along z (th = 0), th = 90 deg at +y; symmetry planes y = 0
 (th = 0), z = 0 (th = 90 deg) and x = 0 (mid-length), the end x = L/2 free. A = (0, 0, R),
@@ -20,7 +20,7 @@ import sys
 sys.dont_write_bytecode = True  # no __pycache__ beside the shared module
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..",
                                 "calculix"))
-from ccx_cylinder import CylinderMesh, parse_dat, run_ccx, write_mesh, write_nset  # noqa: E402
+from ccx_cylinder import LAWS, CylinderMesh, parse_dat, run_ccx, write_mesh, write_nset  # noqa: E402
 
 R, L, H = 4.953, 10.35, 0.094
 E, NU = 10.5e6, 0.3125
@@ -37,12 +37,12 @@ REF = [(0.025, 0.819, 0.864, 0.872), (0.05, 1.260, 1.471, 1.493), (0.075, 1.527,
 W_END = REF[-1][1]
 
 
-def write_input(path, nu, nv, max_inc):
+def write_input(path, nu, nv, max_inc, law="svk"):
     m = CylinderMesh(R, H, [0, 0, 1], [0, 1, 0], [1, 0, 0], (0.0, 90.0), (0.0, L / 2), nu, nv)
     ie, je = m.ni - 1, m.nj - 1
     with open(path, "w") as f:
         f.write("*HEADING\npull-out of an open-ended cylinder, octant, displacement control\n")
-        write_mesh(f, m, E, NU)
+        write_mesh(f, m, E, NU, law)
         write_nset(f, "SYMY", m.line(i=0))
         write_nset(f, "SYMZ", m.line(i=ie))
         write_nset(f, "SYMX", m.line(j=0))
@@ -65,13 +65,15 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--grid", nargs=2, type=int, default=[24, 16], metavar=("NU", "NV"))
     ap.add_argument("--max-inc", type=float, default=0.01)
+    ap.add_argument("--material", choices=LAWS, default="svk",
+                    help="the elastic law at finite strain (ccx_cylinder.write_mesh)")
     ap.add_argument("--workdir", default="out/pullout-ccx")
     ap.add_argument("--timeout", type=float, default=1800.0)
     args = ap.parse_args()
     os.makedirs(args.workdir, exist_ok=True)
-    job = f"pullout_{args.grid[0]}x{args.grid[1]}"
+    job = f"pullout_{args.grid[0]}x{args.grid[1]}" + ("" if args.material == "svk" else "_neo")
     m = write_input(os.path.join(args.workdir, job + ".inp"), args.grid[0], args.grid[1],
-                    args.max_inc)
+                    args.max_inc, args.material)
     text, rc = run_ccx(args.workdir, job, args.timeout)
     ie, je = m.ni - 1, m.nj - 1
     end, mid, a = m.nid(ie, je, 1), m.nid(ie, 0, 1), m.nid(0, 0, 1)
@@ -83,7 +85,8 @@ def main():
         elif what == "displacements":
             row["W"], row["mid"], row["end"] = rows[a][2], -rows[mid][1], -rows[end][1]
     path = [r for _, r in sorted(path.items()) if len(r) == 4]
-    print(f"{args.grid[0]} x {args.grid[1]} C3D20R, ccx exit {rc}, {len(path)} outputs")
+    print(f"{args.grid[0]} x {args.grid[1]} C3D20R, {args.material}, ccx exit {rc}, "
+          f"{len(path)} outputs")
     print("Sze's -U_B against the 90-degree point at mid-length, -U_C against the one on the "
           "free end")
     print("| W_A | P/P_max (Sze) | ccx | error | -U_B (Sze) | ccx, mid-length | error "
