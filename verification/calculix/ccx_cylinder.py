@@ -1,15 +1,16 @@
 """Cylinder-sector meshes for CalculiX (ccx) reference runs, and reading ccx's .dat output.
 
-The shell is meshed as one layer of 20-node reduced-integration bricks (C3D20R) through the
-thickness; this is the element CalculiX itself expands an S8R shell into, written out here so
-that every boundary condition is stated on the layer it acts on (mid-surface only for a hinge,
-all three layers where a rotation is held as well).
+The shell is meshed as `nt` layers of 20-node reduced-integration bricks (C3D20R) through the
+thickness (default one: the element CalculiX itself expands an S8R shell into), written out here
+so that every boundary condition is stated on the nodes it acts on (mid-surface only for a
+hinge, all layers where a rotation is held as well).
 
-Node grid: i = 0 .. 2 nu along the arc, j = 0 .. 2 nv along the axis, k = 0, 1, 2 through the
-thickness (inner face, mid-surface, outer face). Position
-    X = (R + (k - 1) h / 2) (cos(th) e1 + sin(th) e2) + s a,
+Node grid: i = 0 .. 2 nu along the arc, j = 0 .. 2 nv along the axis, k = 0 .. 2 nt through the
+thickness (inner face to outer face; k = nt is the mid-surface). Position
+    X = (R + (k / (2 nt) - 1/2) h) (cos(th) e1 + sin(th) e2) + s a,
 th = th0 + (th1 - th0) i / (2 nu), s = s0 + (s1 - s0) j / (2 nv). Serendipity elements have no
-node where i and j are both odd, and mid-surface (k = 1) nodes only where i and j are both even.
+node where i and j are both odd, and nodes between the bricks' faces (odd k) only where i and j
+are both even.
 """
 import math
 import os
@@ -18,19 +19,19 @@ import subprocess
 
 
 class CylinderMesh:
-    def __init__(self, radius, thickness, e1, e2, axis, theta, length, nu, nv):
+    def __init__(self, radius, thickness, e1, e2, axis, theta, length, nu, nv, nt=1):
         self.r, self.h = radius, thickness
         self.e1, self.e2, self.a = e1, e2, axis
         self.theta, self.length = theta, length
-        self.nu, self.nv = nu, nv
-        self.ni, self.nj = 2 * nu + 1, 2 * nv + 1
+        self.nu, self.nv, self.nt = nu, nv, nt
+        self.ni, self.nj, self.nk = 2 * nu + 1, 2 * nv + 1, 2 * nt + 1
 
     def exists(self, i, j, k):
-        if not (0 <= i < self.ni and 0 <= j < self.nj and 0 <= k <= 2):
+        if not (0 <= i < self.ni and 0 <= j < self.nj and 0 <= k < self.nk):
             return False
         if i % 2 == 1 and j % 2 == 1:
             return False
-        return k != 1 or (i % 2 == 0 and j % 2 == 0)
+        return k % 2 == 0 or (i % 2 == 0 and j % 2 == 0)
 
     def nid(self, i, j, k):
         assert self.exists(i, j, k), (i, j, k)
@@ -39,12 +40,12 @@ class CylinderMesh:
     def coords(self, i, j, k):
         th = math.radians(self.theta[0] + (self.theta[1] - self.theta[0]) * i / (self.ni - 1))
         s = self.length[0] + (self.length[1] - self.length[0]) * j / (self.nj - 1)
-        rk = self.r + (k - 1) * self.h / 2.0
+        rk = self.r + (k / (self.nk - 1) - 0.5) * self.h
         return [rk * (math.cos(th) * p + math.sin(th) * q) + s * c
                 for p, q, c in zip(self.e1, self.e2, self.a)]
 
     def nodes(self):
-        return [(i, j, k) for k in range(3) for j in range(self.nj) for i in range(self.ni)
+        return [(i, j, k) for k in range(self.nk) for j in range(self.nj) for i in range(self.ni)
                 if self.exists(i, j, k)]
 
     def elements(self):
@@ -56,28 +57,49 @@ class CylinderMesh:
                  self.e1[0] * self.e2[1] - self.e1[1] * self.e2[0]]
         right = sum(c * a for c, a in zip(cross, self.a)) > 0
         out = []
-        for b in range(self.nv):
-            for a in range(self.nu):
-                i0, j0 = 2 * a, 2 * b
-                c = [(i0, j0), (i0 + 2, j0), (i0 + 2, j0 + 2), (i0, j0 + 2)]
-                m = [(i0 + 1, j0), (i0 + 2, j0 + 1), (i0 + 1, j0 + 2), (i0, j0 + 1)]
-                if not right:
-                    c = [c[0], c[3], c[2], c[1]]
-                    m = [m[3], m[2], m[1], m[0]]
-                ids = ([self.nid(i, j, 0) for i, j in c] + [self.nid(i, j, 2) for i, j in c]
-                       + [self.nid(i, j, 0) for i, j in m] + [self.nid(i, j, 2) for i, j in m]
-                       + [self.nid(i, j, 1) for i, j in c])
-                out.append(ids)
+        for t in range(self.nt):
+            k0 = 2 * t
+            for b in range(self.nv):
+                for a in range(self.nu):
+                    i0, j0 = 2 * a, 2 * b
+                    c = [(i0, j0), (i0 + 2, j0), (i0 + 2, j0 + 2), (i0, j0 + 2)]
+                    m = [(i0 + 1, j0), (i0 + 2, j0 + 1), (i0 + 1, j0 + 2), (i0, j0 + 1)]
+                    if not right:
+                        c = [c[0], c[3], c[2], c[1]]
+                        m = [m[3], m[2], m[1], m[0]]
+                    ids = ([self.nid(i, j, k0) for i, j in c]
+                           + [self.nid(i, j, k0 + 2) for i, j in c]
+                           + [self.nid(i, j, k0) for i, j in m]
+                           + [self.nid(i, j, k0 + 2) for i, j in m]
+                           + [self.nid(i, j, k0 + 1) for i, j in c])
+                    out.append(ids)
         return out
 
-    def line(self, i=None, j=None, layers=(0, 1, 2), skip_j=()):
-        """Node ids on the grid line i = const or j = const, on the given layers."""
+    def section_average(self, i, j):
+        """[(node, weight)]: the thickness average of a field on the line (i, j) through the
+        thickness, as the bricks interpolate it (Simpson's weights per brick where the line has
+        a node between the faces, the trapezoid where it has none); the weights sum to 1."""
+        w = {}
+        for t in range(self.nt):
+            k0 = 2 * t
+            if self.exists(i, j, k0 + 1):
+                parts = ((k0, 1.0 / 6.0), (k0 + 1, 4.0 / 6.0), (k0 + 2, 1.0 / 6.0))
+            else:
+                parts = ((k0, 0.5), (k0 + 2, 0.5))
+            for k, c in parts:
+                w[k] = w.get(k, 0.0) + c / self.nt
+        return [(self.nid(i, j, k), c) for k, c in sorted(w.items())]
+
+    def line(self, i=None, j=None, layers=None, skip_j=()):
+        """Node ids on the grid line i = const or j = const, on the given node layers k (all
+        by default)."""
         pts = []
         if i is not None:
             pts = [(i, jj) for jj in range(self.nj) if jj not in skip_j]
         else:
             pts = [(ii, j) for ii in range(self.ni)]
-        return [self.nid(p, q, k) for p, q in pts for k in layers if self.exists(p, q, k)]
+        ks = range(self.nk) if layers is None else layers
+        return [self.nid(p, q, k) for p, q in pts for k in ks if self.exists(p, q, k)]
 
 
 LAWS = ("svk", "neo-hooke")

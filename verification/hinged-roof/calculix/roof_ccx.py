@@ -4,8 +4,8 @@ of the hinged-edge condition. Writes the ccx input, runs ccx (displacement contr
 point through the limit point and the minimum) and prints the limit load, the minimum and
 P/P_max at Sze's 36 deflections. Requires the `ccx` executable (Debian package calculix-ccx).
 
-Usage: roof_ccx.py [--grid N [N ...]] [--edge a b c] [--load all|mid] [--material svk|neo-hooke]
-                   [--ours RESULTS_JSON]
+Usage: roof_ccx.py [--grid N [N ...]] [--edge a b c d] [--layers NT] [--load all|mid]
+                   [--material svk|neo-hooke] [--ours RESULTS_JSON]
 
 Quarter model as the shipped case.toml: axis y, crown along z, symmetry planes x = 0 (the crown
 line) and y = 0 (mid-length), the straight edge at th = 0.1 rad hinged, the curved edge y = 254
@@ -13,6 +13,11 @@ free. Hinged-edge candidates:
   a  u_x = u_y = u_z = 0 on the mid-surface only (rotations free: Sze's statement)
   b  u_x = u_y = u_z = 0 on all nodes through the thickness (the rotation about the edge held)
   c  u_x = u_z = 0 on the mid-surface only, u_y (axial) free
+  d  the thickness average of (u_x, u_y, u_z) held on each line through the thickness (the
+     shell's hinge; the section free to turn and warp), with --layers bricks through the
+     thickness. a holds the mid-surface nodes alone: a point support of the section, whose
+     local compliance grows as bricks are added through the thickness, so a and d agree only
+     at one brick, and only roughly.
 """
 import argparse
 import json
@@ -39,26 +44,39 @@ def time_points():
     return sorted(pts)
 
 
-def write_input(path, n, edge, load, law="svk"):
+def write_input(path, n, edge, load, law="svk", nt=1):
     # e1 = z (the crown, th = 0), e2 = x, axis y: th in [0, 0.1 rad], s in [0, 254].
+    if nt != 1 and edge != "d":
+        raise ValueError(f"edge {edge} is written for one brick through the thickness")
     m = CylinderMesh(R, H, [0, 0, 1], [1, 0, 0], [0, 1, 0], (0.0, HALF_ANGLE_DEG),
-                     (0.0, HALF_L), n, n)
+                     (0.0, HALF_L), n, n, nt)
     ie = m.ni - 1
-    dofs = (1, 2, 3) if edge in ("a", "b") else (1, 3)
+    dofs = (1, 3) if edge == "c" else (1, 2, 3)
     with open(path, "w") as f:
         f.write(f"*HEADING\nhinged roof h = 12.7, quarter model, edge {edge}, load {load}\n")
         write_mesh(f, m, E, NU, law)
         write_nset(f, "SYMX", m.line(i=0))
         write_nset(f, "SYMY", m.line(j=0))
         write_nset(f, "EDGEALL", m.line(i=ie))
-        write_nset(f, "EDGEMID", m.line(i=ie, layers=(1,)))
-        layers = (0, 1, 2) if load == "all" else (1,)
+        write_nset(f, "EDGEMID", m.line(i=ie, layers=(nt,)))
+        layers = range(m.nk) if load == "all" else (nt,)
         write_nset(f, "LOADN", [m.nid(0, 0, k) for k in layers])
-        write_nset(f, "LOADMID", [m.nid(0, 0, 1)])
+        write_nset(f, "LOADMID", [m.nid(0, 0, nt)])
         f.write("*BOUNDARY\nSYMX, 1, 1\nSYMY, 2, 2\n")
-        edge_set = "EDGEALL" if edge == "b" else "EDGEMID"
-        for d in dofs:
-            f.write(f"{edge_set}, {d}, {d}\n")
+        if edge == "d":
+            for j in range(m.nj):
+                terms = m.section_average(ie, j)
+                for d in dofs:
+                    if d == 2 and j == 0:
+                        continue  # u_y is held on the symmetry plane y = 0 already
+                    items = [f"{node}, {d}, {c:.12g}" for node, c in terms]
+                    f.write(f"*EQUATION\n{len(items)}\n")
+                    for k in range(0, len(items), 4):
+                        f.write(", ".join(items[k:k + 4]) + "\n")
+        else:
+            edge_set = "EDGEALL" if edge == "b" else "EDGEMID"
+            for d in dofs:
+                f.write(f"{edge_set}, {d}, {d}\n")
         if edge in ("a", "c"):
             # between mid-surface nodes (odd j) the mid-surface value is the faces' mean
             for j in range(1, m.nj, 2):
@@ -122,6 +140,8 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--grid", nargs="+", type=int, default=[16, 24])
     ap.add_argument("--edge", nargs="+", default=["a", "b", "c"])
+    ap.add_argument("--layers", type=int, default=1,
+                    help="bricks through the thickness (edge d only, for more than one)")
     ap.add_argument("--load", choices=["all", "mid"], default="all",
                     help="u_z prescribed on all three load-point nodes or the mid-surface one")
     ap.add_argument("--material", choices=LAWS, default="svk",
@@ -134,13 +154,15 @@ def main():
     ours = ours_path(args.ours) if args.ours else None
     for n in args.grid:
         for edge in args.edge:
-            job = (f"roof_{edge}_{n}x{n}" + ("" if args.load == "all" else "_mid")
+            job = (f"roof_{edge}_{n}x{n}" + ("" if args.layers == 1 else f"x{args.layers}")
+                   + ("" if args.load == "all" else "_mid")
                    + ("" if args.material == "svk" else "_neo"))
             write_input(os.path.join(args.workdir, job + ".inp"), n, edge, args.load,
-                        args.material)
+                        args.material, args.layers)
             text, rc = run_ccx(args.workdir, job, args.timeout)
             pts = read_path(text)
-            print(f"\nedge {edge}, {n} x {n} C3D20R, {args.material}, load-point u_z on "
+            print(f"\nedge {edge}, {n} x {n} x {args.layers} C3D20R, {args.material}, "
+                  f"load-point u_z on "
                   f"{args.load}, ccx exit {rc}, {len(pts) - 1} output points, "
                   f"last -W {pts[-1][0]:.3f}")
             lim, mn = extrema(pts)

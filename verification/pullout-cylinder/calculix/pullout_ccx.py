@@ -3,7 +3,7 @@
 displacement control of the pulled point. Writes the ccx input, runs ccx and prints the load and
 the displacements at Sze's tabulated W_A. Requires the `ccx` executable (Debian calculix-ccx).
 
-Usage: pullout_ccx.py [--grid NU NV] [--material svk|neo-hooke] [--workdir DIR]
+Usage: pullout_ccx.py [--grid NU NV] [--layers NT] [--material svk|neo-hooke] [--workdir DIR]
 
 Axis x, the pulled generator along z (th = 0), th = 90 deg at +y; symmetry planes y = 0
 (th = 0), z = 0 (th = 90 deg) and x = 0 (mid-length), the end x = L/2 free. A = (0, 0, R),
@@ -37,8 +37,9 @@ REF = [(0.025, 0.819, 0.864, 0.872), (0.05, 1.260, 1.471, 1.493), (0.075, 1.527,
 W_END = REF[-1][1]
 
 
-def write_input(path, nu, nv, max_inc, law="svk"):
-    m = CylinderMesh(R, H, [0, 0, 1], [0, 1, 0], [1, 0, 0], (0.0, 90.0), (0.0, L / 2), nu, nv)
+def write_input(path, nu, nv, max_inc, law="svk", nt=1):
+    m = CylinderMesh(R, H, [0, 0, 1], [0, 1, 0], [1, 0, 0], (0.0, 90.0), (0.0, L / 2), nu, nv,
+                     nt)
     ie, je = m.ni - 1, m.nj - 1
     with open(path, "w") as f:
         f.write("*HEADING\npull-out of an open-ended cylinder, octant, displacement control\n")
@@ -46,8 +47,8 @@ def write_input(path, nu, nv, max_inc, law="svk"):
         write_nset(f, "SYMY", m.line(i=0))
         write_nset(f, "SYMZ", m.line(i=ie))
         write_nset(f, "SYMX", m.line(j=0))
-        write_nset(f, "A", [m.nid(0, 0, k) for k in range(3)])
-        write_nset(f, "BC", [m.nid(ie, je, 1), m.nid(ie, 0, 1), m.nid(0, 0, 1)])
+        write_nset(f, "A", [m.nid(0, 0, k) for k in range(m.nk)])
+        write_nset(f, "BC", [m.nid(ie, je, nt), m.nid(ie, 0, nt), m.nid(0, 0, nt)])
         f.write("*BOUNDARY\nSYMY, 2, 2\nSYMZ, 3, 3\nSYMX, 1, 1\n")
         # Sze's levels and a uniform set between them (the path, to interpolate at Sze's loads)
         times = sorted({round(r[1] / W_END, 10) for r in REF} | {n / 100 for n in range(1, 101)})
@@ -65,18 +66,21 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--grid", nargs=2, type=int, default=[24, 16], metavar=("NU", "NV"))
     ap.add_argument("--max-inc", type=float, default=0.01)
+    ap.add_argument("--layers", type=int, default=1, help="bricks through the thickness")
     ap.add_argument("--material", choices=LAWS, default="svk",
                     help="the elastic law at finite strain (ccx_cylinder.write_mesh)")
     ap.add_argument("--workdir", default="out/pullout-ccx")
     ap.add_argument("--timeout", type=float, default=1800.0)
     args = ap.parse_args()
     os.makedirs(args.workdir, exist_ok=True)
-    job = f"pullout_{args.grid[0]}x{args.grid[1]}" + ("" if args.material == "svk" else "_neo")
+    job = (f"pullout_{args.grid[0]}x{args.grid[1]}"
+           + ("" if args.layers == 1 else f"x{args.layers}")
+           + ("" if args.material == "svk" else "_neo"))
     m = write_input(os.path.join(args.workdir, job + ".inp"), args.grid[0], args.grid[1],
-                    args.max_inc, args.material)
+                    args.max_inc, args.material, args.layers)
     text, rc = run_ccx(args.workdir, job, args.timeout)
     ie, je = m.ni - 1, m.nj - 1
-    end, mid, a = m.nid(ie, je, 1), m.nid(ie, 0, 1), m.nid(0, 0, 1)
+    end, mid, a = m.nid(ie, je, m.nt), m.nid(ie, 0, m.nt), m.nid(0, 0, m.nt)
     path = {}
     for (what, _, t), rows in parse_dat(text).items():
         row = path.setdefault(t, {})
@@ -85,7 +89,8 @@ def main():
         elif what == "displacements":
             row["W"], row["mid"], row["end"] = rows[a][2], -rows[mid][1], -rows[end][1]
     path = [r for _, r in sorted(path.items()) if len(r) == 4]
-    print(f"{args.grid[0]} x {args.grid[1]} C3D20R, {args.material}, ccx exit {rc}, "
+    print(f"{args.grid[0]} x {args.grid[1]} x {args.layers} C3D20R, {args.material}, "
+          f"ccx exit {rc}, "
           f"{len(path)} outputs")
     print("Sze's -U_B against the 90-degree point at mid-length, -U_C against the one on the "
           "free end")
