@@ -5,9 +5,15 @@
 //! problem whose minimum load is a small difference of large membrane and bending forces.
 //! Figures, refinement and the other law: `verification/hinged-arch/README.md`.
 
-use shelldsa::io::shell_build;
-use shelldsa::io::shell_case::parse_shell_case;
 use std::path::Path;
+
+#[path = "common/case_run.rs"]
+mod case_run;
+use case_run::run_complete;
+
+#[path = "common/load_path.rs"]
+mod load_path;
+use load_path::extreme_points;
 
 /// (W, q): the crown's deflection and the half arch's load per unit width, from CalculiX 2.20,
 /// 256 × 2 × 6 C3D20R bricks (along the arc, across the strip of width 2, through the
@@ -44,12 +50,7 @@ fn plane_strain_arch_follows_the_neo_hooke_continuum_through_limit_point_and_min
         Path::new(env!("CARGO_MANIFEST_DIR")).join("verification/hinged-arch/case.toml"),
     )
     .unwrap();
-    let case = parse_shell_case(&text, Path::new("hinged-arch.toml")).unwrap();
-    let mut built = shell_build::build(&case).unwrap();
-    let out = std::env::temp_dir().join(format!("shelldsa-arch-{}", std::process::id()));
-    let s = shell_build::run(&case, &mut built, &out, std::time::Instant::now(), |_| {}).unwrap();
-    let _ = std::fs::remove_dir_all(&out);
-    assert_eq!(s.status, shell_build::RunStatus::Complete);
+    let s = run_complete(&text, "hinged-arch.toml");
     // (W, q) per converged step: five prescribed columns on a strip of width 64; their
     // reactions push the crown down (negative).
     let pts: Vec<(f64, f64)> = s
@@ -83,12 +84,7 @@ fn plane_strain_arch_follows_the_neo_hooke_continuum_through_limit_point_and_min
     }
     // The path rose, fell below a third of its maximum and rose again: a limit point and a
     // minimum, at the reference's deflections (7.5 and 19.6) within one step of 0.3.
-    let i_max = (1..pts.len() - 1)
-        .find(|&i| pts[i + 1].1 < pts[i].1)
-        .expect("a load maximum");
-    let i_min = (i_max..pts.len() - 1)
-        .find(|&i| pts[i + 1].1 > pts[i].1)
-        .expect("a load minimum after it");
+    let (i_max, i_min) = extreme_points(&pts);
     println!("limit at W {}, minimum at W {}", pts[i_max].0, pts[i_min].0);
     assert!((pts[i_max].0 - 7.5).abs() <= 0.3 + 1e-9);
     assert!((pts[i_min].0 - 19.6).abs() <= 0.3 + 1e-9);

@@ -11,6 +11,14 @@ use shelldsa::solver::{
 use shelldsa::solver::{NonlinearProblem, SolverOptions};
 use std::path::Path;
 
+#[path = "common/case_run.rs"]
+mod case_run;
+use case_run::run_complete;
+
+#[path = "common/load_path.rs"]
+mod load_path;
+use load_path::{extreme_points, vertex};
+
 const SZE_LIMIT: f64 = 0.7421; // P/P_max at the limit point (Sze 2004 §3.8 table)
 const P_MAX: f64 = 3000.0;
 
@@ -30,12 +38,7 @@ fn case_text() -> String {
 
 #[test]
 fn displacement_control_passes_the_limit_point_with_sze_limit_load() {
-    let case = parse_shell_case(&case_text(), Path::new("hinged-roof.toml")).unwrap();
-    let mut built = shell_build::build(&case).unwrap();
-    let out = std::env::temp_dir().join(format!("shelldsa-roof-{}", std::process::id()));
-    let s = shell_build::run(&case, &mut built, &out, std::time::Instant::now(), |_| {}).unwrap();
-    let _ = std::fs::remove_dir_all(&out);
-    assert_eq!(s.status, shell_build::RunStatus::Complete);
+    let s = run_complete(&case_text(), "hinged-roof.toml");
     // (−W, P/P_max) per converged step; the reaction pushes down (negative), P = −4 R.
     let pts: Vec<(f64, f64)> = s
         .steps
@@ -66,16 +69,6 @@ fn displacement_control_passes_the_limit_point_with_sze_limit_load() {
     }
 }
 
-/// The vertex (W, P) of the parabola through the points i − 1, i, i + 1 of a path.
-fn vertex(pts: &[(f64, f64)], i: usize) -> (f64, f64) {
-    let ((x0, y0), (x1, y1), (x2, y2)) = (pts[i - 1], pts[i], pts[i + 1]);
-    let d = (x0 - x1) * (x0 - x2) * (x1 - x2);
-    let a = (x2 * (y1 - y0) + x1 * (y0 - y2) + x0 * (y2 - y1)) / d;
-    let b = (x2 * x2 * (y0 - y1) + x1 * x1 * (y2 - y0) + x0 * x0 * (y1 - y2)) / d;
-    let c = y1 - a * x1 * x1 - b * x1;
-    (-b / (2.0 * a), c - b * b / (4.0 * a))
-}
-
 /// Limit load and minimum (P/P_max) of a 3-D continuum with the shell's hinge: CalculiX 2.20,
 /// 16 × 16 × 6 C3D20R bricks, compressible neo-Hooke with the case's E and ν, each section's
 /// thickness-average displacement held on the hinged edge
@@ -95,12 +88,7 @@ fn displacement_control_through_the_minimum_matches_the_continuum_with_the_shell
              0.6617333333, 0.6923666667]",
         )
         .replace("final_load = 0.45", "final_load = 0.7");
-    let case = parse_shell_case(&text, Path::new("hinged-roof-min.toml")).unwrap();
-    let mut built = shell_build::build(&case).unwrap();
-    let out = std::env::temp_dir().join(format!("shelldsa-roof-min-{}", std::process::id()));
-    let s = shell_build::run(&case, &mut built, &out, std::time::Instant::now(), |_| {}).unwrap();
-    let _ = std::fs::remove_dir_all(&out);
-    assert_eq!(s.status, shell_build::RunStatus::Complete);
+    let s = run_complete(&text, "hinged-roof-min.toml");
     let pts: Vec<(f64, f64)> = std::iter::once((0.0, 0.0))
         .chain(
             s.steps
@@ -108,12 +96,7 @@ fn displacement_control_through_the_minimum_matches_the_continuum_with_the_shell
                 .map(|st| (-st.monitors[0][2], -4.0 * st.reactions[0].1 / P_MAX)),
         )
         .collect();
-    let i_max = (1..pts.len() - 1)
-        .find(|&i| pts[i + 1].1 < pts[i].1)
-        .expect("a load maximum");
-    let i_min = (i_max..pts.len() - 1)
-        .find(|&i| pts[i + 1].1 > pts[i].1)
-        .expect("a load minimum after it");
+    let (i_max, i_min) = extreme_points(&pts);
     let (limit, minimum) = (vertex(&pts, i_max).1, vertex(&pts, i_min).1);
     println!("limit {limit:.5}, minimum {minimum:.5}");
     // Measured on 9 × 9: −0.28 % and −0.00 % (17 × 17: −0.15 % and −0.12 %). The continuum's

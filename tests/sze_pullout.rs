@@ -3,9 +3,11 @@
 //! stabilisation ε = 2): the deflections at Sze's 23 loads through the snap. Figures,
 //! refinement and the stabilisation's role: `verification/pullout-cylinder/README.md`.
 
-use shelldsa::io::shell_build;
-use shelldsa::io::shell_case::parse_shell_case;
 use std::path::Path;
+
+#[path = "common/case_run.rs"]
+mod case_run;
+use case_run::run_complete;
 
 /// Sze's table (P/P_max, W_A, −U_B, −U_C): `../shared/reference-values.md` §2, §3.5.
 const SZE: [(f64, f64, f64, f64); 23] = [
@@ -41,12 +43,7 @@ fn pull_out_follows_sze_through_the_snap() {
         Path::new(env!("CARGO_MANIFEST_DIR")).join("verification/pullout-cylinder/case.toml"),
     )
     .unwrap();
-    let case = parse_shell_case(&text, Path::new("pullout.toml")).unwrap();
-    let mut built = shell_build::build(&case).unwrap();
-    let out = std::env::temp_dir().join(format!("shelldsa-pullout-{}", std::process::id()));
-    let s = shell_build::run(&case, &mut built, &out, std::time::Instant::now(), |_| {}).unwrap();
-    let _ = std::fs::remove_dir_all(&out);
-    assert_eq!(s.status, shell_build::RunStatus::Complete);
+    let s = run_complete(&text, "pullout.toml");
     // Per converged step: P/P_max (the octant's reaction is P/4), W_A, −U_B, −U_C (B and C
     // at 90° from the load, mid-length and free end; the outward radius there is −y).
     let mut path = vec![[0.0; 4]];

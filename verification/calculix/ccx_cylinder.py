@@ -132,6 +132,21 @@ def write_mesh(f, mesh, young, poisson, law="svk"):
     f.write("*SOLID SECTION, ELSET=EALL, MATERIAL=MAT\n")
 
 
+def write_displacement_step(f, times, controlled, dof, value, first, max_inc, outputs):
+    """One NLGEOM step that moves `controlled` (a node set) along `dof` to `value`, ramped over
+    the step time 1, with output at `times` (a `*TIME POINTS` list named OUT): for each
+    (set, quantity, totals) of `outputs`, a `*NODE PRINT` of that quantity."""
+    f.write("*TIME POINTS, NAME=OUT\n")
+    for k in range(0, len(times), 8):
+        f.write(", ".join(f"{t:.10g}" for t in times[k:k + 8]) + "\n")
+    f.write(f"*STEP, NLGEOM, INC=5000\n*STATIC\n{first:g}, 1.0, 1e-7, {max_inc:g}\n")
+    f.write(f"*BOUNDARY\n{controlled}, {dof}, {dof}, {value:.10g}\n")
+    for nset, quantity, totals in outputs:
+        f.write(f"*NODE PRINT, NSET={nset}{', TOTALS=ONLY' if totals else ''}, "
+                f"TIME POINTS=OUT\n{quantity}\n")
+    f.write("*END STEP\n")
+
+
 def write_nset(f, name, ids):
     f.write(f"*NSET, NSET={name}\n")
     ids = list(ids)

@@ -7,7 +7,12 @@ difference from Sze's in % of P_max, and per tabulated load the deflection on th
 of the computed path (linear interpolation between converged steps) against Sze's W.
 """
 import json
+import os
 import sys
+
+sys.dont_write_bytecode = True  # no __pycache__ beside the shared module
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "calculix"))
+from paths import vertex  # noqa: E402
 
 P_MAX = 3000.0
 # (P/P_max, -W) at the load point (Sze 2004 Table for §3.8, h = 12.7).
@@ -60,15 +65,6 @@ def main(path):
     # Limit point and minimum of the computed path (largest P before the fall, then smallest).
     i_max = next((i for i in range(1, len(ps) - 1) if ps[i + 1] < ps[i]), len(ps) - 1)
     i_min = next((i for i in range(i_max, len(ps) - 1) if ps[i + 1] > ps[i]), len(ps) - 1)
-    def vertex(pts, i):
-        # The parabola through point i and its neighbours: its vertex (W, P).
-        (x0, y0), (x1, y1), (x2, y2) = pts[i - 1], pts[i], pts[i + 1]
-        d = (x0 - x1) * (x0 - x2) * (x1 - x2)
-        a = (x2 * (y1 - y0) + x1 * (y0 - y2) + x0 * (y2 - y1)) / d
-        b = (x2 * x2 * (y0 - y1) + x1 * x1 * (y2 - y0) + x0 * x0 * (y1 - y2)) / d
-        c = y1 - a * x1 * x1 - b * x1
-        xv = -b / (2 * a)
-        return xv, c - b * b / (4 * a)
     # Sze's tabulated extremes are levels of his table, not the extremes of his path: the same
     # parabola through his extreme level and its neighbours gives those, and the run's loads at
     # the same three deflections give ours by the same construction.

@@ -26,7 +26,9 @@ import sys
 sys.dont_write_bytecode = True  # no __pycache__ beside the shared module
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..",
                                 "calculix"))
-from ccx_cylinder import LAWS, CylinderMesh, parse_dat, run_ccx, write_mesh, write_nset  # noqa: E402
+from ccx_cylinder import (LAWS, CylinderMesh, parse_dat, run_ccx,  # noqa: E402
+                          write_displacement_step, write_mesh, write_nset)
+from paths import extrema  # noqa: E402
 
 R, H = 2540.0, 12.7
 E = 3102.75
@@ -59,14 +61,9 @@ def write_input(path, n, nt, width, law, poisson):
                 for k in range(0, len(items), 4):
                     f.write(", ".join(items[k:k + 4]) + "\n")
         # output at every DT of the time (0.3 of deflection), the case's stops among them
-        f.write("*TIME POINTS, NAME=OUT\n")
-        tp = [k * DT for k in range(1, int(round(1 / DT)) + 1)]
-        for k in range(0, len(tp), 8):
-            f.write(", ".join(f"{t:.9g}" for t in tp[k:k + 8]) + "\n")
-        f.write(f"*STEP, NLGEOM, INC=5000\n*STATIC\n{DT / 2}, 1.0, 1e-7, {DT}\n")
-        f.write(f"*BOUNDARY\nCROWN, 3, 3, {-W_END}\n")
-        f.write("*NODE PRINT, NSET=CROWN, TOTALS=ONLY, TIME POINTS=OUT\nRF\n")
-        f.write("*NODE PRINT, NSET=CROWNMID, TIME POINTS=OUT\nU\n*END STEP\n")
+        times = [round(k * DT, 9) for k in range(1, int(round(1 / DT)) + 1)]
+        write_displacement_step(f, times, "CROWN", 3, -W_END, DT / 2, DT,
+                                [("CROWN", "RF", True), ("CROWNMID", "U", False)])
 
 
 def read_path(text, width):
@@ -104,25 +101,6 @@ def at(pts, w):
         if w0 <= w <= w1 + 1e-9 and w1 > w0:
             return q0 + (w - w0) / (w1 - w0) * (q1 - q0)
     return None
-
-
-def vertex(pts, i):
-    """The vertex (W, q) of the parabola through the points i - 1, i, i + 1."""
-    (x0, y0), (x1, y1), (x2, y2) = pts[i - 1], pts[i], pts[i + 1]
-    d = (x0 - x1) * (x0 - x2) * (x1 - x2)
-    a = (x2 * (y1 - y0) + x1 * (y0 - y2) + x0 * (y2 - y1)) / d
-    b = (x2 * x2 * (y0 - y1) + x1 * x1 * (y2 - y0) + x0 * x0 * (y1 - y2)) / d
-    c = y1 - a * x1 * x1 - b * x1
-    return -b / (2 * a), c - b * b / (4 * a)
-
-
-def extrema(pts):
-    qs = [q for _, q in pts]
-    i_max = next((i for i in range(1, len(qs) - 1) if qs[i + 1] < qs[i]), None)
-    if i_max is None:
-        return None, None
-    i_min = next((i for i in range(i_max, len(qs) - 1) if qs[i + 1] > qs[i]), None)
-    return vertex(pts, i_max), (vertex(pts, i_min) if i_min is not None else None)
 
 
 def main():

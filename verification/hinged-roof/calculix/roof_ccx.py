@@ -28,8 +28,10 @@ sys.dont_write_bytecode = True  # no __pycache__ beside the shared modules
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "..", "calculix"))
 sys.path.insert(0, os.path.join(HERE, ".."))
-from ccx_cylinder import LAWS, CylinderMesh, parse_dat, run_ccx, write_mesh, write_nset  # noqa: E402
+from ccx_cylinder import (LAWS, CylinderMesh, parse_dat, run_ccx,  # noqa: E402
+                          write_displacement_step, write_mesh, write_nset)
 from compare import P_MAX, REF  # noqa: E402  (Sze's table and P_max, one copy)
+from paths import extrema  # noqa: E402
 
 R, HALF_L, H = 2540.0, 254.0, 12.7
 E, NU = 3102.75, 0.3
@@ -83,15 +85,9 @@ def write_input(path, n, edge, load, law="svk", nt=1):
                 lo, hi = m.nid(ie, j, 0), m.nid(ie, j, 2)
                 for d in dofs:
                     f.write(f"*EQUATION\n2\n{hi}, {d}, 1.0, {lo}, {d}, 1.0\n")
-        f.write("*TIME POINTS, NAME=OUT\n")
-        tp = time_points()
-        for k in range(0, len(tp), 8):
-            f.write(", ".join(f"{t:.9g}" for t in tp[k:k + 8]) + "\n")
         # Displacement control: u_z = -W_END * time on the load point (ramped over the step).
-        f.write(f"*STEP, NLGEOM, INC=5000\n*STATIC\n0.005, 1.0, 1e-7, {DT_GRID}\n")
-        f.write(f"*BOUNDARY\nLOADN, 3, 3, {-W_END}\n")
-        f.write("*NODE PRINT, NSET=LOADN, TOTALS=ONLY, TIME POINTS=OUT\nRF\n")
-        f.write("*NODE PRINT, NSET=LOADMID, TIME POINTS=OUT\nU\n*END STEP\n")
+        write_displacement_step(f, time_points(), "LOADN", 3, -W_END, 0.005, DT_GRID,
+                                [("LOADN", "RF", True), ("LOADMID", "U", False)])
     return m
 
 
@@ -104,26 +100,6 @@ def read_path(text):
         elif what.startswith("total force"):
             p[t] = -4.0 * rows[0][2] / P_MAX
     return [(0.0, 0.0)] + [(w[t], p[t]) for t in sorted(w) if t in p]
-
-
-def vertex(pts, i):
-    """The vertex (W, P) of the parabola through the steps i - 1, i, i + 1."""
-    (x0, y0), (x1, y1), (x2, y2) = pts[i - 1], pts[i], pts[i + 1]
-    d = (x0 - x1) * (x0 - x2) * (x1 - x2)
-    a = (x2 * (y1 - y0) + x1 * (y0 - y2) + x0 * (y2 - y1)) / d
-    b = (x2 * x2 * (y0 - y1) + x1 * x1 * (y2 - y0) + x0 * x0 * (y1 - y2)) / d
-    c = y1 - a * x1 * x1 - b * x1
-    return -b / (2 * a), c - b * b / (4 * a)
-
-
-def extrema(pts):
-    """(limit (W, P), minimum (W, P)) of a rising-falling-rising path, or None where absent."""
-    ps = [p for _, p in pts]
-    i_max = next((i for i in range(1, len(ps) - 1) if ps[i + 1] < ps[i]), None)
-    if i_max is None:
-        return None, None
-    i_min = next((i for i in range(i_max, len(ps) - 1) if ps[i + 1] > ps[i]), None)
-    return vertex(pts, i_max), (vertex(pts, i_min) if i_min is not None else None)
 
 
 def ours_path(path):

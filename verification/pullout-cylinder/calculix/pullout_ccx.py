@@ -20,7 +20,8 @@ import sys
 sys.dont_write_bytecode = True  # no __pycache__ beside the shared module
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..",
                                 "calculix"))
-from ccx_cylinder import LAWS, CylinderMesh, parse_dat, run_ccx, write_mesh, write_nset  # noqa: E402
+from ccx_cylinder import (LAWS, CylinderMesh, parse_dat, run_ccx,  # noqa: E402
+                          write_displacement_step, write_mesh, write_nset)
 
 R, L, H = 4.953, 10.35, 0.094
 E, NU = 10.5e6, 0.3125
@@ -52,13 +53,8 @@ def write_input(path, nu, nv, max_inc, law="svk", nt=1):
         f.write("*BOUNDARY\nSYMY, 2, 2\nSYMZ, 3, 3\nSYMX, 1, 1\n")
         # Sze's levels and a uniform set between them (the path, to interpolate at Sze's loads)
         times = sorted({round(r[1] / W_END, 10) for r in REF} | {n / 100 for n in range(1, 101)})
-        f.write("*TIME POINTS, NAME=LEVELS\n")
-        for n in range(0, len(times), 8):
-            f.write(", ".join(f"{t:.10g}" for t in times[n:n + 8]) + "\n")
-        f.write(f"*STEP, NLGEOM, INC=5000\n*STATIC\n{max_inc / 2:g}, 1.0, 1e-7, {max_inc:g}\n")
-        f.write(f"*BOUNDARY\nA, 3, 3, {W_END:.10g}\n")
-        f.write("*NODE PRINT, NSET=A, TOTALS=ONLY, TIME POINTS=LEVELS\nRF\n")
-        f.write("*NODE PRINT, NSET=BC, TIME POINTS=LEVELS\nU\n*END STEP\n")
+        write_displacement_step(f, times, "A", 3, W_END, max_inc / 2, max_inc,
+                                [("A", "RF", True), ("BC", "U", False)])
     return m
 
 
