@@ -22,6 +22,7 @@ import argparse
 import json
 import os
 import sys
+import tomllib
 
 sys.dont_write_bytecode = True  # no __pycache__ beside the shared module
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..",
@@ -89,11 +90,11 @@ def ours_path(path):
 
 
 def ours_width():
+    """The strip's width in ../case.toml (`surface.length`)."""
     here = os.path.dirname(os.path.abspath(__file__))
-    for line in open(os.path.join(here, "..", "case.toml")):
-        if line.startswith("length"):
-            return float(line.split("[")[1].split(",")[1].split("]")[0])
-    raise ValueError("case.toml: no `length`")
+    with open(os.path.join(here, "..", "case.toml"), "rb") as f:
+        lo, hi = tomllib.load(f)["surface"]["length"]
+    return hi - lo
 
 
 def at(pts, w):
