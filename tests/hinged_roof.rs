@@ -17,7 +17,7 @@ use case_run::run_complete;
 
 #[path = "common/load_path.rs"]
 mod load_path;
-use load_path::{extreme_points, vertex};
+use load_path::{extreme_points, load_maximum, vertex};
 
 const SZE_LIMIT: f64 = 0.7421; // P/P_max at the limit point (Sze 2004 §3.8 table)
 const P_MAX: f64 = 3000.0;
@@ -49,9 +49,7 @@ fn displacement_control_passes_the_limit_point_with_sze_limit_load() {
         })
         .collect();
     // The load rose and fell: the path went through the limit point.
-    let i = (1..pts.len() - 1)
-        .find(|&i| pts[i + 1].1 < pts[i].1)
-        .expect("a load maximum");
+    let i = load_maximum(&pts);
     // Its value: the vertex of the parabola through the extreme step and its neighbours.
     let (w_limit, limit) = vertex(&pts, i);
     println!("limit load {limit:.5} (Sze {SZE_LIMIT}) at W {w_limit:.3}");

@@ -2,11 +2,16 @@
 //! vertex of the parabola through the turning point and its neighbours.
 #![allow(dead_code)] // each test file uses a subset
 
+/// The first point after which the load falls.
+pub fn load_maximum(pts: &[(f64, f64)]) -> usize {
+    (1..pts.len() - 1)
+        .find(|&i| pts[i + 1].1 < pts[i].1)
+        .expect("a load maximum")
+}
+
 /// The first point after which the load falls, and the first after that where it rises again.
 pub fn extreme_points(pts: &[(f64, f64)]) -> (usize, usize) {
-    let i_max = (1..pts.len() - 1)
-        .find(|&i| pts[i + 1].1 < pts[i].1)
-        .expect("a load maximum");
+    let i_max = load_maximum(pts);
     let i_min = (i_max..pts.len() - 1)
         .find(|&i| pts[i + 1].1 > pts[i].1)
         .expect("a load minimum after it");
