@@ -800,10 +800,11 @@ fn run_shell(con: &Console, c: &ShellCase, out: &Path, quiet: bool) -> i32 {
                     con,
                     "note: under load control a run stops at a limit point, a bifurcation or where \
                      a spurious mode loses its stiffness. With the interpolated director field \
-                     (the default) a director checkerboard can soften under compression until \
-                     it stops the run; integration.director = \"normalised\" keeps its \
-                     stiffness (docs/stability.md §9). A true limit point needs [steps] control \
-                     = \"arc-length\"."
+                     (integration.director = \"interpolated\") a director checkerboard can \
+                     soften under compression until it stops the run; the default \
+                     integration.director = \"normalised\" keeps its stiffness \
+                     (docs/stability.md §9). A true limit point needs [steps] control = \
+                     \"arc-length\"."
                 );
             }
             match summary.status {

@@ -723,12 +723,21 @@ fn check_variable(r: &study::DsaResult, v: usize) {
         "{name}: {unflagged} of {} steps unflagged",
         last.flagged.len()
     );
-    // At the smallest h (5e-4) the central difference's truncation falls as h² (measured
-    // 1.6e-5, 4.1e-6, 1.0e-6, 2.6e-7 for die x at h = 4, 2, 1, 0.5 ·1e-3; die z ≤ 2.9e-7,
-    // t ≤ 5.5e-6) above the re-runs' noise (~1e-14 relative responses / h ≈ 1e-10): 1e-5 at
-    // the smallest h leaves a factor ~40 and still fails a wrong derivative term.
-    let e = study::max_rel_diff(var, last).expect("comparable components");
-    assert!(e < 1e-5, "{name}: dual vs FD {e:e}");
+    // The step-size study's best h: where truncation (falling as h²) meets the re-runs'
+    // noise (growing as 1/h). Measured on the cylinder dies, truncation-bound down to the
+    // smallest h: 1.6e-5, 4.1e-6, 1.0e-6, 2.6e-7 for die x at h = 4, 2, 1, 0.5 ·1e-3 (die z
+    // ≤ 2.9e-7, t ≤ 5.5e-6, radii 1.2e-8). On the NURBS die's control point the re-runs'
+    // noise (independent of the Newton tolerance: the same at residual_rtol 1e-12, and the
+    // Taylor rates are 2.00 ± 0.05 at every step) sets in from h = 2e-3: 3.3e-6, 2.0e-6,
+    // 8.0e-6, 1.7e-5 with the normalised director field, 3.3e-6, 1.7e-6, 4.3e-6, 5.2e-6 with
+    // the interpolated one. 1e-5 at the best h leaves a factor ≥ 3 and still fails a wrong
+    // derivative term.
+    let e = var
+        .fd
+        .iter()
+        .filter_map(|c| study::max_rel_diff(var, c))
+        .fold(f64::INFINITY, f64::min);
+    assert!(e < 1e-5, "{name}: dual vs FD {e:e} at the best step size");
     // The Taylor remainder of the dual derivative falls as h² (the derivative of the discrete
     // response) at every step with at least three unflagged step sizes.
     let fitted = assert_taylor_rates(var, name);

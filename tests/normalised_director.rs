@@ -25,17 +25,22 @@ fn root() -> PathBuf {
 fn hemisphere(lines: &str) -> String {
     let t = std::fs::read_to_string(root().join("verification/hemisphere-plastic-dsa/ci.toml"))
         .unwrap();
-    assert!(t.contains("[integration]\n"));
-    t.replacen("[integration]\n", &format!("[integration]\n{lines}\n"), 1)
+    // The case names the interpolated field (its README's tables); `lines` replace that.
+    let named =
+        "director = \"interpolated\"   # the field this case's README tables were measured with\n";
+    assert!(t.contains(&format!("[integration]\n{named}")));
+    t.replacen(named, &format!("{lines}\n"), 1)
 }
 
 #[test]
 fn the_key_selects_the_field_and_a_bad_value_is_named() {
     let path = Path::new("case.toml");
     let default = parse_shell_case(&hemisphere(""), path).unwrap();
-    assert_eq!(default.integration.director, DirectorField::Interpolated);
+    assert_eq!(default.integration.director, DirectorField::Normalised);
     let n = parse_shell_case(&hemisphere("director = \"normalised\""), path).unwrap();
     assert_eq!(n.integration.director, DirectorField::Normalised);
+    let i = parse_shell_case(&hemisphere("director = \"interpolated\""), path).unwrap();
+    assert_eq!(i.integration.director, DirectorField::Interpolated);
     let e = parse_shell_case(&hemisphere("director = \"unit\""), path)
         .unwrap_err()
         .to_string();

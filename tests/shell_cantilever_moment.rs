@@ -22,7 +22,7 @@
 //! thickness, 8 load steps per quarter of `M_max` (a rotation of 0.2 rad per step at the tip).
 //! Measured alternatives (error of the tip displacement vector at M/M_max = 0.25, 8 steps per
 //! quarter): 4 × 4 Gauss points lock (0.53 % against 0.17 %) and cost 4 times as much; 13 × 3
-//! particles reach the full circle with a 3.7 % error; 49 × 3 particles stop before it (below).
+//! particles reach the full circle with a 0.93 % error; 49 × 3 particles stop before it (below).
 //! The test runs in about 8 s, the refinement study in about 30 s (release, 2 cores).
 //!
 //! Out-of-plane motion (the displacement across the width, `u_y`, and the rotation `α1` about
@@ -163,7 +163,7 @@ fn cantilever_rolls_into_a_circle_under_an_end_moment() {
             l.iterations
         );
     }
-    // Measured: 0.165 %, 0.142 %, 0.227 % (8, 8 and 16 steps of 6–9 iterations). The
+    // Measured: 0.166 %, 0.150 %, 0.155 % (8, 8 and 16 steps of 6–8 iterations). The
     // benchmark's 1 % is the spread of converged shell theories (reference-values.md).
     for l in &levels {
         assert!(
@@ -221,8 +221,8 @@ fn refinement_in_particles_and_load_steps() {
             .map(|t| t.2[k].error)
             .unwrap()
     };
-    // Measured (0.25 / 0.5): 13×3: 0.495 / 0.375 %; 25×3 with 4, 8, 16 steps per quarter:
-    // 0.288 / 0.280, 0.165 / 0.142, 0.041 / 0.012 %; 49×3: 0.161 / 0.172 %. At 8 steps the
+    // Measured (0.25 / 0.5): 13×3: 0.503 / 0.478 %; 25×3 with 4, 8, 16 steps per quarter:
+    // 0.411 / 0.357, 0.166 / 0.150, 0.041 / 0.018 %; 49×3: 0.162 / 0.172 %. At 8 steps the
     // step size dominates beyond 25 particles (the incremental update is second-order
     // accurate per step), so particles and steps are refined separately.
     for k in 0..2 {

@@ -1397,13 +1397,13 @@ impl Checker<'_> {
             }
         };
         let director = match i.director.as_deref() {
-            None | Some("interpolated") => crate::shell::point::DirectorField::Interpolated,
-            Some("normalised") => crate::shell::point::DirectorField::Normalised,
+            Some("interpolated") => crate::shell::point::DirectorField::Interpolated,
+            None | Some("normalised") => crate::shell::point::DirectorField::Normalised,
             Some(other) => {
                 return Err(self.err(
                     "integration.director",
                     format!("{other:?}"),
-                    "\"interpolated\" or \"normalised\" (default \"interpolated\")",
+                    "\"interpolated\" or \"normalised\" (default \"normalised\")",
                 ))
             }
         };

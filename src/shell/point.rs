@@ -32,13 +32,19 @@ type V3<T> = Vector3<T>;
 pub const DOFS_PER_PARTICLE: usize = 5;
 
 /// How the director at a quadrature point follows from the particles' directors.
+///
+/// The default is [`DirectorField::Normalised`]: the interpolant shortens where the rotations
+/// alternate from particle to particle, which releases bending energy and drives the director
+/// checkerboard to a false limit point under compression; normalised, the field keeps that
+/// mode's stiffness without a stabilisation parameter (docs/stability.md §9: every shipped case
+/// runs to its end with it, and the plastic hemisphere converges under refinement).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum DirectorField {
     /// The RK interpolant `d = n⁰ + Σ Ψ_I (d_I − d_I⁰)`, whose length may differ from 1.
-    #[default]
     Interpolated,
     /// The interpolant normalised at the point, `d = r/|r|`
     /// ([`crate::kinematics::unit_director`], docs/stability.md §9).
+    #[default]
     Normalised,
 }
 
