@@ -728,9 +728,9 @@ fn check_variable(r: &study::DsaResult, v: usize) {
     // smallest h: 1.6e-5, 4.1e-6, 1.0e-6, 2.6e-7 for die x at h = 4, 2, 1, 0.5 ·1e-3 (die z
     // ≤ 2.9e-7, t ≤ 5.5e-6, radii 1.2e-8). On the NURBS die's control point the re-runs'
     // noise (independent of the Newton tolerance: the same at residual_rtol 1e-12, and the
-    // Taylor rates are 2.00 ± 0.05 at every step) sets in from h = 2e-3: 3.3e-6, 2.0e-6,
-    // 8.0e-6, 1.7e-5 with the normalised director field, 3.3e-6, 1.7e-6, 4.3e-6, 5.2e-6 with
-    // the interpolated one. 1e-5 at the best h leaves a factor ≥ 3 and still fails a wrong
+    // Taylor rates are 2.00 ± 0.05 at every step) sets in from h = 2e-3: 3.8e-6, 2.2e-6,
+    // 6.6e-6, 1.8e-5 with the normalised director field, 3.3e-6, 1.7e-6, 4.3e-6, 5.2e-6 with
+    // the interpolated one. 1e-5 at the best h leaves a factor ≥ 4 and still fails a wrong
     // derivative term.
     let e = var
         .fd

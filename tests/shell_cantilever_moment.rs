@@ -22,8 +22,9 @@
 //! thickness, 8 load steps per quarter of `M_max` (a rotation of 0.2 rad per step at the tip).
 //! Measured alternatives (error of the tip displacement vector at M/M_max = 0.25, 8 steps per
 //! quarter): 4 × 4 Gauss points lock (0.53 % against 0.17 %) and cost 4 times as much; 13 × 3
-//! particles reach the full circle with a 0.93 % error; 49 × 3 particles stop before it (below).
-//! The test runs in about 8 s, the refinement study in about 30 s (release, 2 cores).
+//! particles reach the full circle with a 0.93 % error, 49 × 3 particles with 0.25 % (with the
+//! interpolated director field they stop at M/M_max = 0.95, docs/loads.md). The test and the
+//! refinement study run in about 4 s together (release, 2 cores).
 //!
 //! Out-of-plane motion (the displacement across the width, `u_y`, and the rotation `α1` about
 //! the lamina vector along the strip) is held at zero on every particle (generalised DOFs off the
@@ -31,10 +32,12 @@
 //! for the planar solution. Without it, the tangent of the 49 × 3 strip acquires a negative
 //! eigenvalue in an out-of-plane mode between M/M_max = 0.75 and 0.85 (the ignored test below
 //! measures it), and the symmetric path is then followed only because round-off keeps the
-//! iterates symmetric. Even planar, the 49 × 3 strip's tangent becomes singular near
-//! M/M_max ≈ 0.93 (2 × 2 points; ≈ 0.997 with 4 × 4) in a mode of the director rotations `α2`
-//! alone, and the driver stops there. Open: whether these are properties of the discrete shell
-//! (the interpolated, non-unit director; the incremental Hughes–Winget update) or of the load.
+//! iterates symmetric. With the interpolated director field, even planar, the 49 × 3 strip's
+//! tangent becomes singular near M/M_max ≈ 0.93 (2 × 2 points; ≈ 0.997 with 4 × 4) in a
+//! checkerboard of the director rotations `α2`, and the driver stops there; the normalised
+//! field (the default) removes it (docs/loads.md). Open: whether the out-of-plane loss of
+//! stability is a property of the discrete shell (the incremental Hughes–Winget update) or of
+//! the load.
 
 mod common;
 
