@@ -5,11 +5,9 @@
 //! problem whose minimum load is a small difference of large membrane and bending forces.
 //! Figures, refinement and the other law: `verification/hinged-arch/README.md`.
 
-use std::path::Path;
-
 #[path = "common/case_run.rs"]
 mod case_run;
-use case_run::run_complete;
+use case_run::{run_complete, shipped_case};
 
 #[path = "common/load_path.rs"]
 mod load_path;
@@ -46,10 +44,7 @@ const CCX_NEO_HOOKE: [(f64, f64); 20] = [
 
 #[test]
 fn plane_strain_arch_follows_the_neo_hooke_continuum_through_limit_point_and_minimum() {
-    let text = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("verification/hinged-arch/case.toml"),
-    )
-    .unwrap();
+    let text = shipped_case("hinged-arch");
     let s = run_complete(&text, "hinged-arch.toml");
     // (W, q) per converged step: five prescribed columns on a strip of width 64; their
     // reactions push the crown down (negative).

@@ -13,7 +13,7 @@ use std::path::Path;
 
 #[path = "common/case_run.rs"]
 mod case_run;
-use case_run::run_complete;
+use case_run::{run_complete, shipped_case};
 
 #[path = "common/load_path.rs"]
 mod load_path;
@@ -23,10 +23,7 @@ const SZE_LIMIT: f64 = 0.7421; // P/P_max at the limit point (Sze 2004 §3.8 tab
 const P_MAX: f64 = 3000.0;
 
 fn case_text() -> String {
-    let text = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("verification/hinged-roof/case.toml"),
-    )
-    .unwrap();
+    let text = shipped_case("hinged-roof");
     let start = text.find("stops = [").unwrap();
     let end = start + text[start..].find(']').unwrap() + 1;
     // Sze's deflections 9.339, 10.358, 11.293, 12.141, 12.903 (÷ 30) and the end at 13.5.

@@ -3,11 +3,9 @@
 //! stabilisation ε = 2): the deflections at Sze's 23 loads through the snap. Figures,
 //! refinement and the stabilisation's role: `verification/pullout-cylinder/README.md`.
 
-use std::path::Path;
-
 #[path = "common/case_run.rs"]
 mod case_run;
-use case_run::run_complete;
+use case_run::{run_complete, shipped_case};
 
 /// Sze's table (P/P_max, W_A, −U_B, −U_C): `../shared/reference-values.md` §2, §3.5.
 const SZE: [(f64, f64, f64, f64); 23] = [
@@ -39,10 +37,7 @@ const P_MAX: f64 = 40_000.0;
 
 #[test]
 fn pull_out_follows_sze_through_the_snap() {
-    let text = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("verification/pullout-cylinder/case.toml"),
-    )
-    .unwrap();
+    let text = shipped_case("pullout-cylinder");
     let s = run_complete(&text, "pullout.toml");
     // Per converged step: P/P_max (the octant's reaction is P/4), W_A, −U_B, −U_C (B and C
     // at 90° from the load, mid-length and free end; the outward radius there is −y).

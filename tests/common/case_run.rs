@@ -6,6 +6,15 @@ use shelldsa::io::shell_case::parse_shell_case;
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
+/// The text of the shipped case `verification/<dir>/case.toml`.
+pub fn shipped_case(dir: &str) -> String {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("verification")
+        .join(dir)
+        .join("case.toml");
+    std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
 /// Parses, builds and runs `text` (`name` is the file name its errors carry) and asserts that
 /// the run completed.
 pub fn run_complete(text: &str, name: &str) -> RunSummary {
