@@ -249,6 +249,7 @@ fn design_derivative_with_filter_support(support: f64) {
             particles: &parts,
             surfaces: &surfaces,
             positions: None,
+            surface: None,
             thickness: Dual64::new(t, s.thickness),
             young: Dual64::new(e, s.young),
             poisson: Dual64::new(nu, s.poisson),

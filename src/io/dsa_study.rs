@@ -14,8 +14,7 @@ use crate::shell::problem::ShellProblem;
 use crate::solver::NewtonSolver;
 
 /// Rejects, before any analysis, the loads the sensitivity methods cannot carry yet: edge
-/// moments (they act through the director) and edge forces (their design derivative through
-/// the edge's length element).
+/// moments (they act through the director).
 pub fn check_dsa_loads(case: &ShellCase) -> Result<(), CaseError> {
     for (k, l) in case.loads.iter().enumerate() {
         let (value, why) = match l {
@@ -24,21 +23,17 @@ pub fn check_dsa_loads(case: &ShellCase) -> Result<(), CaseError> {
                 "for the dual-number reference (edge moments act through the director and \
                  are not supported by it yet)",
             ),
-            Load::EdgeForce { .. } => (
-                "\"edge-force\"",
-                "for the sensitivity methods (the design derivative of an edge force, through \
-                 the edge's length element, is not carried by them yet)",
-            ),
             Load::PointForce { .. }
             | Load::Gravity { .. }
             | Load::GravityPerVolume { .. }
-            | Load::Pressure { .. } => continue,
+            | Load::Pressure { .. }
+            | Load::EdgeForce { .. } => continue,
         };
         return Err(invalid(
             &case.path,
             format!("load[{k}].kind"),
             value,
-            format!("\"point-force\", \"pressure\" or \"gravity\" {why}"),
+            format!("\"point-force\", \"pressure\", \"gravity\" or \"edge-force\" {why}"),
         ));
     }
     Ok(())

@@ -123,6 +123,10 @@ pub struct SensitivityState {
     /// Design velocity `V⁰ = ẋ̄⁰` of the mid-surface point at every in-plane point (shape
     /// variables, with [`Self::surface`]): where the contact's slave points sit (eq 74).
     pub position: Option<Vec<Vector3<f64>>>,
+    /// Per load of the problem (its order; empty for every load when the variable is not a
+    /// shape variable): for an edge force, the design velocity `ẋ̄⁰,t` of the initial tangent
+    /// at each of its edge points (`EdgeForce::tangent_velocities`); empty for other loads.
+    pub edge_tangents: Vec<Vec<Vector3<f64>>>,
     /// `ṫ`.
     pub thickness: f64,
     /// `Ė, ν̇, k̇, σ̇0, Ḣ, β̇`.
@@ -180,6 +184,15 @@ impl SensitivityState {
                 s.history = v.history;
                 s.surface = Some(v.points);
                 s.position = Some(v.positions);
+                s.edge_tangents = problem
+                    .loads()
+                    .iter()
+                    .map(|l| match l.edge_force() {
+                        Some(e) => e.tangent_velocities(surface, *parameter),
+                        None => Ok(Vec::new()),
+                    })
+                    .collect::<Result<_, _>>()
+                    .map_err(SensitivityError::from)?;
             }
             // The one check (`check_method_inputs`) found the tool.
             DesignKind::Tool { tool, axis } | DesignKind::ToolRotation { tool, axis } => {
@@ -242,6 +255,7 @@ impl SensitivityState {
             unknowns: vec![0.0; problem.n_dofs()],
             surface: None,
             position: None,
+            edge_tangents: Vec::new(),
             thickness: 0.0,
             material: MaterialParams::zero(),
             tools: vec![Default::default(); contact_tools(problem).len()],
@@ -753,6 +767,7 @@ impl ContinuumDsa {
                     unknowns: s.unknowns.iter().zip(dq).map(|(a, d)| a + d).collect(),
                     surface: s.surface.clone(),
                     position: s.position.clone(),
+                    edge_tangents: s.edge_tangents.clone(),
                     thickness: s.thickness,
                     material: s.material,
                     tools: s.tools.clone(),
@@ -928,12 +943,15 @@ fn tool_force_dots(
     Ok(c.contact.tool_force_dots(model, &q, load, &seeds)?)
 }
 
-/// Add the derivative of load `l` at the increment `dq` and factor `factor` for the seeds of
-/// `s` restricted to `group` (`None`: all) into `f`, hand-derived:
+/// Add the derivative of load `l` (position `k` in the problem's loads) at the increment `dq`
+/// and factor `factor` for the seeds of `s` restricted to `group` (`None`: all) into `f`,
+/// hand-derived:
 /// - a follower pressure depends on `ⁿū + Δū` only: its history term is its load stiffness at
 ///   `Δu` applied to `ⁿū̇` (eq 37's `l'_V`); for a shape variable its explicit dependence on the
 ///   initial tangents `x̄⁰,α` (`Pressure::add_design_derivative`, group `load`);
 /// - gravity per unit initial area: the area element's shape derivative (group `load`);
+/// - an edge force per unit initial length: the length element's shape derivative
+///   (`EdgeForce::add_design_derivative`, group `load`);
 /// - a constant load: the inner load at factor 1;
 /// - the director filter (group `filter` alone, with all seeds):
 ///   `−κ̇ Bᵀ B α − κ (Ḃᵀ B α + Bᵀ Ḃ α)` with `κ̇` from `Ė, ν̇, ṫ` and `Ḃ` from the committed
@@ -941,7 +959,7 @@ fn tool_force_dots(
 /// - the contact: [`contact_dots`], for all variables at once.
 fn add_load_dot(
     model: &ShellModel,
-    l: &Load,
+    (k, l): (usize, &Load),
     s: &SensitivityState,
     group: Option<TermGroup>,
     dq: &[f64],
@@ -974,7 +992,7 @@ fn add_load_dot(
             }
         }
         Load::PointForce(_) => {}
-        Load::Constant(inner) => add_load_dot(model, inner, s, group, dq, 1.0, f)?,
+        Load::Constant(inner) => add_load_dot(model, (k, inner), s, group, dq, 1.0, f)?,
         // The contact is evaluated for all variables at once (`contact_dots`).
         Load::Contact(_) => {
             return Err(SensitivityError::LoadNotCarried {
@@ -992,11 +1010,18 @@ fn add_load_dot(
                 l.add_design_derivative(model, &s.particles, kappa_dot, dq, f)?;
             }
         }
+        // Dead per unit initial length: a shape variable changes the arc-length element.
+        Load::EdgeForce(e) => {
+            if let (true, Some(td)) = (on(TermGroup::Load), s.edge_tangents.get(k)) {
+                e.add_design_derivative(model, td, factor, f)?;
+            }
+        }
         // Refused before the analysis (`check_method_inputs`).
-        Load::Moment(_) | Load::EdgeForce(_) => {
+        Load::Moment(_) => {
             return Err(SensitivityError::LoadNotCarried {
                 load: format!("a {} load", l.kind()),
-                expected: "point forces, gravity, pressure, contact or the director filter",
+                expected: "point forces, gravity, pressure, edge forces, contact or the director \
+                           filter",
             })
         }
     }
@@ -1082,8 +1107,12 @@ fn fictitious_loads_kept(
             Some(c) => c,
             None => vec![0.0; n_q],
         };
-        for l in loads.iter().filter(|l| !matches!(l, Load::Contact(_))) {
-            add_load_dot(model, l, s, group, &du[..n_q], load, &mut f)?;
+        for (k, l) in loads
+            .iter()
+            .enumerate()
+            .filter(|(_, l)| !matches!(l, Load::Contact(_)))
+        {
+            add_load_dot(model, (k, l), s, group, &du[..n_q], load, &mut f)?;
         }
         for (ri, fi) in r.iter_mut().zip(&f) {
             *ri -= fi;

@@ -132,6 +132,9 @@ pub struct DualState<D> {
     /// [`Self::surfaces`] it is the initial geometry of the contact's slave points
     /// ([`crate::shell::contact::InitialGeometry`]).
     pub positions: Option<Vec<Vector3<D>>>,
+    /// The initial mid-surface with the group's shape design variables seeded on its design
+    /// parameters (`None` without any): where an edge force takes its arc-length element.
+    pub surface: Option<Surface<D>>,
     /// Per tool of the contact load (empty without one): the translation added to its path,
     /// value 0 (the problem's tools are at the design's position), seeded for tool variables.
     pub tool_offsets: Vec<Vector3<D>>,
@@ -151,6 +154,7 @@ impl<D: DesignDual> DualState<D> {
             particles: &self.particles,
             surfaces: &self.surfaces,
             positions: self.positions.as_deref(),
+            surface: self.surface.as_ref(),
             thickness: self.thickness,
             young: self.material.young,
             poisson: self.material.poisson,
@@ -226,8 +230,8 @@ pub enum SensitivityError {
     /// ([`crate::shell::load::Load::takes_state`]).
     #[error(
         "load {index} of the problem ({kind}): not carried by the design sensitivity methods \
-         (expected point forces, gravity, pressure, contact or the director filter, any of \
-         them held constant)"
+         (expected point forces, gravity, pressure, edge forces, contact or the director \
+         filter, any of them held constant)"
     )]
     UnsupportedLoad {
         /// Position in [`ShellProblem::loads`].
@@ -439,7 +443,7 @@ impl<D: DesignDual> DualDsa<D> {
                     None
                 };
                 let m = design.material.to_array();
-                let (particles, history, surfaces, positions) = match surface {
+                let (particles, history, surfaces, positions, seeded) = match surface {
                     Some(s) if shape => {
                         let g = dual_geometry::<D>(model, s, &s_parts).map_err(|source| {
                             SensitivityError::Geometry {
@@ -447,12 +451,19 @@ impl<D: DesignDual> DualDsa<D> {
                                 source,
                             }
                         })?;
-                        (g.particles, g.history, g.points, Some(g.positions))
+                        (
+                            g.particles,
+                            g.history,
+                            g.points,
+                            Some(g.positions),
+                            Some(g.surface),
+                        )
                     }
                     _ => (
                         model.particles.iter().map(|p| p.lift()).collect(),
                         model.history.iter().map(|h| h.lift()).collect(),
                         model.points.iter().map(|p| p.surface.lift()).collect(),
+                        None,
                         None,
                     ),
                 };
@@ -468,6 +479,7 @@ impl<D: DesignDual> DualDsa<D> {
                     unknowns: problem.state().iter().map(|&v| D::cst(v)).collect(),
                     surfaces,
                     positions,
+                    surface: seeded,
                     tool_offsets: tool_parts
                         .iter()
                         .map(|p| Vector3::from_fn(|c, _| D::from_parts(0.0, &p[c])))
@@ -676,6 +688,7 @@ impl<D: DesignDual> DualDsa<D> {
                 unknowns,
                 surfaces: g.surfaces.clone(),
                 positions: g.positions.clone(),
+                surface: g.surface.clone(),
                 tool_offsets: g.tool_offsets.clone(),
                 tool_rotations: g.tool_rotations.clone(),
                 tool_surfaces: g.tool_surfaces.clone(),

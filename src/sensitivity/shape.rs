@@ -251,6 +251,7 @@ pub fn dual_geometry<D: DesignDual>(
         positions,
         particles,
         history,
+        surface: s,
     })
 }
 
@@ -265,4 +266,6 @@ pub struct DualGeometry<D> {
     pub particles: Vec<ParticleState<D>>,
     /// Per point and layer (initial histories).
     pub history: Vec<PointHistory<D>>,
+    /// The surface itself, its design parameters in `D`.
+    pub surface: Surface<D>,
 }

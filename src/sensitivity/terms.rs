@@ -104,7 +104,7 @@ pub struct TermBreakdown {
 }
 
 /// The continuum seeds carried by a dual state (its derivative parts).
-fn seeds_of(g: &DualState<Dual64>) -> SensitivityState {
+fn seeds_of(problem: &ShellProblem, g: &DualState<Dual64>) -> SensitivityState {
     let pv = |v: &nalgebra::Vector3<Dual64>| v.map(|x| x.eps);
     SensitivityState {
         particles: g
@@ -138,6 +138,19 @@ fn seeds_of(g: &DualState<Dual64>) -> SensitivityState {
         }),
         // V⁰ of the contact's slave sites, with the surface dots (a shape variable's group).
         position: g.positions.as_ref().map(|x| x.iter().map(pv).collect()),
+        // The edge forces' tangent velocities, from the seeded surface (a shape variable's).
+        edge_tangents: match &g.surface {
+            Some(s) => problem
+                .loads()
+                .iter()
+                .map(|l| {
+                    l.edge_force()
+                        .map(|e| e.tangents_on(s).iter().map(pv).collect())
+                        .unwrap_or_default()
+                })
+                .collect(),
+            None => Vec::new(),
+        },
         thickness: g.thickness.eps,
         material: MaterialParams::from_array(g.material.to_array().map(|x| x.eps)),
         // Tool translations, rotations and shapes all feed the `Tool` group (V^c, eq 76).
@@ -206,6 +219,7 @@ fn masked(g: &DualState<Dual64>, group: TermGroup) -> DualState<Dual64> {
         for x in m.positions.iter_mut().flatten() {
             *x = x.map(|v| c(&v));
         }
+        m.surface = None;
     }
     if group != TermGroup::Tool {
         for v in m.tool_offsets.iter_mut().chain(&mut m.tool_rotations) {
@@ -306,7 +320,8 @@ impl Breakdown {
             u: step.u,
             load: step.load,
         };
-        let states: Vec<SensitivityState> = dp.groups().iter().map(seeds_of).collect();
+        let states: Vec<SensitivityState> =
+            dp.groups().iter().map(|g| seeds_of(problem, g)).collect();
         let zero = SensitivityState::zero(problem);
         let mut per_var: Vec<Vec<GroupComparison>> = vec![Vec::new(); states.len()];
         let groups: Vec<Option<TermGroup>> = TermGroup::ALL
@@ -418,6 +433,7 @@ impl Breakdown {
                     unknowns: s.unknowns.iter().zip(dqd).map(|(a, d)| a + d).collect(),
                     surface: s.surface.clone(),
                     position: s.position.clone(),
+                    edge_tangents: s.edge_tangents.clone(),
                     thickness: s.thickness,
                     material: s.material,
                     tools: s.tools.clone(),

@@ -148,6 +148,9 @@ pub struct LoadState<'a, T> {
     /// Initial mid-surface position `x̄⁰` per quadrature point when it carries a shape design
     /// derivative (`None`: the contact's slave sites as built).
     pub positions: Option<&'a [V3<T>]>,
+    /// The initial mid-surface in `T` when it carries a shape design derivative (`None`: the
+    /// surface as built): where an edge force takes its arc-length element.
+    pub surface: Option<&'a Surface<T>>,
     /// Shell thickness.
     pub thickness: T,
     /// Young's modulus (of a penalty `ω = c E / t`, of the director filter's `κ`).
@@ -200,6 +203,15 @@ impl Load {
         }
     }
 
+    /// The edge force of this load (also inside [`Load::Constant`]).
+    pub fn edge_force(&self) -> Option<&EdgeForce> {
+        match self {
+            Load::EdgeForce(e) => Some(e),
+            Load::Constant(inner) => inner.edge_force(),
+            _ => None,
+        }
+    }
+
     /// The contact of this load (also inside [`Load::Constant`]).
     pub fn contact(&self) -> Option<&ContactLoad> {
         match self {
@@ -209,13 +221,13 @@ impl Load {
         }
     }
 
-    /// Whether [`Load::force`] takes a [`LoadState`]: every kind but the edge moment and edge
-    /// force (their design derivative through the edge's length element is not carried) and
-    /// the director filter with the per-particle strength (that of the committed director
-    /// forces is not carried).
+    /// Whether [`Load::force`] takes a [`LoadState`]: every kind but the edge moment (it acts
+    /// through the director, whose design derivative it does not carry) and the director
+    /// filter with the per-particle strength (that of the committed director forces is not
+    /// carried).
     pub fn takes_state(&self) -> bool {
         match self {
-            Load::Moment(_) | Load::EdgeForce(_) => false,
+            Load::Moment(_) => false,
             Load::DirectorFilter(l) => l.strength() == FilterStrength::Bending,
             Load::Constant(inner) => inner.takes_state(),
             _ => true,
@@ -263,6 +275,11 @@ impl Load {
             }
             (Load::Moment(l), None) => l.force(model, q, factor, f),
             (Load::EdgeForce(l), None) => l.force(model, q, factor, f),
+            // Dead per unit initial length: on the state's initial surface when it has one.
+            (Load::EdgeForce(l), Some(s)) => match s.surface {
+                Some(surface) => l.force_on_surface(model, surface, factor, f),
+                None => l.force(model, q, factor, f),
+            },
             (Load::DirectorFilter(l), None) => l.force(model, q, f),
             // On the state's committed directors and lamina vectors, with κ(E, ν, t).
             (Load::DirectorFilter(l), Some(s)) => {
@@ -272,10 +289,10 @@ impl Load {
             (Load::Contact(c), None) => c.contact.force_generic(model, q, factor, f),
             (Load::Contact(c), Some(s)) => c.contact.force_with(model, &c.inputs(s), q, factor, f),
             (Load::Constant(inner), s) => inner.force(model, s, q, 1.0, f),
-            (l @ (Load::Moment(_) | Load::EdgeForce(_)), Some(_)) => {
+            (l @ Load::Moment(_), Some(_)) => {
                 Err(ShellError::InvalidInput(format!(
                     "{} load on a given committed state and design: not implemented \
-                     (expected point forces, gravity, pressure, contact or the director filter)",
+                     (expected point forces, gravity, pressure, edge forces, contact or the director filter)",
                     l.kind()
                 )))
             }
@@ -884,6 +901,9 @@ fn edge_rule(
                 .map_err(|e| ShellError::InvalidInput(format!("{what} edge point {uv:?}: {e}")))?;
             pts.push(EdgePoint {
                 uv,
+                gauss: w,
+                along: 1 - fixed,
+                tangent,
                 weight: w * tangent.norm(),
                 n0,
                 shape: sv.iter().map(|(j, psi, _)| (j, psi)).collect(),
@@ -942,27 +962,121 @@ impl EdgeForce {
         factor: f64,
         f: &mut [T],
     ) -> Result<(), ShellError> {
+        self.check_model(model)?;
+        check_sizes(model, q.len(), Some(f.len()))?;
+        for ep in &self.points {
+            self.scatter(model, ep, T::cst(ep.weight * factor), f);
+        }
+        Ok(())
+    }
+
+    /// [`EdgeForce::force`] on the initial surface `surface` in `T` (the state's design, the
+    /// dual reference): the arc-length element `|x̄⁰,t|` of every edge point evaluated on it,
+    /// so that it carries the shape design derivative. The rule's points and shape functions
+    /// live on the parameter domain and do not move.
+    pub fn force_on_surface<T: Real>(
+        &self,
+        model: &ShellModel,
+        surface: &Surface<T>,
+        factor: f64,
+        f: &mut [T],
+    ) -> Result<(), ShellError> {
+        self.check_model(model)?;
+        check_sizes(model, f.len(), None)?;
+        for (ep, t) in self.points.iter().zip(self.tangents_on(surface)) {
+            let s = t.norm() * (ep.gauss * factor);
+            self.scatter(model, ep, s, f);
+        }
+        Ok(())
+    }
+
+    /// The tangent `x̄⁰,t` along the edge at every edge point, on `surface` in `T`.
+    pub fn tangents_on<T: Real>(&self, surface: &Surface<T>) -> Vec<V3<T>> {
+        self.points
+            .iter()
+            .map(|ep| {
+                let sd = surface.eval(T::cst(ep.uv[0]), T::cst(ep.uv[1]));
+                if ep.along == 0 {
+                    sd.xu
+                } else {
+                    sd.xv
+                }
+            })
+            .collect()
+    }
+
+    /// The design velocity `ẋ̄⁰,t` of the initial tangent at every edge point, for the
+    /// surface's design parameter `parameter` (the input of
+    /// [`EdgeForce::add_design_derivative`]). `surface` is the one the load was built on.
+    pub fn tangent_velocities(
+        &self,
+        surface: &Surface<f64>,
+        parameter: usize,
+    ) -> Result<Vec<V3<f64>>, ShellError> {
+        self.points
+            .iter()
+            .map(|ep| {
+                let sd = surface
+                    .design_velocity(parameter, ep.uv[0], ep.uv[1])
+                    .map_err(|e| {
+                        ShellError::InvalidInput(format!(
+                            "edge force: design velocity at edge point {:?}: {e}",
+                            ep.uv
+                        ))
+                    })?;
+                Ok(if ep.along == 0 { sd.xu } else { sd.xv })
+            })
+            .collect()
+    }
+
+    /// The shape design derivative of the force (hand-derived): the force per unit initial
+    /// length is fixed, so only the arc-length element changes,
+    /// `d|x̄⁰,t|/dτ = x̄⁰,t · ẋ̄⁰,t / |x̄⁰,t|`, with `tangent_dots` from
+    /// [`EdgeForce::tangent_velocities`] (one per edge point). Adds `factor · ḟ` into `f`.
+    pub fn add_design_derivative(
+        &self,
+        model: &ShellModel,
+        tangent_dots: &[V3<f64>],
+        factor: f64,
+        f: &mut [f64],
+    ) -> Result<(), ShellError> {
+        self.check_model(model)?;
+        check_sizes(model, f.len(), None)?;
+        if tangent_dots.len() != self.points.len() {
+            return Err(ShellError::Dimension {
+                expected: self.points.len(),
+                got: tangent_dots.len(),
+            });
+        }
+        for (ep, td) in self.points.iter().zip(tangent_dots) {
+            let s = ep.tangent.dot(td) / ep.tangent.norm() * (ep.gauss * factor);
+            self.scatter(model, ep, s, f);
+        }
+        Ok(())
+    }
+
+    /// Scatter `s · Ψ_J · p` of edge point `ep` into the translations of `f`.
+    fn scatter<T: Real>(&self, model: &ShellModel, ep: &EdgePoint, s: T, f: &mut [T]) {
+        for &(j, psi) in &ep.shape {
+            let c = s * psi;
+            let local = [
+                c * self.force[0],
+                c * self.force[1],
+                c * self.force[2],
+                T::zero(),
+                T::zero(),
+            ];
+            model.scatter_particle(j, &local, f);
+        }
+    }
+
+    fn check_model(&self, model: &ShellModel) -> Result<(), ShellError> {
         if model.n_dofs() != self.n_dofs {
             return Err(ShellError::InvalidInput(format!(
                 "edge force built for a model with {} DOFs, used with one of {}",
                 self.n_dofs,
                 model.n_dofs()
             )));
-        }
-        check_sizes(model, q.len(), Some(f.len()))?;
-        for ep in &self.points {
-            let s = ep.weight * factor;
-            for &(j, psi) in &ep.shape {
-                let c = psi * s;
-                let local = [
-                    T::cst(c * self.force[0]),
-                    T::cst(c * self.force[1]),
-                    T::cst(c * self.force[2]),
-                    T::zero(),
-                    T::zero(),
-                ];
-                model.scatter_particle(j, &local, f);
-            }
         }
         Ok(())
     }
@@ -972,6 +1086,12 @@ impl EdgeForce {
 #[derive(Clone, Debug, PartialEq)]
 struct EdgePoint {
     uv: [f64; 2],
+    /// Gauss weight on the parameter line.
+    gauss: f64,
+    /// The running parameter: 0 (`u`, a `v`-edge) or 1 (`v`, a `u`-edge).
+    along: usize,
+    /// The initial tangent `x̄⁰,t` along the running parameter.
+    tangent: V3<f64>,
     /// Gauss weight times the initial arc-length element `|x̄⁰,t|`.
     weight: f64,
     /// Initial normal `n⁰`.
