@@ -251,15 +251,6 @@ pub fn main_with_args<I: IntoIterator<Item = String>>(args: I) -> i32 {
                     set.merged.len()
                 );
             }
-            if let Case::Shell(s) = &c {
-                let missing = shell_build::unsupported(s);
-                if !missing.is_empty() {
-                    say!(con, "note: this build cannot run the case yet:");
-                    for m in &missing {
-                        say!(con, "  {m}");
-                    }
-                }
-            }
             EXIT_OK
         }),
         Command::Run { case, out, quiet } => read_case(&case).map(|c| run(&con, &c, &out, quiet)),

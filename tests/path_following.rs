@@ -270,14 +270,7 @@ fn displacement_control_reports_the_reaction_that_equals_the_applied_load() {
 }
 
 #[test]
-fn follower_edge_force_and_arc_length_with_dsa_are_refused_up_front() {
-    let text = PLATE.replace(
-        "LOAD",
-        "[[load]]\nkind = \"edge-force\"\nedge = \"u-max\"\nper_length = [0.0, 0.0, 1.0]\nfollower = true",
-    );
-    let case = parse_shell_case(&text, Path::new("strip.toml")).unwrap();
-    let e = shell_build::build(&case).unwrap_err().to_string();
-    assert!(e.contains("load[0].follower"), "{e}");
+fn degree_keys_and_arc_length_with_dsa_are_refused_up_front() {
     // A degree key names degrees.
     let start = PLATE.find("[surface]").unwrap();
     let end = PLATE.find("[particles]").unwrap();

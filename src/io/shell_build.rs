@@ -5,13 +5,11 @@
 //! The file has two halves:
 //! - **stable**: particle grid, cell quadrature, the [`Discretisation`], driver options and the
 //!   run loop. They use APIs that are settled (meshfree, quadrature, solver, model output).
-//! - **the problem seam** (section "API seam" below): [`unsupported`], [`connect`], [`driver`]
-//!   and [`problem_model`]. Only these know how boundary conditions, symmetry planes and loads
-//!   reach [`ShellProblem`], and which driver options exist. Today `ShellProblem` imposes
-//!   essential conditions on particles by the transformation method, with nodal values fixed at
-//!   zero, and takes one dead load vector; what that cannot express is listed by
-//!   [`unsupported`] (and rejected by [`connect`]) with the key of the case file, so a case
-//!   using it fails before any computation, naming what is missing.
+//! - **the problem seam** (section "API seam" below): [`connect`], [`driver`] and
+//!   [`problem_model`]. Only these know how boundary conditions (exact linear constraints with
+//!   multipliers), symmetry planes (image particles) and loads reach [`ShellProblem`], and which
+//!   driver options exist. A condition or load they cannot build is an error naming its key in
+//!   the case file, before any computation.
 
 use super::shell_case::{
     edge_name, Boundary, CellLayout, Component, Load, LoadScalingSpec, Location, MonitorDirection,
@@ -60,16 +58,6 @@ pub enum BuildError {
         key: String,
         /// What failed.
         message: String,
-    },
-    /// A feature of the case that the shell problem cannot express yet.
-    #[error("`{key}`: {what} is not available in this build: {needs}")]
-    Unsupported {
-        /// Case-file key.
-        key: String,
-        /// The feature.
-        what: String,
-        /// What is missing.
-        needs: String,
     },
     /// Sparse solver set-up.
     #[error("linear solver: {0}")]
@@ -180,25 +168,7 @@ pub fn newton_settings(case: &ShellCase) -> (NewtonOptions, LoadStepping) {
 
 // ---------------------------------------------------------------------------------------------
 // API seam: the only code that knows how conditions and loads reach `ShellProblem`, and which
-// options the driver has. To connect the rewritten problem (symmetry images, Lagrange-multiplier
-// constraints, `Vec<Load>`) and the driver's predictor, change these four
-// functions and remove the entries of `unsupported` that become possible.
-
-/// Features of `case` the current [`ShellProblem`] and driver cannot express, each as the
-/// error [`connect`] or [`driver`] would return. Empty when the case can run (everything the
-/// case format describes runs in this build; the seam stays for future features).
-pub fn unsupported(case: &ShellCase) -> Vec<BuildError> {
-    case.loads
-        .iter()
-        .enumerate()
-        .filter(|(_, l)| matches!(l, Load::EdgeForce { follower: true, .. }))
-        .map(|(k, _)| BuildError::Unsupported {
-            key: format!("load[{k}].follower"),
-            what: "a follower edge force".into(),
-            needs: "its load stiffness; use follower = false (a dead force in global axes)".into(),
-        })
-        .collect()
-}
+// options the driver has.
 
 /// The reaction of every `prescribed` entry of the case, in case order: `(boundary[k], the
 /// force (or moment) the support exerts on the shell along the prescribed component)`, from
@@ -425,8 +395,7 @@ pub fn check_boundary(case: &ShellCase) -> Result<ConstraintSet, BuildError> {
 }
 
 /// Build the model and the shell problem: surface, discretisation (symmetry planes, VCI),
-/// essential conditions (exact linear constraints) and loads. Rejects what [`unsupported`]
-/// lists.
+/// essential conditions (exact linear constraints) and loads.
 pub fn connect(case: &ShellCase, disc: Discretisation) -> Result<ShellProblem, BuildError> {
     connect_with_contact(case, disc).map(|(p, _)| p)
 }
@@ -464,19 +433,20 @@ pub fn case_loads(
                     .map_err(err)?
                     .into()
             }
-            // A follower one is refused by `unsupported`.
             Load::EdgeForce {
-                edge, per_length, ..
-            } => load::EdgeForce::on_edge(
-                model,
-                &case.surface,
-                *edge,
-                *per_length,
-                intervals(edge),
-                4,
-            )
-            .map_err(err)?
-            .into(),
+                edge,
+                per_length,
+                follower,
+            } => {
+                let build = if *follower {
+                    load::EdgeForce::follower_on_edge
+                } else {
+                    load::EdgeForce::on_edge
+                };
+                build(model, &case.surface, *edge, *per_length, intervals(edge), 4)
+                    .map_err(err)?
+                    .into()
+            }
         };
         loads.push(
             match case.load_scaling.get(k).copied().unwrap_or_default() {
@@ -530,9 +500,6 @@ pub fn connect_with_contact(
     case: &ShellCase,
     mut disc: Discretisation,
 ) -> Result<(ShellProblem, Option<Arc<ShellContact>>), BuildError> {
-    if let Some(e) = unsupported(case).into_iter().next() {
-        return Err(e);
-    }
     disc.symmetry = symmetry_planes(case)?;
     let mut model = ShellModel::new(&case.surface, disc, case.material)
         .map_err(|e| model_err("kernel.support", e))?;

@@ -124,9 +124,10 @@ pub struct SensitivityState {
     /// variables, with [`Self::surface`]): where the contact's slave points sit (eq 74).
     pub position: Option<Vec<Vector3<f64>>>,
     /// Per load of the problem (its order; empty for every load when the variable is not a
-    /// shape variable): for an edge force, the design velocity `ẋ̄⁰,t` of the initial tangent
-    /// at each of its edge points (`EdgeForce::tangent_velocities`); empty for other loads.
-    pub edge_tangents: Vec<Vec<Vector3<f64>>>,
+    /// shape variable): for an edge force, the design velocities `ẋ̄⁰,u`, `ẋ̄⁰,v` of the initial
+    /// tangents at each of its edge points (`EdgeForce::tangent_velocities`); empty for other
+    /// loads.
+    pub edge_tangents: Vec<Vec<[Vector3<f64>; 2]>>,
     /// `ṫ`.
     pub thickness: f64,
     /// `Ė, ν̇, k̇, σ̇0, Ḣ, β̇`.
@@ -972,12 +973,7 @@ fn add_load_dot(
             if on(TermGroup::History) {
                 let mut trip = Vec::new();
                 p.add_stiffness(model, dq, factor, &mut trip)?;
-                for (i, j, k) in trip {
-                    let (pj, c) = (j / DOFS_PER_PARTICLE, j % DOFS_PER_PARTICLE);
-                    if c < 3 {
-                        f[i] += k * s.particles[pj].u[c];
-                    }
-                }
+                add_times_committed_u(&trip, s, f);
             }
             if let (true, Some(v)) = (on(TermGroup::Load), &s.surface) {
                 p.add_design_derivative(model, v, dq, factor, f)?;
@@ -1010,10 +1006,16 @@ fn add_load_dot(
                 l.add_design_derivative(model, &s.particles, kappa_dot, dq, f)?;
             }
         }
-        // Dead per unit initial length: a shape variable changes the arc-length element.
+        // A follower depends on `ⁿū + Δū` as the pressure does; a shape variable changes the
+        // arc-length element (dead) or the initial tangents under the current frame (follower).
         Load::EdgeForce(e) => {
+            if e.is_follower() && on(TermGroup::History) {
+                let mut trip = Vec::new();
+                e.add_stiffness(model, dq, factor, &mut trip)?;
+                add_times_committed_u(&trip, s, f);
+            }
             if let (true, Some(td)) = (on(TermGroup::Load), s.edge_tangents.get(k)) {
-                e.add_design_derivative(model, td, factor, f)?;
+                e.add_design_derivative(model, td, dq, factor, f)?;
             }
         }
         // Refused before the analysis (`check_method_inputs`).
@@ -1026,6 +1028,18 @@ fn add_load_dot(
         }
     }
     Ok(())
+}
+
+/// Add the load stiffness entries `trip` (global `(row, column, value)`) applied to the
+/// committed displacement sensitivities `ⁿū̇` of `s` into `f` (a follower load's history term,
+/// eq 37's `l'_V`): only the translation columns carry `ⁿū̇`.
+fn add_times_committed_u(trip: &[(usize, usize, f64)], s: &SensitivityState, f: &mut [f64]) {
+    for &(i, j, k) in trip {
+        let (pj, c) = (j / DOFS_PER_PARTICLE, j % DOFS_PER_PARTICLE);
+        if c < 3 {
+            f[i] += k * s.particles[pj].u[c];
+        }
+    }
 }
 
 /// A converged step as the sensitivity methods see it.

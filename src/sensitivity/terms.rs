@@ -145,7 +145,12 @@ fn seeds_of(problem: &ShellProblem, g: &DualState<Dual64>) -> SensitivityState {
                 .iter()
                 .map(|l| {
                     l.edge_force()
-                        .map(|e| e.tangents_on(s).iter().map(pv).collect())
+                        .map(|e| {
+                            e.initial_tangents_on(s)
+                                .iter()
+                                .map(|t| t.map(|v| pv(&v)))
+                                .collect()
+                        })
                         .unwrap_or_default()
                 })
                 .collect(),

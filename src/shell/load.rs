@@ -166,6 +166,24 @@ pub struct LoadState<'a, T> {
     pub tool_surfaces: Option<&'a [crate::geometry::Surface<T>]>,
 }
 
+impl<T: Real> LoadState<'_, T> {
+    /// The increment `q` with the derivative part of the committed displacements `ⁿū` added
+    /// to its translations: a load that depends on `ⁿū + Δū` only (a follower pressure or edge
+    /// force, evaluated on the model's f64 committed state) then carries `ⁿū̇`.
+    fn shifted(&self, q: &[T]) -> Vec<T> {
+        q.iter()
+            .enumerate()
+            .map(|(i, x)| {
+                let (p, c) = (i / DOFS_PER_PARTICLE, i % DOFS_PER_PARTICLE);
+                match self.particles.get(p) {
+                    Some(st) if c < 3 => *x + st.u[c] - T::cst(st.u[c].value()),
+                    _ => *x,
+                }
+            })
+            .collect()
+    }
+}
+
 impl Load {
     /// The kind, as the case format names it.
     pub fn kind(&self) -> &'static str {
@@ -195,7 +213,8 @@ impl Load {
     /// empty).
     pub fn is_follower(&self) -> bool {
         match self {
-            Load::PointForce(_) | Load::Gravity(_) | Load::EdgeForce(_) => false,
+            Load::PointForce(_) | Load::Gravity(_) => false,
+            Load::EdgeForce(e) => e.is_follower(),
             Load::Pressure(_) | Load::Moment(_) | Load::Contact(_) | Load::DirectorFilter(_) => {
                 true
             }
@@ -260,26 +279,16 @@ impl Load {
             // only through their sum: the increment carries the state's `ⁿū̇`.
             (Load::Pressure(l), Some(s)) => {
                 check_sizes(model, q.len(), None)?;
-                let shifted: Vec<T> = q
-                    .iter()
-                    .enumerate()
-                    .map(|(i, x)| {
-                        let (p, c) = (i / DOFS_PER_PARTICLE, i % DOFS_PER_PARTICLE);
-                        match s.particles.get(p) {
-                            Some(st) if c < 3 => *x + st.u[c] - T::cst(st.u[c].value()),
-                            _ => *x,
-                        }
-                    })
-                    .collect();
-                l.force_with_surfaces(model, s.surfaces, &shifted, factor, f)
+                l.force_with_surfaces(model, s.surfaces, &s.shifted(q), factor, f)
             }
             (Load::Moment(l), None) => l.force(model, q, factor, f),
             (Load::EdgeForce(l), None) => l.force(model, q, factor, f),
-            // Dead per unit initial length: on the state's initial surface when it has one.
-            (Load::EdgeForce(l), Some(s)) => match s.surface {
-                Some(surface) => l.force_on_surface(model, surface, factor, f),
-                None => l.force(model, q, factor, f),
-            },
+            // On the state's initial surface when it has one; a follower depends on `ⁿū + Δū`
+            // as the pressure does.
+            (Load::EdgeForce(l), Some(s)) => {
+                check_sizes(model, q.len(), None)?;
+                l.force_with(model, s.surface, &s.shifted(q), factor, f)
+            }
             (Load::DirectorFilter(l), None) => l.force(model, q, f),
             // On the state's committed directors and lamina vectors, with κ(E, ν, t).
             (Load::DirectorFilter(l), Some(s)) => {
@@ -326,7 +335,8 @@ impl Load {
         out: &mut Vec<(usize, usize, f64)>,
     ) -> Result<(), ShellError> {
         match self {
-            Load::PointForce(_) | Load::Gravity(_) | Load::EdgeForce(_) => Ok(()),
+            Load::PointForce(_) | Load::Gravity(_) => Ok(()),
+            Load::EdgeForce(l) => l.add_stiffness(model, q, factor, out),
             Load::Pressure(l) => l.add_stiffness(model, q, factor, out),
             Load::Moment(l) => l.add_stiffness(model, q, factor, out),
             Load::Contact(c) => c.contact.add_stiffness(model, q, factor, out),
@@ -903,29 +913,47 @@ fn edge_rule(
                 uv,
                 gauss: w,
                 along: 1 - fixed,
-                tangent,
+                x0a: [sd.xu, sd.xv],
                 weight: w * tangent.norm(),
                 n0,
                 shape: sv.iter().map(|(j, psi, _)| (j, psi)).collect(),
+                grads: sv.iter().map(|(_, _, g)| g).collect(),
             });
         }
     }
     Ok(pts)
 }
 
-/// A dead force `p` per unit initial length on a parametric edge (global axes):
-/// `f_I = ∫_edge Ψ_I p ds⁰ = Σ_g Ψ_I(ξ_g) p |x̄⁰,t(ξ_g)| w_g`, with the Gauss rule of
-/// [`edge_rule`] on the edge's parameter line (translations only; `docs/loads.md`).
+/// A force per unit length on a parametric edge, integrated with the Gauss rule of
+/// [`edge_rule`] on the edge's parameter line (translations only; `docs/loads.md`):
+///
+/// - **dead** ([`EdgeForce::on_edge`]): `p` in global axes per unit initial length,
+///   `f_I = ∫_edge Ψ_I p ds⁰ = Σ_g Ψ_I(ξ_g) p |x̄⁰,t(ξ_g)| w_g`;
+/// - **follower** ([`EdgeForce::follower_on_edge`]): components `c = (c_o, c_n, c_t)` per unit
+///   current length along the edge's current frame, the outward in-plane normal `ô`, the
+///   surface normal `n̂ = a/|a|` (`a = x̄,u × x̄,v`) and the tangent `t̂ = x̄,t/|x̄,t|`:
+///   `f_I = Σ_g w_g Ψ_I [c_o σ (n̂ × x̄,t) + c_n |x̄,t| n̂ + c_t x̄,t]`, where
+///   `x̄,α = x̄⁰,α + Σ_J Ψ_J,α (ū_J + Δū_J)` and `ô = σ n̂ × t̂` (`σ = ±1` by the edge: `n̂ × t̂`
+///   points into increasing `v` along a `v`-edge's `u` and into decreasing `u` along a
+///   `u`-edge's `v`).
+///
+/// The follower's load stiffness (hand-derived, [`EdgeForce::add_stiffness`]): with
+/// `N_J = (I − n̂n̂ᵀ)(Ψ_J,v [x̄,u]× − Ψ_J,u [x̄,v]×)/|a|` (the rate of `n̂` per `Δū_J`), the
+/// block of particles `(I, J)` is `Σ_g w_g Ψ_I [c_o σ (Ψ_J,t [n̂]× − [x̄,t]× N_J)
+/// + c_n (|x̄,t| N_J + Ψ_J,t n̂ x̄,tᵀ/|x̄,t|) + c_t Ψ_J,t I]`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EdgeForce {
     force: [f64; 3],
+    /// `Some(σ)` for a follower (the outward normal's orientation), `None` for a dead force.
+    follower: Option<f64>,
     n_dofs: usize,
     points: Vec<EdgePoint>,
 }
 
 impl EdgeForce {
-    /// The force `force` per unit initial length on `edge` of `surface` (the surface `model`
-    /// was built on), integrated with `intervals` intervals of `points` Gauss points.
+    /// The dead force `force` per unit initial length (global axes) on `edge` of `surface`
+    /// (the surface `model` was built on), integrated with `intervals` intervals of `points`
+    /// Gauss points.
     pub fn on_edge(
         model: &ShellModel,
         surface: &Surface<f64>,
@@ -937,14 +965,44 @@ impl EdgeForce {
         check_finite("edge force per unit length", &force)?;
         Ok(EdgeForce {
             force,
+            follower: None,
             n_dofs: model.n_dofs(),
             points: edge_rule(model, surface, edge, intervals, points, "edge force")?,
         })
     }
 
-    /// The force per unit length.
+    /// The follower force with components `[c_o, c_n, c_t]` per unit current length along the
+    /// edge's current outward in-plane normal, surface normal and tangent (the type's
+    /// documentation), on `edge` of `surface`.
+    pub fn follower_on_edge(
+        model: &ShellModel,
+        surface: &Surface<f64>,
+        edge: Edge,
+        components: [f64; 3],
+        intervals: usize,
+        points: usize,
+    ) -> Result<Self, ShellError> {
+        check_finite("follower edge force per unit length", &components)?;
+        let sigma = match edge {
+            Edge::UMin | Edge::VMax => 1.0,
+            Edge::UMax | Edge::VMin => -1.0,
+        };
+        Ok(EdgeForce {
+            force: components,
+            follower: Some(sigma),
+            n_dofs: model.n_dofs(),
+            points: edge_rule(model, surface, edge, intervals, points, "edge force")?,
+        })
+    }
+
+    /// The force per unit length: global components (dead) or `[c_o, c_n, c_t]` (follower).
     pub fn per_length(&self) -> [f64; 3] {
         self.force
+    }
+
+    /// Whether the force follows the edge's current frame.
+    pub fn is_follower(&self) -> bool {
+        self.follower.is_some()
     }
 
     /// Total edge length in the initial configuration (the sum of the rule's weights).
@@ -953,8 +1011,57 @@ impl EdgeForce {
     }
 }
 
+/// The current tangents of an edge point and the quantities of the follower force built on
+/// them.
+struct EdgeFrame<T> {
+    /// `x̄,u`, `x̄,v`.
+    xa: [V3<T>; 2],
+    /// `a = x̄,u × x̄,v` and `|a|`.
+    a_norm: T,
+    /// `n̂ = a/|a|`.
+    n: V3<T>,
+    /// `x̄,t` and `|x̄,t|`.
+    xt: V3<T>,
+    xt_norm: T,
+}
+
+impl<T: Real> EdgeFrame<T> {
+    fn new(xa: [V3<T>; 2], along: usize) -> Self {
+        let a = xa[0].cross(&xa[1]);
+        let a_norm = a.norm();
+        let xt = xa[along];
+        EdgeFrame {
+            xa,
+            a_norm,
+            n: a / a_norm,
+            xt,
+            xt_norm: xt.norm(),
+        }
+    }
+
+    /// `c_o σ (n̂ × x̄,t) + c_n |x̄,t| n̂ + c_t x̄,t`.
+    fn force(&self, c: [f64; 3], sigma: f64) -> V3<T> {
+        self.n.cross(&self.xt) * T::cst(c[0] * sigma)
+            + self.n * (self.xt_norm * c[1])
+            + self.xt * T::cst(c[2])
+    }
+}
+
+impl EdgeFrame<f64> {
+    /// The force's rate for tangent rates `dxa` (`ẋ̄,u`, `ẋ̄,v`).
+    fn force_rate(&self, c: [f64; 3], sigma: f64, along: usize, dxa: [V3<f64>; 2]) -> V3<f64> {
+        let da = dxa[0].cross(&self.xa[1]) + self.xa[0].cross(&dxa[1]);
+        let dn = (da - self.n * self.n.dot(&da)) / self.a_norm;
+        let dxt = dxa[along];
+        (dn.cross(&self.xt) + self.n.cross(&dxt)) * (c[0] * sigma)
+            + (dn * self.xt_norm + self.n * (self.xt.dot(&dxt) / self.xt_norm)) * c[1]
+            + dxt * c[2]
+    }
+}
+
 impl EdgeForce {
-    /// Add `factor · f` into `f`, in scalar `T` (dead: `q` is checked for its size only).
+    /// Add `factor · f` into `f`, in scalar `T`, on the model's committed state and the
+    /// increment `q` (a dead force does not depend on it).
     pub fn force<T: Real>(
         &self,
         model: &ShellModel,
@@ -962,57 +1069,67 @@ impl EdgeForce {
         factor: f64,
         f: &mut [T],
     ) -> Result<(), ShellError> {
-        self.check_model(model)?;
-        check_sizes(model, q.len(), Some(f.len()))?;
-        for ep in &self.points {
-            self.scatter(model, ep, T::cst(ep.weight * factor), f);
-        }
-        Ok(())
+        self.force_with(model, None, q, factor, f)
     }
 
-    /// [`EdgeForce::force`] on the initial surface `surface` in `T` (the state's design, the
-    /// dual reference): the arc-length element `|x̄⁰,t|` of every edge point evaluated on it,
-    /// so that it carries the shape design derivative. The rule's points and shape functions
-    /// live on the parameter domain and do not move.
-    pub fn force_on_surface<T: Real>(
+    /// [`EdgeForce::force`] on the initial surface `surface` in `T` when given (the state's
+    /// design, the dual reference): the tangents `x̄⁰,α` of every edge point evaluated on it,
+    /// so that the arc-length element (dead) or the current frame (follower) carries the shape
+    /// design derivative. The rule's points and shape functions live on the parameter domain
+    /// and do not move.
+    pub fn force_with<T: Real>(
         &self,
         model: &ShellModel,
-        surface: &Surface<T>,
+        surface: Option<&Surface<T>>,
+        q: &[T],
         factor: f64,
         f: &mut [T],
     ) -> Result<(), ShellError> {
         self.check_model(model)?;
-        check_sizes(model, f.len(), None)?;
-        for (ep, t) in self.points.iter().zip(self.tangents_on(surface)) {
-            let s = t.norm() * (ep.gauss * factor);
-            self.scatter(model, ep, s, f);
+        check_sizes(model, q.len(), Some(f.len()))?;
+        let initial = surface.map(|s| self.initial_tangents_on(s));
+        for (g, ep) in self.points.iter().enumerate() {
+            let x0a = match &initial {
+                Some(t) => t[g],
+                None => ep.x0a.map(|v| v.map(T::cst)),
+            };
+            match self.follower {
+                None => {
+                    let s = match &initial {
+                        Some(_) => x0a[ep.along].norm() * (ep.gauss * factor),
+                        None => T::cst(ep.weight * factor),
+                    };
+                    self.scatter_dead(model, ep, s, f);
+                }
+                Some(sigma) => {
+                    let frame = EdgeFrame::new(current_tangents(model, ep, x0a, q), ep.along);
+                    let v = frame.force(self.force, sigma) * T::cst(ep.gauss * factor);
+                    self.scatter(model, ep, v, f);
+                }
+            }
         }
         Ok(())
     }
 
-    /// The tangent `x̄⁰,t` along the edge at every edge point, on `surface` in `T`.
-    pub fn tangents_on<T: Real>(&self, surface: &Surface<T>) -> Vec<V3<T>> {
+    /// The tangents `x̄⁰,u`, `x̄⁰,v` at every edge point, on `surface` in `T`.
+    pub fn initial_tangents_on<T: Real>(&self, surface: &Surface<T>) -> Vec<[V3<T>; 2]> {
         self.points
             .iter()
             .map(|ep| {
                 let sd = surface.eval(T::cst(ep.uv[0]), T::cst(ep.uv[1]));
-                if ep.along == 0 {
-                    sd.xu
-                } else {
-                    sd.xv
-                }
+                [sd.xu, sd.xv]
             })
             .collect()
     }
 
-    /// The design velocity `ẋ̄⁰,t` of the initial tangent at every edge point, for the
-    /// surface's design parameter `parameter` (the input of
+    /// The design velocities `ẋ̄⁰,u`, `ẋ̄⁰,v` of the initial tangents at every edge point, for
+    /// the surface's design parameter `parameter` (the input of
     /// [`EdgeForce::add_design_derivative`]). `surface` is the one the load was built on.
     pub fn tangent_velocities(
         &self,
         surface: &Surface<f64>,
         parameter: usize,
-    ) -> Result<Vec<V3<f64>>, ShellError> {
+    ) -> Result<Vec<[V3<f64>; 2]>, ShellError> {
         self.points
             .iter()
             .map(|ep| {
@@ -1024,24 +1141,26 @@ impl EdgeForce {
                             ep.uv
                         ))
                     })?;
-                Ok(if ep.along == 0 { sd.xu } else { sd.xv })
+                Ok([sd.xu, sd.xv])
             })
             .collect()
     }
 
-    /// The shape design derivative of the force (hand-derived): the force per unit initial
-    /// length is fixed, so only the arc-length element changes,
-    /// `d|x̄⁰,t|/dτ = x̄⁰,t · ẋ̄⁰,t / |x̄⁰,t|`, with `tangent_dots` from
-    /// [`EdgeForce::tangent_velocities`] (one per edge point). Adds `factor · ḟ` into `f`.
+    /// The shape design derivative of the force at the increment `q` (hand-derived), with
+    /// `tangent_dots` from [`EdgeForce::tangent_velocities`] (one pair per edge point). Dead:
+    /// only the arc-length element changes, `d|x̄⁰,t|/dτ = x̄⁰,t · ẋ̄⁰,t / |x̄⁰,t|`. Follower: the
+    /// current tangents change by `ẋ̄,α = ẋ̄⁰,α`, and the frame with them (the rate of the
+    /// type's force expression). Adds `factor · ḟ` into `f`.
     pub fn add_design_derivative(
         &self,
         model: &ShellModel,
-        tangent_dots: &[V3<f64>],
+        tangent_dots: &[[V3<f64>; 2]],
+        q: &[f64],
         factor: f64,
         f: &mut [f64],
     ) -> Result<(), ShellError> {
         self.check_model(model)?;
-        check_sizes(model, f.len(), None)?;
+        check_sizes(model, q.len(), Some(f.len()))?;
         if tangent_dots.len() != self.points.len() {
             return Err(ShellError::Dimension {
                 expected: self.points.len(),
@@ -1049,14 +1168,83 @@ impl EdgeForce {
             });
         }
         for (ep, td) in self.points.iter().zip(tangent_dots) {
-            let s = ep.tangent.dot(td) / ep.tangent.norm() * (ep.gauss * factor);
-            self.scatter(model, ep, s, f);
+            match self.follower {
+                None => {
+                    let t = ep.x0a[ep.along];
+                    let s = t.dot(&td[ep.along]) / t.norm() * (ep.gauss * factor);
+                    self.scatter_dead(model, ep, s, f);
+                }
+                Some(sigma) => {
+                    let frame = EdgeFrame::new(current_tangents(model, ep, ep.x0a, q), ep.along);
+                    let v = frame.force_rate(self.force, sigma, ep.along, *td);
+                    self.scatter(model, ep, v * (ep.gauss * factor), f);
+                }
+            }
         }
         Ok(())
     }
 
-    /// Scatter `s · Ψ_J · p` of edge point `ep` into the translations of `f`.
-    fn scatter<T: Real>(&self, model: &ShellModel, ep: &EdgePoint, s: T, f: &mut [T]) {
+    /// Add `factor · ∂f/∂q` as global entries (hand-derived: the type's documentation); none
+    /// for a dead force. Every pair of an edge point's particles is entered, zero or not, so
+    /// that the pattern built from the entries at `q = 0` holds the later ones.
+    pub fn add_stiffness(
+        &self,
+        model: &ShellModel,
+        q: &[f64],
+        factor: f64,
+        out: &mut Vec<(usize, usize, f64)>,
+    ) -> Result<(), ShellError> {
+        let Some(sigma) = self.follower else {
+            return Ok(());
+        };
+        self.check_model(model)?;
+        check_sizes(model, q.len(), None)?;
+        let mut map = GatherMap::new(model);
+        for ep in &self.points {
+            let frame = EdgeFrame::new(current_tangents(model, ep, ep.x0a, q), ep.along);
+            let n = ep.shape.len();
+            let w = ep.gauss * factor;
+            let mut kl = DMatrix::zeros(3 * n, 3 * n);
+            for (j, g) in ep.grads.iter().enumerate() {
+                // The force's rate per unit Δū_J along each axis: columns of the 3×3 block.
+                let cols: [V3<f64>; 3] = std::array::from_fn(|c| {
+                    let e = V3::ith(c, 1.0);
+                    frame.force_rate(self.force, sigma, ep.along, [e * g[0], e * g[1]])
+                });
+                for (i, &(_, psi_i)) in ep.shape.iter().enumerate() {
+                    for (c, col) in cols.iter().enumerate() {
+                        for r in 0..3 {
+                            kl[(3 * i + r, 3 * j + c)] = w * psi_i * col[r];
+                        }
+                    }
+                }
+            }
+            let local: Vec<(usize, usize)> = ep
+                .shape
+                .iter()
+                .flat_map(|&(j, _)| (0..3).map(move |c| (j, c)))
+                .collect();
+            let rows: Vec<Vec<(usize, f64)>> = local
+                .iter()
+                .map(|&(j, c)| map.rows(model, j)[c].clone())
+                .collect();
+            for (a, ra) in rows.iter().enumerate() {
+                for (b, rb) in rows.iter().enumerate() {
+                    let v = kl[(a, b)];
+                    for &(i, gi) in ra {
+                        for &(jj, gj) in rb {
+                            out.push((i, jj, gi * v * gj));
+                        }
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Scatter `s · Ψ_J · p` (the dead force `p`) of edge point `ep` to the translations of
+    /// its particles.
+    fn scatter_dead<T: Real>(&self, model: &ShellModel, ep: &EdgePoint, s: T, f: &mut [T]) {
         for &(j, psi) in &ep.shape {
             let c = s * psi;
             let local = [
@@ -1066,6 +1254,16 @@ impl EdgeForce {
                 T::zero(),
                 T::zero(),
             ];
+            model.scatter_particle(j, &local, f);
+        }
+    }
+
+    /// Scatter the force `v` of edge point `ep` (its weight included) to the translations of
+    /// its particles, `Ψ_J v` each.
+    fn scatter<T: Real>(&self, model: &ShellModel, ep: &EdgePoint, v: V3<T>, f: &mut [T]) {
+        for &(j, psi) in &ep.shape {
+            let c = v * T::cst(psi);
+            let local = [c[0], c[1], c[2], T::zero(), T::zero()];
             model.scatter_particle(j, &local, f);
         }
     }
@@ -1082,6 +1280,25 @@ impl EdgeForce {
     }
 }
 
+/// The current tangents `x̄,α = x̄⁰,α + Σ_J Ψ_J,α (ū_J + Δū_J)` at edge point `ep`, from the
+/// initial ones `x0a`, the model's committed displacements and the increment `q`.
+fn current_tangents<T: Real>(
+    model: &ShellModel,
+    ep: &EdgePoint,
+    x0a: [V3<T>; 2],
+    q: &[T],
+) -> [V3<T>; 2] {
+    let mut xa = x0a;
+    for (&(j, _), g) in ep.shape.iter().zip(&ep.grads) {
+        let x = model.particle_dofs(j, q);
+        let u = model.particle_state(j).u.map(T::cst) + V3::new(x[0], x[1], x[2]);
+        for (a, xa) in xa.iter_mut().enumerate() {
+            *xa += u * T::cst(g[a]);
+        }
+    }
+    xa
+}
+
 /// One point of an edge rule, with its shape functions.
 #[derive(Clone, Debug, PartialEq)]
 struct EdgePoint {
@@ -1090,14 +1307,16 @@ struct EdgePoint {
     gauss: f64,
     /// The running parameter: 0 (`u`, a `v`-edge) or 1 (`v`, a `u`-edge).
     along: usize,
-    /// The initial tangent `x̄⁰,t` along the running parameter.
-    tangent: V3<f64>,
+    /// The initial tangents `x̄⁰,u`, `x̄⁰,v` (`x̄⁰,t` is the one along the edge).
+    x0a: [V3<f64>; 2],
     /// Gauss weight times the initial arc-length element `|x̄⁰,t|`.
     weight: f64,
     /// Initial normal `n⁰`.
     n0: V3<f64>,
     /// Shape-function particles and `Ψ_J`.
     shape: Vec<(usize, f64)>,
+    /// `∇Ψ_J` on the parameter domain, parallel to `shape`.
+    grads: Vec<[f64; 2]>,
 }
 
 /// A line moment `m` per unit initial length on a parametric edge, about a fixed (global) axis,

@@ -443,21 +443,27 @@ impl ShellModel {
             .collect();
         let mut x = Vec::with_capacity(DOFS_PER_PARTICLE * p.neighbours.len());
         for &j in &p.neighbours {
-            let m = self.dof_map(j);
-            let q = &dofs[DOFS_PER_PARTICLE * m.source..DOFS_PER_PARTICLE * (m.source + 1)];
-            match m.map {
-                None => x.extend_from_slice(q),
-                Some((qm, det)) => {
-                    // x = T q: ū_img = Q ū, α_img = det(Q) α.
-                    for r in 0..3 {
-                        x.push(q[0] * qm[(r, 0)] + q[1] * qm[(r, 1)] + q[2] * qm[(r, 2)]);
-                    }
-                    x.push(q[3] * det);
-                    x.push(q[4] * det);
-                }
-            }
+            x.extend_from_slice(&self.particle_dofs(j, dofs));
         }
         (parts, x)
+    }
+
+    /// The local DOFs of shape-function particle `j` from the global generalised vector
+    /// `dofs`: its own for a real particle, `T q` of its source's for a symmetry image
+    /// (`ū_img = Q ū`, `α_img = det(Q) α`).
+    pub fn particle_dofs<T: Real>(&self, j: usize, dofs: &[T]) -> [T; DOFS_PER_PARTICLE] {
+        let m = self.dof_map(j);
+        let q = &dofs[DOFS_PER_PARTICLE * m.source..DOFS_PER_PARTICLE * (m.source + 1)];
+        match m.map {
+            None => [q[0], q[1], q[2], q[3], q[4]],
+            Some((qm, det)) => [
+                q[0] * qm[(0, 0)] + q[1] * qm[(0, 1)] + q[2] * qm[(0, 2)],
+                q[0] * qm[(1, 0)] + q[1] * qm[(1, 1)] + q[2] * qm[(1, 2)],
+                q[0] * qm[(2, 0)] + q[1] * qm[(2, 1)] + q[2] * qm[(2, 2)],
+                q[3] * det,
+                q[4] * det,
+            ],
+        }
     }
 
     /// Add a local vector of in-plane point `k` (5 per neighbour, as from
