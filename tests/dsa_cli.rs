@@ -6,7 +6,6 @@
 
 use serde_json::Value;
 use shelldsa::io::dsa_case::DsaMethod;
-use shelldsa::io::dsa_study::check_dsa_loads;
 use shelldsa::io::shell_case::parse_shell_case;
 use shelldsa::io::CaseError;
 use std::path::{Path, PathBuf};
@@ -63,7 +62,6 @@ fn design_tables_parse() {
     );
     let labels: Vec<&str> = d.monitors.iter().map(|m| m.label.as_str()).collect();
     assert_eq!(labels, ["A.ux", "A.uz", "B.uy", "B.uz"]);
-    check_dsa_loads(&c).unwrap();
 
     // Defaults: fd_steps [1e-3, 1e-4], all three methods, every monitor with ux, uy, uz.
     let c = parse_shell_case(
@@ -305,37 +303,6 @@ fn design_errors_name_the_key() {
     )
     .unwrap_err();
     assert!(e.to_string().contains("method"), "{e}");
-}
-
-#[test]
-fn loads_the_reference_cannot_carry_are_rejected() {
-    // An edge moment instead of the point forces.
-    let t = ci_text().replacen(
-        "[[load]]\nkind = \"point-force\"",
-        "[[load]]\nkind = \"moment\"\nedge = \"v-max\"\nper_length = [0.0, 0.0, 1.0]\n\n[[load]]\nkind = \"point-force\"",
-        1,
-    );
-    let c = parse_shell_case(&t, Path::new("m.toml")).unwrap();
-    let e = check_dsa_loads(&c).unwrap_err().to_string();
-    assert!(
-        e.contains("load[0].kind") && e.contains("not supported"),
-        "{e}"
-    );
-    // The CLI stops before any analysis, with exit status 1.
-    let dir = root().join("target/dsa-cli-tests");
-    std::fs::create_dir_all(&dir).unwrap();
-    let case = dir.join("moment.toml");
-    std::fs::write(&case, &t).unwrap();
-    let code = cli(&[
-        "dsa",
-        case.to_str().unwrap(),
-        "--out",
-        dir.join("m").to_str().unwrap(),
-    ]);
-    assert_eq!(code, 1);
-    assert!(!dir.join("m/sensitivity.json").exists());
-    // ...but finite differences alone can run it (checked here up to the validation only).
-    assert!(shelldsa::io::dsa_study::validate(&c, &[DsaMethod::Fd]).is_ok());
 }
 
 #[test]

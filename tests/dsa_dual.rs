@@ -23,7 +23,7 @@ use shelldsa::sensitivity::{
     Monitor,
 };
 use shelldsa::shell::constraints::{edge_constraints, EdgeCondition};
-use shelldsa::shell::load::{Moment, PointForce};
+use shelldsa::shell::load::{Load, PointForce};
 use shelldsa::shell::model::{Discretisation, ShellModel};
 use shelldsa::shell::problem::ShellProblem;
 use shelldsa::solver::SolverOptions;
@@ -351,17 +351,16 @@ fn design_variables_are_validated() {
         Err(DesignError::NoVariables)
     ));
     assert!(Monitor::new("bad", [0.5, 0.5], 3).is_err());
-    // The dual reference refuses, before the analysis, a load it does not carry.
-    let surface = Surface::Rectangle(
-        Rectangle::new(
-            nalgebra::Vector3::zeros(),
-            nalgebra::Vector3::x(),
-            nalgebra::Vector3::y(),
-        )
-        .unwrap(),
-    );
-    let moment = Moment::on_edge(&model, &surface, Edge::UMax, [0.0, 1.0, 0.0], 2, 2).unwrap();
-    let problem = ShellProblem::new(model, vec![moment.into()], Vec::new()).unwrap();
+    // The dual reference refuses, before the analysis, a load it does not carry: the director
+    // filter with its per-particle strength.
+    let filter = shelldsa::shell::stabilisation::DirectorFilter::with_strength(
+        &model,
+        1.0,
+        shelldsa::shell::stabilisation::FilterStrength::DirectorForce,
+        0.0,
+    )
+    .unwrap();
+    let problem = ShellProblem::new(model, vec![Load::DirectorFilter(filter)], Vec::new()).unwrap();
     let err = run_dual(
         problem,
         vec![DesignVariable::thickness()],
@@ -376,7 +375,7 @@ fn design_variables_are_validated() {
             err,
             SensitivityError::UnsupportedLoad {
                 index: 0,
-                kind: "moment"
+                kind: "director-stabilisation"
             }
         ),
         "{err}"

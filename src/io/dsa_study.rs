@@ -5,39 +5,13 @@
 
 use super::dsa_case::{check_tool_names, invalid, DsaMethod, DsaSpec};
 use super::shell_build;
-use super::shell_case::{Load, ShellCase};
+use super::shell_case::ShellCase;
 use super::CaseError;
 use crate::sensitivity::dual::SensitivityError;
 use crate::sensitivity::fd::Analysis;
 use crate::sensitivity::Design;
 use crate::shell::problem::ShellProblem;
 use crate::solver::NewtonSolver;
-
-/// Rejects, before any analysis, the loads the sensitivity methods cannot carry yet: edge
-/// moments (they act through the director).
-pub fn check_dsa_loads(case: &ShellCase) -> Result<(), CaseError> {
-    for (k, l) in case.loads.iter().enumerate() {
-        let (value, why) = match l {
-            Load::Moment { .. } => (
-                "\"moment\"",
-                "for the dual-number reference (edge moments act through the director and \
-                 are not supported by it yet)",
-            ),
-            Load::PointForce { .. }
-            | Load::Gravity { .. }
-            | Load::GravityPerVolume { .. }
-            | Load::Pressure { .. }
-            | Load::EdgeForce { .. } => continue,
-        };
-        return Err(invalid(
-            &case.path,
-            format!("load[{k}].kind"),
-            value,
-            format!("\"point-force\", \"pressure\", \"gravity\" or \"edge-force\" {why}"),
-        ));
-    }
-    Ok(())
-}
 
 /// Rejects, before any analysis, a case on an arc-length path (`[steps] control =
 /// "arc-length"`): the sensitivity methods differentiate at fixed load levels (and their
@@ -130,8 +104,8 @@ pub fn base_design(case: &ShellCase) -> Design {
 }
 
 /// Check everything a `dsa` run of `case` with `methods` needs before any analysis, as far as
-/// the case tells: design variables present and naming the case's tools, loads the methods
-/// can carry (the study checks the variables on the built model,
+/// the case tells: design variables present and naming the case's tools, load control (the
+/// study checks the variables and loads on the built model,
 /// [`check_design`](crate::sensitivity::check_design)).
 pub fn validate(case: &ShellCase, methods: &[DsaMethod]) -> Result<DsaSpec, CaseError> {
     let mut spec = case.dsa.clone().ok_or_else(|| CaseError::NoDesign {
@@ -140,10 +114,5 @@ pub fn validate(case: &ShellCase, methods: &[DsaMethod]) -> Result<DsaSpec, Case
     spec.methods = methods.to_vec();
     check_load_control(case)?;
     check_tool_names(&case.path, &case.tools, &spec)?;
-    if methods.contains(&DsaMethod::Dual) || methods.contains(&DsaMethod::Continuum) {
-        // Shape variables with contact are carried by both methods: the slave sites take the
-        // design velocity of the initial geometry (`shell::contact::InitialGeometry`).
-        check_dsa_loads(case)?;
-    }
     Ok(spec)
 }

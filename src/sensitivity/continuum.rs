@@ -45,7 +45,7 @@ use super::{record_monitors, DesignError, DesignKind, DesignVariable, Monitor, S
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
 use crate::shell::contact_sensitivity::ContactSeeds;
-use crate::shell::load::Load;
+use crate::shell::load::{EdgeVelocity, Load};
 use crate::shell::model::ShellModel;
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
 use crate::shell::point_sensitivity::{commit_particle_dot, ModelSeeds, StepLinearisation};
@@ -124,10 +124,10 @@ pub struct SensitivityState {
     /// variables, with [`Self::surface`]): where the contact's slave points sit (eq 74).
     pub position: Option<Vec<Vector3<f64>>>,
     /// Per load of the problem (its order; empty for every load when the variable is not a
-    /// shape variable): for an edge force, the design velocities `ẋ̄⁰,u`, `ẋ̄⁰,v` of the initial
-    /// tangents at each of its edge points (`EdgeForce::tangent_velocities`); empty for other
-    /// loads.
-    pub edge_tangents: Vec<Vec<[Vector3<f64>; 2]>>,
+    /// shape variable): for a load on an edge (an edge force or moment), the design velocity of
+    /// the initial geometry `ẋ̄⁰,u, ẋ̄⁰,v, ṅ⁰` at each of its edge points
+    /// (`Load::edge_velocities`); empty for other loads.
+    pub edge_velocities: Vec<Vec<EdgeVelocity>>,
     /// `ṫ`.
     pub thickness: f64,
     /// `Ė, ν̇, k̇, σ̇0, Ḣ, β̇`.
@@ -185,13 +185,10 @@ impl SensitivityState {
                 s.history = v.history;
                 s.surface = Some(v.points);
                 s.position = Some(v.positions);
-                s.edge_tangents = problem
+                s.edge_velocities = problem
                     .loads()
                     .iter()
-                    .map(|l| match l.edge_force() {
-                        Some(e) => e.tangent_velocities(surface, *parameter),
-                        None => Ok(Vec::new()),
-                    })
+                    .map(|l| l.edge_velocities(surface, *parameter))
                     .collect::<Result<_, _>>()
                     .map_err(SensitivityError::from)?;
             }
@@ -256,7 +253,7 @@ impl SensitivityState {
             unknowns: vec![0.0; problem.n_dofs()],
             surface: None,
             position: None,
-            edge_tangents: Vec::new(),
+            edge_velocities: Vec::new(),
             thickness: 0.0,
             material: MaterialParams::zero(),
             tools: vec![Default::default(); contact_tools(problem).len()],
@@ -768,7 +765,7 @@ impl ContinuumDsa {
                     unknowns: s.unknowns.iter().zip(dq).map(|(a, d)| a + d).collect(),
                     surface: s.surface.clone(),
                     position: s.position.clone(),
-                    edge_tangents: s.edge_tangents.clone(),
+                    edge_velocities: s.edge_velocities.clone(),
                     thickness: s.thickness,
                     material: s.material,
                     tools: s.tools.clone(),
@@ -1014,17 +1011,22 @@ fn add_load_dot(
                 e.add_stiffness(model, dq, factor, &mut trip)?;
                 add_times_committed_u(&trip, s, f);
             }
-            if let (true, Some(td)) = (on(TermGroup::Load), s.edge_tangents.get(k)) {
-                e.add_design_derivative(model, td, dq, factor, f)?;
+            if let (true, Some(v)) = (on(TermGroup::Load), s.edge_velocities.get(k)) {
+                e.add_design_derivative(model, v, dq, factor, f)?;
             }
         }
-        // Refused before the analysis (`check_method_inputs`).
-        Load::Moment(_) => {
-            return Err(SensitivityError::LoadNotCarried {
-                load: format!("a {} load", l.kind()),
-                expected: "point forces, gravity, pressure, edge forces, contact or the director \
-                           filter",
-            })
+        // Through the committed directors and lamina vectors (history) and, for a shape
+        // variable, the edge's initial normals and length element (load).
+        Load::Moment(mo) => {
+            let particles = on(TermGroup::History).then_some(s.particles.as_slice());
+            let velocities = s
+                .edge_velocities
+                .get(k)
+                .filter(|_| on(TermGroup::Load))
+                .map(|v| v.as_slice());
+            if particles.is_some() || velocities.is_some() {
+                mo.add_design_derivative(model, particles, velocities, dq, factor, f)?;
+            }
         }
     }
     Ok(())

@@ -23,6 +23,7 @@ use super::DesignVariable;
 use crate::geometry::Surface;
 use crate::material::MaterialParams;
 use crate::shell::contact_sensitivity::ToolRate;
+use crate::shell::load::EdgeVelocity;
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
 use crate::shell::point_sensitivity::{commit_particle_dot, ModelSeeds};
 use crate::shell::problem::ShellProblem;
@@ -138,17 +139,21 @@ fn seeds_of(problem: &ShellProblem, g: &DualState<Dual64>) -> SensitivityState {
         }),
         // V⁰ of the contact's slave sites, with the surface dots (a shape variable's group).
         position: g.positions.as_ref().map(|x| x.iter().map(pv).collect()),
-        // The edge forces' tangent velocities, from the seeded surface (a shape variable's).
-        edge_tangents: match &g.surface {
+        // The edge loads' design velocities, from the seeded surface (a shape variable's; its
+        // values are the surface the loads were built on, whose edge normals were checked
+        // then, so the evaluation does not fail).
+        edge_velocities: match &g.surface {
             Some(s) => problem
                 .loads()
                 .iter()
                 .map(|l| {
-                    l.edge_force()
-                        .map(|e| {
-                            e.initial_tangents_on(s)
-                                .iter()
-                                .map(|t| t.map(|v| pv(&v)))
+                    l.edge_geometry_on(s)
+                        .map(|geo| {
+                            geo.iter()
+                                .map(|e| EdgeVelocity {
+                                    x_a: e.x_a.map(|v| pv(&v)),
+                                    n: pv(&e.n),
+                                })
                                 .collect()
                         })
                         .unwrap_or_default()
@@ -438,7 +443,7 @@ impl Breakdown {
                     unknowns: s.unknowns.iter().zip(dqd).map(|(a, d)| a + d).collect(),
                     surface: s.surface.clone(),
                     position: s.position.clone(),
-                    edge_tangents: s.edge_tangents.clone(),
+                    edge_velocities: s.edge_velocities.clone(),
                     thickness: s.thickness,
                     material: s.material,
                     tools: s.tools.clone(),

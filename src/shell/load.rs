@@ -33,6 +33,7 @@
 use super::gather::GatherMap;
 use super::model::ShellModel;
 use super::point::{director_first_derivatives, ParticleState, SurfacePoint, DOFS_PER_PARTICLE};
+use super::point_sensitivity::particle_increment_dot;
 use super::stabilisation::{DirectorFilter, FilterStrength};
 use super::ShellError;
 use crate::geometry::Surface;
@@ -222,6 +223,36 @@ impl Load {
         }
     }
 
+    /// For a load on an edge (an edge force or moment, also held constant): the design
+    /// velocities of its edge points' initial geometry for `surface`'s design parameter
+    /// `parameter`; empty for other loads.
+    pub fn edge_velocities(
+        &self,
+        surface: &Surface<f64>,
+        parameter: usize,
+    ) -> Result<Vec<EdgeVelocity>, ShellError> {
+        match self {
+            Load::EdgeForce(e) => e.velocities(surface, parameter),
+            Load::Moment(m) => m.velocities(surface, parameter),
+            Load::Constant(inner) => inner.edge_velocities(surface, parameter),
+            _ => Ok(Vec::new()),
+        }
+    }
+
+    /// For a load on an edge: its edge points' initial geometry on `surface` in `T`; empty for
+    /// other loads.
+    pub fn edge_geometry_on<T: Real>(
+        &self,
+        surface: &Surface<T>,
+    ) -> Result<Vec<EdgeGeometry<T>>, ShellError> {
+        match self {
+            Load::EdgeForce(e) => e.geometry_on(surface),
+            Load::Moment(m) => m.geometry_on(surface),
+            Load::Constant(inner) => inner.edge_geometry_on(surface),
+            _ => Ok(Vec::new()),
+        }
+    }
+
     /// The edge force of this load (also inside [`Load::Constant`]).
     pub fn edge_force(&self) -> Option<&EdgeForce> {
         match self {
@@ -240,13 +271,10 @@ impl Load {
         }
     }
 
-    /// Whether [`Load::force`] takes a [`LoadState`]: every kind but the edge moment (it acts
-    /// through the director, whose design derivative it does not carry) and the director
-    /// filter with the per-particle strength (that of the committed director forces is not
-    /// carried).
+    /// Whether [`Load::force`] takes a [`LoadState`]: every kind but the director filter with
+    /// the per-particle strength (that of the committed director forces is not carried).
     pub fn takes_state(&self) -> bool {
         match self {
-            Load::Moment(_) => false,
             Load::DirectorFilter(l) => l.strength() == FilterStrength::Bending,
             Load::Constant(inner) => inner.takes_state(),
             _ => true,
@@ -282,6 +310,10 @@ impl Load {
                 l.force_with_surfaces(model, s.surfaces, &s.shifted(q), factor, f)
             }
             (Load::Moment(l), None) => l.force(model, q, factor, f),
+            // On the state's committed directors and lamina vectors and its initial surface.
+            (Load::Moment(l), Some(s)) => {
+                l.force_with(model, Some(s.particles), s.surface, q, factor, f)
+            }
             (Load::EdgeForce(l), None) => l.force(model, q, factor, f),
             // On the state's initial surface when it has one; a follower depends on `ⁿū + Δū`
             // as the pressure does.
@@ -298,13 +330,6 @@ impl Load {
             (Load::Contact(c), None) => c.contact.force_generic(model, q, factor, f),
             (Load::Contact(c), Some(s)) => c.contact.force_with(model, &c.inputs(s), q, factor, f),
             (Load::Constant(inner), s) => inner.force(model, s, q, 1.0, f),
-            (l @ Load::Moment(_), Some(_)) => {
-                Err(ShellError::InvalidInput(format!(
-                    "{} load on a given committed state and design: not implemented \
-                     (expected point forces, gravity, pressure, edge forces, contact or the director filter)",
-                    l.kind()
-                )))
-            }
         }
     }
 
@@ -863,6 +888,76 @@ impl Pressure {
     }
 }
 
+/// The design velocity of an edge rule's initial geometry at one edge point, for one shape
+/// design variable: `ẋ̄⁰,u`, `ẋ̄⁰,v` and `ṅ⁰`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EdgeVelocity {
+    /// `ẋ̄⁰,u`, `ẋ̄⁰,v`.
+    pub x_a: [V3<f64>; 2],
+    /// `ṅ⁰`.
+    pub n: V3<f64>,
+}
+
+/// The initial geometry of an edge rule at one edge point in `T`: `x̄⁰,u`, `x̄⁰,v` and `n⁰`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EdgeGeometry<T> {
+    /// `x̄⁰,u`, `x̄⁰,v`.
+    pub x_a: [V3<T>; 2],
+    /// `n⁰ = x̄⁰,u × x̄⁰,v / |…|`.
+    pub n: V3<T>,
+}
+
+/// The design velocities of the rule's initial geometry for `surface`'s design parameter
+/// `parameter`: `ẋ̄⁰,α` from the surface, `ṅ⁰ = (ċ − n⁰ (n⁰·ċ))/|c|` with `c = x̄⁰,u × x̄⁰,v`.
+fn rule_velocities(
+    points: &[EdgePoint],
+    surface: &Surface<f64>,
+    parameter: usize,
+    what: &str,
+) -> Result<Vec<EdgeVelocity>, ShellError> {
+    points
+        .iter()
+        .map(|ep| {
+            let sd = surface
+                .design_velocity(parameter, ep.uv[0], ep.uv[1])
+                .map_err(|e| {
+                    ShellError::InvalidInput(format!(
+                        "{what}: design velocity at edge point {:?}: {e}",
+                        ep.uv
+                    ))
+                })?;
+            let c = ep.x0a[0].cross(&ep.x0a[1]);
+            let c_dot = sd.xu.cross(&ep.x0a[1]) + ep.x0a[0].cross(&sd.xv);
+            let n = c / c.norm();
+            Ok(EdgeVelocity {
+                x_a: [sd.xu, sd.xv],
+                n: (c_dot - n * n.dot(&c_dot)) / c.norm(),
+            })
+        })
+        .collect()
+}
+
+/// The rule's initial geometry evaluated on `surface` in `T`.
+fn rule_geometry_on<T: Real>(
+    points: &[EdgePoint],
+    surface: &Surface<T>,
+    what: &str,
+) -> Result<Vec<EdgeGeometry<T>>, ShellError> {
+    points
+        .iter()
+        .map(|ep| {
+            let sd = surface.eval(T::cst(ep.uv[0]), T::cst(ep.uv[1]));
+            let n = sd.normal().map_err(|e| {
+                ShellError::InvalidInput(format!("{what} edge point {:?}: {e}", ep.uv))
+            })?;
+            Ok(EdgeGeometry {
+                x_a: [sd.xu, sd.xv],
+                n,
+            })
+        })
+        .collect()
+}
+
 /// The rule of a line load on `edge` of the parameter domain of `surface`: `intervals` equal
 /// intervals of the edge's parameter line with `points` Gauss–Legendre points each, the
 /// weights times the initial arc-length element `|x̄⁰,t|`, the initial normals and the RK shape
@@ -1087,10 +1182,10 @@ impl EdgeForce {
     ) -> Result<(), ShellError> {
         self.check_model(model)?;
         check_sizes(model, q.len(), Some(f.len()))?;
-        let initial = surface.map(|s| self.initial_tangents_on(s));
+        let initial = surface.map(|s| self.geometry_on(s)).transpose()?;
         for (g, ep) in self.points.iter().enumerate() {
             let x0a = match &initial {
-                Some(t) => t[g],
+                Some(t) => t[g].x_a,
                 None => ep.x0a.map(|v| v.map(T::cst)),
             };
             match self.follower {
@@ -1111,72 +1206,56 @@ impl EdgeForce {
         Ok(())
     }
 
-    /// The tangents `x̄⁰,u`, `x̄⁰,v` at every edge point, on `surface` in `T`.
-    pub fn initial_tangents_on<T: Real>(&self, surface: &Surface<T>) -> Vec<[V3<T>; 2]> {
-        self.points
-            .iter()
-            .map(|ep| {
-                let sd = surface.eval(T::cst(ep.uv[0]), T::cst(ep.uv[1]));
-                [sd.xu, sd.xv]
-            })
-            .collect()
-    }
-
-    /// The design velocities `ẋ̄⁰,u`, `ẋ̄⁰,v` of the initial tangents at every edge point, for
-    /// the surface's design parameter `parameter` (the input of
-    /// [`EdgeForce::add_design_derivative`]). `surface` is the one the load was built on.
-    pub fn tangent_velocities(
+    /// The design velocities of the edge points' initial geometry for the surface's design
+    /// parameter `parameter` (the input of [`EdgeForce::add_design_derivative`]). `surface` is
+    /// the one the load was built on.
+    pub fn velocities(
         &self,
         surface: &Surface<f64>,
         parameter: usize,
-    ) -> Result<Vec<[V3<f64>; 2]>, ShellError> {
-        self.points
-            .iter()
-            .map(|ep| {
-                let sd = surface
-                    .design_velocity(parameter, ep.uv[0], ep.uv[1])
-                    .map_err(|e| {
-                        ShellError::InvalidInput(format!(
-                            "edge force: design velocity at edge point {:?}: {e}",
-                            ep.uv
-                        ))
-                    })?;
-                Ok([sd.xu, sd.xv])
-            })
-            .collect()
+    ) -> Result<Vec<EdgeVelocity>, ShellError> {
+        rule_velocities(&self.points, surface, parameter, "edge force")
+    }
+
+    /// The edge points' initial geometry on `surface` in `T`.
+    pub fn geometry_on<T: Real>(
+        &self,
+        surface: &Surface<T>,
+    ) -> Result<Vec<EdgeGeometry<T>>, ShellError> {
+        rule_geometry_on(&self.points, surface, "edge force")
     }
 
     /// The shape design derivative of the force at the increment `q` (hand-derived), with
-    /// `tangent_dots` from [`EdgeForce::tangent_velocities`] (one pair per edge point). Dead:
+    /// `velocities` from [`EdgeForce::velocities`] (one per edge point). Dead:
     /// only the arc-length element changes, `d|x̄⁰,t|/dτ = x̄⁰,t · ẋ̄⁰,t / |x̄⁰,t|`. Follower: the
     /// current tangents change by `ẋ̄,α = ẋ̄⁰,α`, and the frame with them (the rate of the
     /// type's force expression). Adds `factor · ḟ` into `f`.
     pub fn add_design_derivative(
         &self,
         model: &ShellModel,
-        tangent_dots: &[[V3<f64>; 2]],
+        velocities: &[EdgeVelocity],
         q: &[f64],
         factor: f64,
         f: &mut [f64],
     ) -> Result<(), ShellError> {
         self.check_model(model)?;
         check_sizes(model, q.len(), Some(f.len()))?;
-        if tangent_dots.len() != self.points.len() {
+        if velocities.len() != self.points.len() {
             return Err(ShellError::Dimension {
                 expected: self.points.len(),
-                got: tangent_dots.len(),
+                got: velocities.len(),
             });
         }
-        for (ep, td) in self.points.iter().zip(tangent_dots) {
+        for (ep, v) in self.points.iter().zip(velocities) {
             match self.follower {
                 None => {
                     let t = ep.x0a[ep.along];
-                    let s = t.dot(&td[ep.along]) / t.norm() * (ep.gauss * factor);
+                    let s = t.dot(&v.x_a[ep.along]) / t.norm() * (ep.gauss * factor);
                     self.scatter_dead(model, ep, s, f);
                 }
                 Some(sigma) => {
                     let frame = EdgeFrame::new(current_tangents(model, ep, ep.x0a, q), ep.along);
-                    let v = frame.force_rate(self.force, sigma, ep.along, *td);
+                    let v = frame.force_rate(self.force, sigma, ep.along, v.x_a);
                     self.scatter(model, ep, v * (ep.gauss * factor), f);
                 }
             }
@@ -1396,21 +1475,58 @@ impl Moment {
         factor: f64,
         f: &mut [T],
     ) -> Result<(), ShellError> {
+        self.force_with(model, None, None, q, factor, f)
+    }
+
+    /// [`Moment::force`] on a given committed state and design in `T` (the dual reference):
+    /// the committed particles `particles` (real ones, as `ShellModel::particles`; `None`: the
+    /// model's) and the initial surface `surface` (`None`: as built), which gives the edge
+    /// points' initial normals `n⁰` and arc-length elements.
+    pub fn force_with<T: Real>(
+        &self,
+        model: &ShellModel,
+        particles: Option<&[ParticleState<T>]>,
+        surface: Option<&Surface<T>>,
+        q: &[T],
+        factor: f64,
+        f: &mut [T],
+    ) -> Result<(), ShellError> {
         self.check_model(model)?;
         check_sizes(model, q.len(), Some(f.len()))?;
+        if let Some(p) = particles {
+            if p.len() != model.particles.len() {
+                return Err(ShellError::Dimension {
+                    expected: model.particles.len(),
+                    got: p.len(),
+                });
+            }
+        }
         let m = V3::from(self.moment).map(|v| T::cst(v * factor));
         let mut map = GatherMap::new(model);
         for ep in &self.points {
-            let mut d = ep.n0.map(T::cst);
+            let (mut d, weight) = match surface {
+                Some(s) => {
+                    let sd = s.eval(T::cst(ep.uv[0]), T::cst(ep.uv[1]));
+                    let n0 = sd.normal().map_err(|e| {
+                        ShellError::InvalidInput(format!("moment edge point {:?}: {e}", ep.uv))
+                    })?;
+                    let t = if ep.along == 0 { sd.xu } else { sd.xv };
+                    (n0, t.norm() * ep.gauss)
+                }
+                None => (ep.n0.map(T::cst), T::cst(ep.weight)),
+            };
             let mut da = Vec::with_capacity(ep.shape.len());
             for &(j, psi) in &ep.shape {
-                let st: ParticleState<T> = model.particle_state(j).lift();
+                let st: ParticleState<T> = match particles {
+                    Some(p) => model.particle_state_in(j, p),
+                    None => model.particle_state(j).lift(),
+                };
                 let alpha = [map.gather(model, j, 3, q), map.gather(model, j, 4, q)];
                 let dj = rotate_director(&st.d, &st.e[0], &st.e[1], alpha);
                 d += (dj - st.d0) * T::cst(psi);
                 da.push(director_first_derivatives(&st, alpha));
             }
-            let g = m.cross(&d) * (T::cst(ep.weight) / d.norm_squared());
+            let g = m.cross(&d) * (weight / d.norm_squared());
             for (&(j, psi), dj) in ep.shape.iter().zip(&da) {
                 let local = [
                     T::zero(),
@@ -1418,6 +1534,108 @@ impl Moment {
                     T::zero(),
                     dj[0].dot(&g) * psi,
                     dj[1].dot(&g) * psi,
+                ];
+                model.scatter_particle(j, &local, f);
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Moment {
+    /// The design velocities of the edge points' initial geometry for the surface's design
+    /// parameter `parameter` (`surface`: the one the load was built on).
+    pub fn velocities(
+        &self,
+        surface: &Surface<f64>,
+        parameter: usize,
+    ) -> Result<Vec<EdgeVelocity>, ShellError> {
+        rule_velocities(&self.points, surface, parameter, "moment")
+    }
+
+    /// The edge points' initial geometry on `surface` in `T`.
+    pub fn geometry_on<T: Real>(
+        &self,
+        surface: &Surface<T>,
+    ) -> Result<Vec<EdgeGeometry<T>>, ShellError> {
+        rule_geometry_on(&self.points, surface, "moment")
+    }
+
+    /// The design derivative of the force at the increment `q` (hand-derived), adding
+    /// `factor · ḟ` into `f`: with the committed particles' sensitivities `particles_dot` (real
+    /// particles, `ⁿḋ, ḋ⁰, ⁿė`; `None`: left out) the end-of-step directors change by
+    /// `ⁿḋ_J + Δḋ_J` and their derivatives `(∂d_J/∂α_β)˙` (Rodrigues' formula differentiated,
+    /// as the point kernel's); with the edge points' design velocities `velocities` (`None`:
+    /// left out) the interpolated director's `n⁰` by `ṅ⁰` and the weight by the length
+    /// element's `x̄⁰,t · ẋ̄⁰,t / |x̄⁰,t|`. Then, with `ḋ = ṅ⁰ + Σ_J Ψ_J (ⁿḋ_J + Δḋ_J − ḋ⁰_J)`,
+    /// `ġ = w [m × ḋ − 2 (d·ḋ) g/w] / |d|² + ẇ g/w` and
+    /// `ḟ_Jβ = Σ_g Ψ_J [(∂d_J/∂α_β)˙ · g + (∂d_J/∂α_β) · ġ]`.
+    pub fn add_design_derivative(
+        &self,
+        model: &ShellModel,
+        particles_dot: Option<&[ParticleState<f64>]>,
+        velocities: Option<&[EdgeVelocity]>,
+        q: &[f64],
+        factor: f64,
+        f: &mut [f64],
+    ) -> Result<(), ShellError> {
+        self.check_model(model)?;
+        check_sizes(model, q.len(), Some(f.len()))?;
+        if let Some(p) = particles_dot {
+            if p.len() != model.particles.len() {
+                return Err(ShellError::Dimension {
+                    expected: model.particles.len(),
+                    got: p.len(),
+                });
+            }
+        }
+        if let Some(v) = velocities {
+            if v.len() != self.points.len() {
+                return Err(ShellError::Dimension {
+                    expected: self.points.len(),
+                    got: v.len(),
+                });
+            }
+        }
+        let m = V3::from(self.moment) * factor;
+        let zero = [0.0; DOFS_PER_PARTICLE];
+        for (g, ep) in self.points.iter().enumerate() {
+            let (mut d, mut d_dot, w, mut w_dot) = (ep.n0, V3::zeros(), ep.weight, 0.0);
+            if let Some(v) = velocities {
+                let t = ep.x0a[ep.along];
+                d_dot = v[g].n;
+                w_dot = t.dot(&v[g].x_a[ep.along]) / t.norm() * ep.gauss;
+            }
+            let mut da = Vec::with_capacity(ep.shape.len());
+            let mut da_dot = Vec::with_capacity(ep.shape.len());
+            for &(j, psi) in &ep.shape {
+                let st = model.particle_state(j);
+                let x = model.particle_dofs(j, q);
+                let alpha = [x[3], x[4]];
+                d += (rotate_director(&st.d, &st.e[0], &st.e[1], alpha) - st.d0) * psi;
+                da.push(director_first_derivatives(&st, alpha));
+                match particles_dot {
+                    Some(p) => {
+                        let sd = model.particle_state_in(j, p);
+                        let (_, dd, dda) = particle_increment_dot(&st, &sd, &x, &zero);
+                        d_dot += (sd.d + dd - sd.d0) * psi;
+                        da_dot.push(dda);
+                    }
+                    None => da_dot.push([V3::zeros(); 2]),
+                }
+            }
+            let dd = d.norm_squared();
+            let mxd = m.cross(&d);
+            let gv = mxd * (w / dd);
+            let g_dot =
+                (m.cross(&d_dot) * w - mxd * (2.0 * w * d.dot(&d_dot) / dd) + mxd * w_dot) / dd;
+            for ((&(j, psi), a), a_dot) in ep.shape.iter().zip(&da).zip(&da_dot) {
+                let local = [
+                    0.0,
+                    0.0,
+                    0.0,
+                    (a_dot[0].dot(&gv) + a[0].dot(&g_dot)) * psi,
+                    (a_dot[1].dot(&gv) + a[1].dot(&g_dot)) * psi,
                 ];
                 model.scatter_particle(j, &local, f);
             }

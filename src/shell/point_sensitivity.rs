@@ -219,7 +219,7 @@ impl PointIncrementDot {
 }
 
 /// One particle's `(Δū̇, Δḋ, (∂d/∂α_β)˙)`.
-fn particle_increment_dot(
+pub(crate) fn particle_increment_dot(
     p: &ParticleState<f64>,
     pd: &ParticleState<f64>,
     q: &[f64],
