@@ -113,6 +113,64 @@ fn edge_forces(problem: &shelldsa::shell::problem::ShellProblem, q: &[f64]) -> V
     f
 }
 
+/// The central difference of the loads at the increment `q` with respect to surface parameter
+/// `name` (value `value`), from the case rebuilt at `±h`, `h = 1e-5 max(|τ|, 1)`.
+fn central_difference(
+    case: &ShellCase,
+    surface: &Surface<f64>,
+    name: &str,
+    value: f64,
+    q: &[f64],
+) -> Vec<f64> {
+    let h = 1e-5 * value.abs().max(1.0);
+    let fp = moved(case, surface, name, h, q);
+    let fm = moved(case, surface, name, -h, q);
+    fp.iter()
+        .zip(&fm)
+        .map(|(a, b)| (a - b) / (2.0 * h))
+        .collect()
+}
+
+/// A load derivative three ways: the hand-derived `cont` against the dual `dual` within
+/// `dual_rel` (round-off) and against the central difference `fd` within 1e-8 (truncation
+/// `h² |f'''|` ~ 1e-10 of the force plus cancellation `ε |f|/h` ~ 1e-11), both relative to the
+/// larger of the force's size `scale` and the derivative's. Returns whether the parameter acts
+/// (a derivative above 1e-12 of the force).
+fn compare_three(
+    name: &str,
+    cont: &[f64],
+    dual: &[f64],
+    fd: &[f64],
+    scale: f64,
+    dual_rel: f64,
+) -> bool {
+    let d_cd: Vec<f64> = cont.iter().zip(dual).map(|(a, b)| a - b).collect();
+    let d_cf: Vec<f64> = cont.iter().zip(fd).map(|(a, b)| a - b).collect();
+    let size = max_abs(dual);
+    println!(
+        "{name}: |df| {size:.3e}, continuum−dual {:.1e}, continuum−fd {:.1e}",
+        max_abs(&d_cd),
+        max_abs(&d_cf)
+    );
+    assert!(max_abs(&d_cd) <= dual_rel * scale.max(size), "{name}: dual");
+    assert!(max_abs(&d_cf) <= 1e-8 * scale.max(size), "{name}: fd");
+    size > 1e-12 * scale
+}
+
+/// The panel's parameters that stretch its edges (the radius, the angles, the ends of the
+/// length) are among `acting`.
+fn assert_stretching_parameters_act(acting: &[String]) {
+    for name in [
+        "radius",
+        "angle_start",
+        "angle_end",
+        "length_start",
+        "length_end",
+    ] {
+        assert!(acting.iter().any(|a| a == name), "{name} in {acting:?}");
+    }
+}
+
 fn max_abs(a: &[f64]) -> f64 {
     a.iter().fold(0.0f64, |m, x| m.max(x.abs()))
 }
@@ -120,7 +178,7 @@ fn max_abs(a: &[f64]) -> f64 {
 /// For every design parameter of the panel's surface (origin, axis, reference direction,
 /// radius, angles, length), dead edge forces at the initial state and followers at a displaced
 /// one: the hand-derived derivative of the edge forces (`EdgeForce::add_design_derivative`
-/// with `velocities`) equals the dual one (the force evaluated on the surface seeded
+/// with `EdgeRule::velocities`) equals the dual one (the force evaluated on the surface seeded
 /// with that parameter, through `Load::force` with a `LoadState`) to round-off, and the central
 /// difference of the load rebuilt on the perturbed surface to truncation. Returns the
 /// parameters that change the force.
@@ -145,7 +203,7 @@ fn design_derivative_three_ways(follower: bool) -> Vec<String> {
         let mut cont = vec![0.0; n];
         for l in problem.loads() {
             let e = l.edge_force().unwrap();
-            let td = e.velocities(&surface, k).unwrap();
+            let td = e.rule().velocities(&surface, k).unwrap();
             e.add_design_derivative(model, &td, &q, 1.0, &mut cont)
                 .unwrap();
         }
@@ -183,31 +241,11 @@ fn design_derivative_three_ways(follower: bool) -> Vec<String> {
         let scale = max_abs(&f0);
         let diff_value: Vec<f64> = values_f.iter().zip(&f0).map(|(a, b)| a - b).collect();
         assert!(max_abs(&diff_value) <= 1e-14 * scale, "{name}: value");
-        // Central difference with h relative to the parameter (1e-5, absolute for a zero one).
-        let h = 1e-5 * values[k].abs().max(1.0);
-        let fp = moved(&case, &surface, name, h, &q);
-        let fm = moved(&case, &surface, name, -h, &q);
-        let fd: Vec<f64> = fp
-            .iter()
-            .zip(&fm)
-            .map(|(a, b)| (a - b) / (2.0 * h))
-            .collect();
-        let d_cd: Vec<f64> = cont.iter().zip(&dual).map(|(a, b)| a - b).collect();
-        let d_cf: Vec<f64> = cont.iter().zip(&fd).map(|(a, b)| a - b).collect();
-        let size = max_abs(&dual);
-        println!(
-            "follower {follower}, {name}: |df| {size:.3e}, continuum−dual {:.1e}, \
-             continuum−fd {:.1e}",
-            max_abs(&d_cd),
-            max_abs(&d_cf)
-        );
-        if size > 1e-12 * scale {
+        let fd = central_difference(&case, &surface, name, values[k], &q);
+        // Round-off of a sum of O(100) terms of the force's size.
+        if compare_three(name, &cont, &dual, &fd, scale, 1e-13) {
             acting.push(name.clone());
         }
-        // Round-off of a sum of O(100) terms of the force's size.
-        assert!(max_abs(&d_cd) <= 1e-13 * scale.max(size), "{name}: dual");
-        // Truncation h²|f'''| ~ 1e-10 of the force plus cancellation ε|f|/h ~ 1e-11: 1e-8.
-        assert!(max_abs(&d_cf) <= 1e-8 * scale.max(size), "{name}: fd");
     }
     acting
 }
@@ -234,15 +272,7 @@ fn follower_edge_force_design_derivative_three_ways_for_every_surface_parameter(
     // At a displaced state the current frame depends on the initial tangents as well: turning
     // the initial geometry under a displacement fixed in global axes changes it too.
     let acting = design_derivative_three_ways(true);
-    for name in [
-        "radius",
-        "angle_start",
-        "angle_end",
-        "length_start",
-        "length_end",
-    ] {
-        assert!(acting.iter().any(|a| a == name), "{name} in {acting:?}");
-    }
+    assert_stretching_parameters_act(&acting);
 }
 
 /// The follower edge forces' load stiffness (hand-derived) equals the dual Jacobian of the
@@ -304,6 +334,45 @@ fn follower_stiffness_against_dual(case: &ShellCase, images: bool) {
             assert_eq!(v, 0.0);
         }
     }
+}
+
+/// The study of `case` by all three methods.
+fn three_ways(case: &ShellCase) -> study::DsaResult {
+    let methods = [DsaMethod::Continuum, DsaMethod::Dual, DsaMethod::Fd];
+    let spec = dsa_study::validate(case, &methods).unwrap();
+    study::run(
+        &CaseAnalysis { case },
+        &base_design(case),
+        &spec,
+        &mut |_| {},
+    )
+    .unwrap()
+}
+
+/// Every step of a variable's results: continuum = dual within 1e-10 of `scale` (the same
+/// equations with right-hand sides equal to round-off, 1e-13 relative measured on the shipped
+/// cases), and the first step size's central differences within 1e-6 of `scale` where the
+/// re-runs do not flag a changed yield set (`h/τ = 1e-4`: truncation `(h/τ)² = 1e-8`). Returns
+/// the number of monitor values compared with the differences.
+fn assert_three_ways(var: &study::VariableResult, scale: f64) -> usize {
+    let name = &var.entry.variable.name;
+    let cont = var.continuum.as_ref().unwrap();
+    let dual = var.dual.as_ref().unwrap();
+    let fd = &var.fd[0];
+    let mut compared = 0;
+    for (s, ((c, d), f)) in cont.iter().zip(dual).zip(&fd.derivatives).enumerate() {
+        for ((c, d), f) in c.iter().zip(d).zip(f) {
+            assert!(
+                (c - d).abs() <= 1e-10 * scale,
+                "{name} step {s}: {c} vs {d}"
+            );
+            if !fd.flagged[s] {
+                assert!((f - c).abs() <= 1e-6 * scale, "{name} step {s}: {f} vs {c}");
+                compared += 1;
+            }
+        }
+    }
+    compared
 }
 
 /// A clamped cantilever strip (L = 2, b = 0.5, t = 0.05, E = 1.2e6, ν = 0, 13 × 3 particles)
@@ -373,15 +442,7 @@ monitors = ["tip.uz"]
 #[test]
 fn edge_force_width_and_length_sensitivities_three_ways_match_beam_theory() {
     let case = strip();
-    let methods = [DsaMethod::Continuum, DsaMethod::Dual, DsaMethod::Fd];
-    let spec = dsa_study::validate(&case, &methods).unwrap();
-    let out = study::run(
-        &CaseAnalysis { case: &case },
-        &base_design(&case),
-        &spec,
-        &mut |_| {},
-    )
-    .unwrap();
+    let out = three_ways(&case);
     let w = out.nominal.values[0][0];
     let (b, l) = (0.5f64, 2.0f64);
     let beam = -4.0 * 0.2 * l.powi(3) / (1.2e6 * 0.05f64.powi(3));
@@ -393,29 +454,8 @@ fn edge_force_width_and_length_sensitivities_three_ways_match_beam_theory() {
     let mut exponents = Vec::new();
     for (var, size) in out.variables.iter().zip([b, l]) {
         let cont = var.continuum.as_ref().unwrap()[0][0];
-        let dual = var.dual.as_ref().unwrap()[0][0];
-        let fd = var.fd[0].derivatives[0][0];
-        println!(
-            "{}: continuum {cont:e}, dual {dual:e}, fd {fd:e}, (τ/w) dw/dτ {}",
-            var.entry.variable.name,
-            size * cont / w
-        );
-        // The same equation with right-hand sides equal to round-off: 1e-10 leaves decades
-        // (1e-13 measured on the shipped cases). The scale is w/τ: the width's derivative
-        // is nearly zero by itself.
-        let scale = (w / size).abs();
-        assert!(
-            (cont - dual).abs() <= 1e-10 * scale,
-            "{}: {cont} vs {dual}",
-            var.entry.variable.name
-        );
-        // Central difference at h/τ = 1e-4: truncation (h/τ)² = 1e-8 of w/τ, re-runs'
-        // round-off well below; bound 1e-6 of w/τ.
-        assert!(
-            (fd - cont).abs() <= 1e-6 * scale,
-            "{}: {fd} vs {cont}",
-            var.entry.variable.name
-        );
+        // The scale is w/τ: the width's derivative is nearly zero by itself.
+        assert_eq!(assert_three_ways(var, (w / size).abs()), 1);
         exponents.push(size * cont / w);
     }
     // Width: 0 for the beam, and for the plate strip at ν = 0 up to the geometric
@@ -471,15 +511,7 @@ monitors = ["corner.ux", "corner.uz"]
 #[test]
 fn edge_forces_on_a_yielding_panel_three_ways() {
     let case = plastic_panel();
-    let methods = [DsaMethod::Continuum, DsaMethod::Dual, DsaMethod::Fd];
-    let spec = dsa_study::validate(&case, &methods).unwrap();
-    let out = study::run(
-        &CaseAnalysis { case: &case },
-        &base_design(&case),
-        &spec,
-        &mut |_| {},
-    )
-    .unwrap();
+    let out = three_ways(&case);
     assert_eq!(out.nominal.values.len(), 5);
     let yielding: Vec<usize> = out
         .nominal
@@ -491,31 +523,12 @@ fn edge_forces_on_a_yielding_panel_three_ways() {
     // Elastic for three steps, then yielding (3 and 20 layer points measured).
     assert!(yielding[..3].iter().all(|&n| n == 0) && yielding[3..].iter().all(|&n| n > 0));
     for var in &out.variables {
-        let name = &var.entry.variable.name;
-        let cont = var.continuum.as_ref().unwrap();
         let dual = var.dual.as_ref().unwrap();
-        let fd = &var.fd[0];
         let scale = dual.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
-        let mut compared = 0;
-        for (s, ((c, d), f)) in cont.iter().zip(dual).zip(&fd.derivatives).enumerate() {
-            for ((c, d), f) in c.iter().zip(d).zip(f) {
-                // The same equations with right-hand sides equal to round-off (2.3e-13 of
-                // the largest derivative measured): 1e-10 leaves decades.
-                assert!(
-                    (c - d).abs() <= 1e-10 * scale,
-                    "{name} step {s}: {c} vs {d}"
-                );
-                if !fd.flagged[s] {
-                    // h/τ = 1e-4: truncation (h/τ)² = 1e-8 relative (measured 3.8e-8 of the
-                    // derivative); bound 1e-6 of the largest derivative.
-                    assert!((f - c).abs() <= 1e-6 * scale, "{name} step {s}: {f} vs {c}");
-                    compared += 1;
-                }
-            }
-        }
-        // The yield set does not change within ±h at this step size (measured): every step
-        // compared, the yielding one included.
-        assert_eq!(compared, 10, "{name}: flags {:?}", fd.flagged);
+        // Continuum = dual measured to 2.3e-13 of the largest derivative, the differences to
+        // 3.8e-8 of the derivative. The yield set does not change within ±h at this step size:
+        // every step compared, the yielding ones included.
+        assert_eq!(assert_three_ways(var, scale), 10);
     }
 }
 
@@ -587,15 +600,7 @@ fn follower_strip() -> ShellCase {
 #[test]
 fn follower_end_force_follows_the_elastica_and_its_sensitivities_three_ways() {
     let case = follower_strip();
-    let methods = [DsaMethod::Continuum, DsaMethod::Dual, DsaMethod::Fd];
-    let spec = dsa_study::validate(&case, &methods).unwrap();
-    let out = study::run(
-        &CaseAnalysis { case: &case },
-        &base_design(&case),
-        &spec,
-        &mut |_| {},
-    )
-    .unwrap();
+    let out = three_ways(&case);
     let (l, b, t, e) = (2.0f64, 0.5f64, 0.05f64, 1.2e6f64);
     let ei = e * b * t.powi(3) / 12.0;
     let p = 9.375 * b;
@@ -620,21 +625,8 @@ fn follower_end_force_follows_the_elastica_and_its_sensitivities_three_ways() {
     let reference = [0.0, dlog_l, dlog_t];
     for ((var, size), r) in out.variables.iter().zip([b, l, t]).zip(reference) {
         let name = &var.entry.variable.name;
-        let last = var.continuum.as_ref().unwrap().len() - 1;
-        let scale = (w / size).abs();
-        for s in 0..=last {
-            let c = var.continuum.as_ref().unwrap()[s][0];
-            let d = var.dual.as_ref().unwrap()[s][0];
-            let f = var.fd[0].derivatives[s][0];
-            // Round-off (1e-13 relative measured on the shipped cases): 1e-10 of w/τ.
-            assert!(
-                (c - d).abs() <= 1e-10 * scale,
-                "{name} step {s}: {c} vs {d}"
-            );
-            // h/τ = 1e-4: truncation (h/τ)² = 1e-8 of w/τ; bound 1e-6.
-            assert!((f - c).abs() <= 1e-6 * scale, "{name} step {s}: {f} vs {c}");
-        }
-        let c = var.continuum.as_ref().unwrap()[last][0];
+        assert_eq!(assert_three_ways(var, (w / size).abs()), 20);
+        let c = var.continuum.as_ref().unwrap().last().unwrap()[0];
         let dlog = size * c / w;
         println!("{name}: (τ/w) dw/dτ = {dlog}, elastica {r}");
         // The strip against the elastica: the discretisation's 0.24 % in w carries over to
@@ -646,7 +638,7 @@ fn follower_end_force_follows_the_elastica_and_its_sensitivities_three_ways() {
 /// For every design parameter of the panel's surface, edge moments on both edges at a
 /// displaced and rotated state: the hand-derived design derivative of their force
 /// (`Moment::add_design_derivative` with the particles' initial sensitivities of
-/// `ShapeVelocity` and the edge points' `Moment::velocities`) equals the dual one (the moments
+/// `ShapeVelocity` and the edge points' `EdgeRule::velocities`) equals the dual one (the moments
 /// on the dual geometry of `dual_geometry`: particles and surface seeded) to round-off, and
 /// the central difference of the loads rebuilt on perturbed surfaces to truncation.
 #[test]
@@ -687,7 +679,7 @@ fn edge_moment_design_derivative_three_ways_for_every_surface_parameter() {
             let Load::Moment(m) = l else {
                 panic!("only moments")
             };
-            let vel = m.velocities(&surface, k).unwrap();
+            let vel = m.rule().velocities(&surface, k).unwrap();
             m.add_design_derivative(model, Some(&v.particles), Some(&vel), &q, 1.0, &mut cont)
                 .unwrap();
         }
@@ -713,42 +705,16 @@ fn edge_moment_design_derivative_three_ways_for_every_surface_parameter() {
         let dual: Vec<f64> = fd_dual.iter().map(|x| x.eps).collect();
         let value: Vec<f64> = fd_dual.iter().zip(&f0).map(|(a, b)| a.re - b).collect();
         assert!(max_abs(&value) <= 1e-13 * scale, "{name}: value");
-        let h = 1e-5 * values[k].abs().max(1.0);
-        let fp = moved(&case, &surface, name, h, &q);
-        let fm = moved(&case, &surface, name, -h, &q);
-        let fd: Vec<f64> = fp
-            .iter()
-            .zip(&fm)
-            .map(|(a, b)| (a - b) / (2.0 * h))
-            .collect();
-        let d_cd: Vec<f64> = cont.iter().zip(&dual).map(|(a, b)| a - b).collect();
-        let d_cf: Vec<f64> = cont.iter().zip(&fd).map(|(a, b)| a - b).collect();
-        let size = max_abs(&dual);
-        println!(
-            "moment, {name}: |df| {size:.3e}, continuum−dual {:.1e}, continuum−fd {:.1e}",
-            max_abs(&d_cd),
-            max_abs(&d_cf)
-        );
-        if size > 1e-12 * scale {
+        let fd = central_difference(&case, &surface, name, values[k], &q);
+        // Round-off of the Rodrigues chains and sums over O(100) terms.
+        if compare_three(name, &cont, &dual, &fd, scale, 1e-12) {
             acting.push(name.clone());
         }
-        // Round-off of the Rodrigues chains and sums over O(100) terms.
-        assert!(max_abs(&d_cd) <= 1e-12 * scale.max(size), "{name}: dual");
-        // Truncation h²|f'''| plus cancellation ε|f|/h: 1e-8.
-        assert!(max_abs(&d_cf) <= 1e-8 * scale.max(size), "{name}: fd");
     }
     // A moment about fixed axes on a rotated state: the radius, the angles and the ends of the
     // length change the force (normals and lengths); so do the axis and reference direction
     // (they turn the initial normals under the fixed moment axes).
-    for name in [
-        "radius",
-        "angle_start",
-        "angle_end",
-        "length_start",
-        "length_end",
-    ] {
-        assert!(acting.iter().any(|a| a == name), "{name} in {acting:?}");
-    }
+    assert_stretching_parameters_act(&acting);
 }
 
 /// A cantilever strip under an end moment `m` per unit width (`[[load]] kind = "moment"`),
@@ -776,15 +742,7 @@ fn end_moment_sensitivities_three_ways_match_the_circular_arc() {
         )
         + "[[design]]\nname = \"t\"\nkind = \"thickness\"\nfd_steps = [1e-4]\n";
     let case = parse_shell_case(&text, Path::new("moment-strip.toml")).unwrap();
-    let methods = [DsaMethod::Continuum, DsaMethod::Dual, DsaMethod::Fd];
-    let spec = dsa_study::validate(&case, &methods).unwrap();
-    let out = study::run(
-        &CaseAnalysis { case: &case },
-        &base_design(&case),
-        &spec,
-        &mut |_| {},
-    )
-    .unwrap();
+    let out = three_ways(&case);
     let kl = kappa * l;
     let w_ref = (1.0 - kl.cos()) / kappa;
     let w = *out.nominal.values.last().unwrap().first().unwrap();
@@ -796,24 +754,12 @@ fn end_moment_sensitivities_three_ways_match_the_circular_arc() {
     for ((var, size), r) in out.variables.iter().zip([0.5, l, t]).zip(reference) {
         let name = &var.entry.variable.name;
         let scale = (w / size).abs();
-        let cont = var.continuum.as_ref().unwrap();
-        for (s, c) in cont.iter().enumerate() {
-            let c = c[0];
-            let d = var.dual.as_ref().unwrap()[s][0];
-            let f = var.fd[0].derivatives[s][0];
-            // Round-off (1e-13 relative measured on the shipped cases): 1e-10 of w/τ.
-            assert!(
-                (c - d).abs() <= 1e-10 * scale,
-                "{name} step {s}: {c} vs {d}"
-            );
-            // h/τ = 1e-4: truncation (h/τ)² = 1e-8 of w/τ; bound 1e-6.
-            assert!((f - c).abs() <= 1e-6 * scale, "{name} step {s}: {f} vs {c}");
-        }
-        let c = cont.last().unwrap()[0] * w.signum();
+        assert_eq!(assert_three_ways(var, scale), 4);
+        let c = var.continuum.as_ref().unwrap().last().unwrap()[0] * w.signum();
         println!("{name}: dw/dτ = {c:e}, arc {r:e}");
         // The strip against the arc: the discretisation's −0.29 % in w becomes −0.6 % in
-        // dw/dL and −0.8 % in dw/dt (measured); within 1 % of the arc's derivative, and 1e-4 of w/τ where that is
-        // zero (the width: measured 1.2e-6 against w/b = 1.8).
+        // dw/dL and −0.8 % in dw/dt (measured); within 1 % of the arc's derivative, and 1e-4
+        // of w/τ where that is zero (the width: measured 1.2e-6 against w/b = 1.8).
         assert!(
             (c - r).abs() <= 0.01 * r.abs() + 1e-4 * scale,
             "{name}: {c} vs {r}"

@@ -287,7 +287,7 @@ fn moment_does_the_work_of_a_uniform_rotation_on_a_flat_strip() {
     let model = common::elastic_model(&surface, &spec(7, 4));
     let m = [0.3, -2.0, 0.7];
     let load = Moment::on_edge(&model, &surface, Edge::UMax, m, 3, 4).unwrap();
-    assert!((load.edge_length() - 1.0).abs() < 1e-15);
+    assert!((load.rule().edge_length() - 1.0).abs() < 1e-15);
     let mut f = vec![0.0; model.n_dofs()];
     load.force(&model, &vec![0.0; model.n_dofs()], 1.5, &mut f)
         .unwrap();
@@ -342,7 +342,7 @@ fn moment_on_a_curved_edge_matches_dual_numbers() {
     let mut model = common::elastic_model(&surface, &spec(5, 4));
     let load = Moment::on_edge(&model, &surface, Edge::VMax, [1.0, -0.5, 2.0], 4, 3).unwrap();
     let arc = 5.0 * 60f64.to_radians();
-    assert!((load.edge_length() - arc).abs() <= 1e-13 * arc);
+    assert!((load.rule().edge_length() - arc).abs() <= 1e-13 * arc);
     let mut rng = XorShift64::new(42);
     commit_random(&mut model, &mut rng, 0.05, 0.2);
     let q = random_increment(model.n_dofs(), &mut rng, 0.05, 0.3, true);

@@ -232,8 +232,8 @@ impl Load {
         parameter: usize,
     ) -> Result<Vec<EdgeVelocity>, ShellError> {
         match self {
-            Load::EdgeForce(e) => e.velocities(surface, parameter),
-            Load::Moment(m) => m.velocities(surface, parameter),
+            Load::EdgeForce(e) => e.rule().velocities(surface, parameter),
+            Load::Moment(m) => m.rule().velocities(surface, parameter),
             Load::Constant(inner) => inner.edge_velocities(surface, parameter),
             _ => Ok(Vec::new()),
         }
@@ -246,8 +246,8 @@ impl Load {
         surface: &Surface<T>,
     ) -> Result<Vec<EdgeGeometry<T>>, ShellError> {
         match self {
-            Load::EdgeForce(e) => e.geometry_on(surface),
-            Load::Moment(m) => m.geometry_on(surface),
+            Load::EdgeForce(e) => e.rule().geometry_on(surface),
+            Load::Moment(m) => m.rule().geometry_on(surface),
             Load::Constant(inner) => inner.edge_geometry_on(surface),
             _ => Ok(Vec::new()),
         }
@@ -907,8 +907,71 @@ pub struct EdgeGeometry<T> {
     pub n: V3<T>,
 }
 
-/// The design velocities of the rule's initial geometry for `surface`'s design parameter
-/// `parameter`: `ẋ̄⁰,α` from the surface, `ṅ⁰ = (ċ − n⁰ (n⁰·ċ))/|c|` with `c = x̄⁰,u × x̄⁰,v`.
+/// The Gauss rule of a load on an edge (an edge force or moment), with the model it was built
+/// for: the edge points, their weights, initial geometry and RK shape functions ([`edge_rule`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct EdgeRule {
+    /// What the rule belongs to, in errors.
+    what: &'static str,
+    n_dofs: usize,
+    points: Vec<EdgePoint>,
+}
+
+impl EdgeRule {
+    fn new(
+        model: &ShellModel,
+        surface: &Surface<f64>,
+        edge: Edge,
+        intervals: usize,
+        points: usize,
+        what: &'static str,
+    ) -> Result<Self, ShellError> {
+        Ok(EdgeRule {
+            what,
+            n_dofs: model.n_dofs(),
+            points: edge_rule(model, surface, edge, intervals, points, what)?,
+        })
+    }
+
+    /// Total edge length in the initial configuration (the sum of the rule's weights).
+    pub fn edge_length(&self) -> f64 {
+        self.points.iter().map(|p| p.weight).sum()
+    }
+
+    /// The design velocities of the edge points' initial geometry for `surface`'s design
+    /// parameter `parameter` (`surface`: the one the load was built on): `ẋ̄⁰,α` from the
+    /// surface, `ṅ⁰ = (ċ − n⁰ (n⁰·ċ))/|c|` with `c = x̄⁰,u × x̄⁰,v`.
+    pub fn velocities(
+        &self,
+        surface: &Surface<f64>,
+        parameter: usize,
+    ) -> Result<Vec<EdgeVelocity>, ShellError> {
+        rule_velocities(&self.points, surface, parameter, self.what)
+    }
+
+    /// The edge points' initial geometry on `surface` in `T`.
+    pub fn geometry_on<T: Real>(
+        &self,
+        surface: &Surface<T>,
+    ) -> Result<Vec<EdgeGeometry<T>>, ShellError> {
+        rule_geometry_on(&self.points, surface, self.what)
+    }
+
+    /// The load is bound to the model it was built for (its edge shape functions are
+    /// evaluated once): another model is rejected by its DOF count.
+    fn check_model(&self, model: &ShellModel) -> Result<(), ShellError> {
+        if model.n_dofs() != self.n_dofs {
+            return Err(ShellError::InvalidInput(format!(
+                "{} built for a model with {} DOFs, used with one of {}",
+                self.what,
+                self.n_dofs,
+                model.n_dofs()
+            )));
+        }
+        Ok(())
+    }
+}
+
 fn rule_velocities(
     points: &[EdgePoint],
     surface: &Surface<f64>,
@@ -1041,8 +1104,7 @@ pub struct EdgeForce {
     force: [f64; 3],
     /// `Some(σ)` for a follower (the outward normal's orientation), `None` for a dead force.
     follower: Option<f64>,
-    n_dofs: usize,
-    points: Vec<EdgePoint>,
+    rule: EdgeRule,
 }
 
 impl EdgeForce {
@@ -1061,8 +1123,7 @@ impl EdgeForce {
         Ok(EdgeForce {
             force,
             follower: None,
-            n_dofs: model.n_dofs(),
-            points: edge_rule(model, surface, edge, intervals, points, "edge force")?,
+            rule: EdgeRule::new(model, surface, edge, intervals, points, "edge force")?,
         })
     }
 
@@ -1085,8 +1146,7 @@ impl EdgeForce {
         Ok(EdgeForce {
             force: components,
             follower: Some(sigma),
-            n_dofs: model.n_dofs(),
-            points: edge_rule(model, surface, edge, intervals, points, "edge force")?,
+            rule: EdgeRule::new(model, surface, edge, intervals, points, "edge force")?,
         })
     }
 
@@ -1100,9 +1160,9 @@ impl EdgeForce {
         self.follower.is_some()
     }
 
-    /// Total edge length in the initial configuration (the sum of the rule's weights).
-    pub fn edge_length(&self) -> f64 {
-        self.points.iter().map(|p| p.weight).sum()
+    /// The edge rule.
+    pub fn rule(&self) -> &EdgeRule {
+        &self.rule
     }
 }
 
@@ -1180,10 +1240,10 @@ impl EdgeForce {
         factor: f64,
         f: &mut [T],
     ) -> Result<(), ShellError> {
-        self.check_model(model)?;
+        self.rule.check_model(model)?;
         check_sizes(model, q.len(), Some(f.len()))?;
-        let initial = surface.map(|s| self.geometry_on(s)).transpose()?;
-        for (g, ep) in self.points.iter().enumerate() {
+        let initial = surface.map(|s| self.rule.geometry_on(s)).transpose()?;
+        for (g, ep) in self.rule.points.iter().enumerate() {
             let x0a = match &initial {
                 Some(t) => t[g].x_a,
                 None => ep.x0a.map(|v| v.map(T::cst)),
@@ -1206,27 +1266,8 @@ impl EdgeForce {
         Ok(())
     }
 
-    /// The design velocities of the edge points' initial geometry for the surface's design
-    /// parameter `parameter` (the input of [`EdgeForce::add_design_derivative`]). `surface` is
-    /// the one the load was built on.
-    pub fn velocities(
-        &self,
-        surface: &Surface<f64>,
-        parameter: usize,
-    ) -> Result<Vec<EdgeVelocity>, ShellError> {
-        rule_velocities(&self.points, surface, parameter, "edge force")
-    }
-
-    /// The edge points' initial geometry on `surface` in `T`.
-    pub fn geometry_on<T: Real>(
-        &self,
-        surface: &Surface<T>,
-    ) -> Result<Vec<EdgeGeometry<T>>, ShellError> {
-        rule_geometry_on(&self.points, surface, "edge force")
-    }
-
     /// The shape design derivative of the force at the increment `q` (hand-derived), with
-    /// `velocities` from [`EdgeForce::velocities`] (one per edge point). Dead:
+    /// `velocities` from [`EdgeRule::velocities`] (one per edge point). Dead:
     /// only the arc-length element changes, `d|x̄⁰,t|/dτ = x̄⁰,t · ẋ̄⁰,t / |x̄⁰,t|`. Follower: the
     /// current tangents change by `ẋ̄,α = ẋ̄⁰,α`, and the frame with them (the rate of the
     /// type's force expression). Adds `factor · ḟ` into `f`.
@@ -1238,15 +1279,15 @@ impl EdgeForce {
         factor: f64,
         f: &mut [f64],
     ) -> Result<(), ShellError> {
-        self.check_model(model)?;
+        self.rule.check_model(model)?;
         check_sizes(model, q.len(), Some(f.len()))?;
-        if velocities.len() != self.points.len() {
+        if velocities.len() != self.rule.points.len() {
             return Err(ShellError::Dimension {
-                expected: self.points.len(),
+                expected: self.rule.points.len(),
                 got: velocities.len(),
             });
         }
-        for (ep, v) in self.points.iter().zip(velocities) {
+        for (ep, v) in self.rule.points.iter().zip(velocities) {
             match self.follower {
                 None => {
                     let t = ep.x0a[ep.along];
@@ -1276,10 +1317,10 @@ impl EdgeForce {
         let Some(sigma) = self.follower else {
             return Ok(());
         };
-        self.check_model(model)?;
+        self.rule.check_model(model)?;
         check_sizes(model, q.len(), None)?;
         let mut map = GatherMap::new(model);
-        for ep in &self.points {
+        for ep in &self.rule.points {
             let frame = EdgeFrame::new(current_tangents(model, ep, ep.x0a, q), ep.along);
             let n = ep.shape.len();
             let w = ep.gauss * factor;
@@ -1346,17 +1387,6 @@ impl EdgeForce {
             model.scatter_particle(j, &local, f);
         }
     }
-
-    fn check_model(&self, model: &ShellModel) -> Result<(), ShellError> {
-        if model.n_dofs() != self.n_dofs {
-            return Err(ShellError::InvalidInput(format!(
-                "edge force built for a model with {} DOFs, used with one of {}",
-                self.n_dofs,
-                model.n_dofs()
-            )));
-        }
-        Ok(())
-    }
 }
 
 /// The current tangents `x̄,α = x̄⁰,α + Σ_J Ψ_J,α (ū_J + Δū_J)` at edge point `ep`, from the
@@ -1421,8 +1451,7 @@ struct EdgePoint {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Moment {
     moment: [f64; 3],
-    n_dofs: usize,
-    points: Vec<EdgePoint>,
+    rule: EdgeRule,
 }
 
 impl Moment {
@@ -1439,8 +1468,7 @@ impl Moment {
         check_finite("moment per unit length", &moment)?;
         Ok(Moment {
             moment,
-            n_dofs: model.n_dofs(),
-            points: edge_rule(model, surface, edge, intervals, points, "moment")?,
+            rule: EdgeRule::new(model, surface, edge, intervals, points, "moment")?,
         })
     }
 
@@ -1449,20 +1477,28 @@ impl Moment {
         self.moment
     }
 
-    /// Total edge length in the initial configuration (the sum of the rule's weights).
-    pub fn edge_length(&self) -> f64 {
-        self.points.iter().map(|p| p.weight).sum()
+    /// The edge rule.
+    pub fn rule(&self) -> &EdgeRule {
+        &self.rule
     }
 
-    fn check_model(&self, model: &ShellModel) -> Result<(), ShellError> {
-        if model.n_dofs() != self.n_dofs {
-            return Err(ShellError::InvalidInput(format!(
-                "moment load built for a model with {} DOFs, used with one of {}",
-                self.n_dofs,
-                model.n_dofs()
-            )));
+    /// The model, the sizes of `q` and `f`, and of a given particle list (`particles`).
+    fn check_inputs(
+        &self,
+        model: &ShellModel,
+        particles: Option<usize>,
+        q: usize,
+        f: usize,
+    ) -> Result<(), ShellError> {
+        self.rule.check_model(model)?;
+        check_sizes(model, q, Some(f))?;
+        match particles {
+            Some(got) if got != model.particles.len() => Err(ShellError::Dimension {
+                expected: model.particles.len(),
+                got,
+            }),
+            _ => Ok(()),
         }
-        Ok(())
     }
 }
 
@@ -1491,19 +1527,10 @@ impl Moment {
         factor: f64,
         f: &mut [T],
     ) -> Result<(), ShellError> {
-        self.check_model(model)?;
-        check_sizes(model, q.len(), Some(f.len()))?;
-        if let Some(p) = particles {
-            if p.len() != model.particles.len() {
-                return Err(ShellError::Dimension {
-                    expected: model.particles.len(),
-                    got: p.len(),
-                });
-            }
-        }
+        self.check_inputs(model, particles.map(<[_]>::len), q.len(), f.len())?;
         let m = V3::from(self.moment).map(|v| T::cst(v * factor));
         let mut map = GatherMap::new(model);
-        for ep in &self.points {
+        for ep in &self.rule.points {
             let (mut d, weight) = match surface {
                 Some(s) => {
                     let sd = s.eval(T::cst(ep.uv[0]), T::cst(ep.uv[1]));
@@ -1543,24 +1570,6 @@ impl Moment {
 }
 
 impl Moment {
-    /// The design velocities of the edge points' initial geometry for the surface's design
-    /// parameter `parameter` (`surface`: the one the load was built on).
-    pub fn velocities(
-        &self,
-        surface: &Surface<f64>,
-        parameter: usize,
-    ) -> Result<Vec<EdgeVelocity>, ShellError> {
-        rule_velocities(&self.points, surface, parameter, "moment")
-    }
-
-    /// The edge points' initial geometry on `surface` in `T`.
-    pub fn geometry_on<T: Real>(
-        &self,
-        surface: &Surface<T>,
-    ) -> Result<Vec<EdgeGeometry<T>>, ShellError> {
-        rule_geometry_on(&self.points, surface, "moment")
-    }
-
     /// The design derivative of the force at the increment `q` (hand-derived), adding
     /// `factor · ḟ` into `f`: with the committed particles' sensitivities `particles_dot` (real
     /// particles, `ⁿḋ, ḋ⁰, ⁿė`; `None`: left out) the end-of-step directors change by
@@ -1579,27 +1588,18 @@ impl Moment {
         factor: f64,
         f: &mut [f64],
     ) -> Result<(), ShellError> {
-        self.check_model(model)?;
-        check_sizes(model, q.len(), Some(f.len()))?;
-        if let Some(p) = particles_dot {
-            if p.len() != model.particles.len() {
-                return Err(ShellError::Dimension {
-                    expected: model.particles.len(),
-                    got: p.len(),
-                });
-            }
-        }
+        self.check_inputs(model, particles_dot.map(<[_]>::len), q.len(), f.len())?;
         if let Some(v) = velocities {
-            if v.len() != self.points.len() {
+            if v.len() != self.rule.points.len() {
                 return Err(ShellError::Dimension {
-                    expected: self.points.len(),
+                    expected: self.rule.points.len(),
                     got: v.len(),
                 });
             }
         }
         let m = V3::from(self.moment) * factor;
         let zero = [0.0; DOFS_PER_PARTICLE];
-        for (g, ep) in self.points.iter().enumerate() {
+        for (g, ep) in self.rule.points.iter().enumerate() {
             let (mut d, mut d_dot, w, mut w_dot) = (ep.n0, V3::zeros(), ep.weight, 0.0);
             if let Some(v) = velocities {
                 let t = ep.x0a[ep.along];
@@ -1653,11 +1653,11 @@ impl Moment {
         factor: f64,
         out: &mut Vec<(usize, usize, f64)>,
     ) -> Result<(), ShellError> {
-        self.check_model(model)?;
+        self.rule.check_model(model)?;
         check_sizes(model, q.len(), None)?;
         let m = V3::from(self.moment) * factor;
         let mut map = GatherMap::new(model);
-        for ep in &self.points {
+        for ep in &self.rule.points {
             let mut d = ep.n0;
             let mut dirs = Vec::with_capacity(ep.shape.len());
             for &(j, psi) in &ep.shape {

@@ -370,19 +370,8 @@ impl ShellModel {
             .into_par_iter()
             .map(|j| {
                 let state = self.particle_state(j);
-                let m = self.dof_map(j);
-                let q = &dofs[DOFS_PER_PARTICLE * m.source..DOFS_PER_PARTICLE * (m.source + 1)];
                 // The local DOFs exactly as `gather_local` forms them.
-                let x: [f64; DOFS_PER_PARTICLE] = match m.map {
-                    None => [q[0], q[1], q[2], q[3], q[4]],
-                    Some((qm, det)) => [
-                        q[0] * qm[(0, 0)] + q[1] * qm[(0, 1)] + q[2] * qm[(0, 2)],
-                        q[0] * qm[(1, 0)] + q[1] * qm[(1, 1)] + q[2] * qm[(1, 2)],
-                        q[0] * qm[(2, 0)] + q[1] * qm[(2, 1)] + q[2] * qm[(2, 2)],
-                        q[3] * det,
-                        q[4] * det,
-                    ],
-                };
+                let x = self.particle_dofs(j, dofs);
                 let inc = PointIncrement::new(std::slice::from_ref(&state), &x)?;
                 let dirs = tangent.then(|| {
                     director_derivatives(&state.d, &state.e[0], &state.e[1], [x[3], x[4]])

@@ -1105,25 +1105,6 @@ impl ShellModel {
         }
     }
 
-    /// The local DOFs of shape-function particle `j` from the global vector `g` (as the
-    /// analysis forms them): an image's are `T g` of its source's.
-    fn local_dofs(&self, j: usize, g: &[f64]) -> [f64; DOFS_PER_PARTICLE] {
-        const D: usize = DOFS_PER_PARTICLE;
-        let (src, q, det) = self.seed_map(j);
-        let g = &g[D * src..D * src + D];
-        if j < self.particles.len() {
-            [g[0], g[1], g[2], g[3], g[4]]
-        } else {
-            [
-                g[0] * q[(0, 0)] + g[1] * q[(0, 1)] + g[2] * q[(0, 2)],
-                g[0] * q[(1, 0)] + g[1] * q[(1, 1)] + g[2] * q[(1, 2)],
-                g[0] * q[(2, 0)] + g[1] * q[(2, 1)] + g[2] * q[(2, 2)],
-                g[3] * det,
-                g[4] * det,
-            ]
-        }
-    }
-
     fn check_model_seeds(&self, s: usize, seeds: &ModelSeeds) -> Result<(), ShellError> {
         let f = |name: &str| format!("seeds[{s}].{name}");
         if let Some(sp) = seeds.surface {
@@ -1263,7 +1244,7 @@ impl ShellModel {
         let n_sf = self.particles.len() + self.symmetry.images.len();
         // Per shape-function particle: f64 state, local DOFs and increment (as the analysis
         // forms them), then, seed-major (`s · n_sf + j`), the derivatives of every seed set.
-        let local_dofs = |j: usize, g: &[f64]| self.local_dofs(j, g);
+        let local_dofs = |j: usize, g: &[f64]| self.particle_dofs(j, g);
         let per: Vec<ParticleValues> = (0..n_sf)
             .into_par_iter()
             .map(|j| {
@@ -1551,7 +1532,7 @@ impl ShellModel {
             .into_par_iter()
             .map(|idx| {
                 let (qd, j) = (dofs_dot[idx / n_sf], idx % n_sf);
-                let x = self.local_dofs(j, qd);
+                let x = self.particle_dofs(j, qd);
                 let (p, xs, k) = &lin.particles[j];
                 // θ̇ = e1 α̇1 + e2 α̇2: the rotation vector of the DOF rates.
                 let (theta, theta_dot) = (rotation_vector(p, xs), rotation_vector(p, &x));
