@@ -948,8 +948,13 @@ fn tool_force_dots(
 ///   `Δu` applied to `ⁿū̇` (eq 37's `l'_V`); for a shape variable its explicit dependence on the
 ///   initial tangents `x̄⁰,α` (`Pressure::add_design_derivative`, group `load`);
 /// - gravity per unit initial area: the area element's shape derivative (group `load`);
-/// - an edge force per unit initial length: the length element's shape derivative
+/// - an edge force: a follower's history term as the pressure's (its load stiffness applied
+///   to `ⁿū̇`); for a shape variable the derivative through its edge points' initial geometry,
+///   a dead one's length element or a follower's initial tangents
 ///   (`EdgeForce::add_design_derivative`, group `load`);
+/// - an edge moment: through the committed directors and lamina vectors (group `history`) and,
+///   for a shape variable, the edge points' initial normals and length elements (group
+///   `load`), `Moment::add_design_derivative`;
 /// - a constant load: the inner load at factor 1;
 /// - the director filter (group `filter` alone, with all seeds):
 ///   `−κ̇ Bᵀ B α − κ (Ḃᵀ B α + Bᵀ Ḃ α)` with `κ̇` from `Ė, ν̇, ṫ` and `Ḃ` from the committed
