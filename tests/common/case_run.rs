@@ -1,5 +1,6 @@
 //! Runs a shell case text in process, as `shelldsa run` does, with its output in a temporary
 //! directory of its own (removed afterwards: the tests of one file run in parallel).
+#![allow(dead_code)] // each test file uses a subset
 
 use shelldsa::io::shell_build::{self, RunStatus, RunSummary};
 use shelldsa::io::shell_case::parse_shell_case;
