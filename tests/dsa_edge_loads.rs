@@ -769,3 +769,48 @@ fn end_moment_sensitivities_three_ways_match_the_circular_arc() {
         );
     }
 }
+
+/// The follower's frame at the initial state of the flat 2 × 0.5 strip (`u` along x, `v` along y,
+/// normal +z): on each edge, a unit outward component sums to the edge's length along the
+/// outward normal (−x on `u-min`, +x on `u-max`, −y on `v-min`, +y on `v-max`), a unit normal
+/// component to its length along +z, and a unit tangential component to its length along the
+/// running parameter (y on the `u`-edges, x on the `v`-edges).
+#[test]
+fn follower_edge_force_frame_is_outward_normal_and_tangent_at_the_start() {
+    for (edge, outward, along, length) in [
+        ("u-min", [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], 0.5),
+        ("u-max", [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], 0.5),
+        ("v-min", [0.0, -1.0, 0.0], [1.0, 0.0, 0.0], 2.0),
+        ("v-max", [0.0, 1.0, 0.0], [1.0, 0.0, 0.0], 2.0),
+    ] {
+        for (c, expected) in [
+            ([1.0, 0.0, 0.0], outward),
+            ([0.0, 1.0, 0.0], [0.0, 0.0, 1.0]),
+            ([0.0, 0.0, 1.0], along),
+        ] {
+            let text = STRIP.replace(
+                "kind = \"edge-force\"\nedge = \"u-max\"\nper_length = [0.0, 0.0, -0.2]",
+                &format!(
+                    "kind = \"edge-force\"\nedge = \"{edge}\"\nfollower = true\n\
+                     per_length = [{:?}, {:?}, {:?}]",
+                    c[0], c[1], c[2]
+                ),
+            );
+            let case = parse_shell_case(&text, Path::new("frame.toml")).unwrap();
+            let built = shell_build::build(&case).unwrap();
+            let problem = &built.problem;
+            let f = edge_forces(problem, &vec![0.0; problem.n_generalised()]);
+            // Partition of unity: the translations' forces sum to the resultant.
+            let total: Vec<f64> = (0..3)
+                .map(|a| f.iter().skip(a).step_by(5).sum::<f64>())
+                .collect();
+            for a in 0..3 {
+                // Gauss sums of the RK functions: 1e-13 of the edge length.
+                assert!(
+                    (total[a] - length * expected[a]).abs() <= 1e-12,
+                    "{edge}, components {c:?}: resultant {total:?}"
+                );
+            }
+        }
+    }
+}
