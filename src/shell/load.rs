@@ -1119,12 +1119,7 @@ impl EdgeForce {
         intervals: usize,
         points: usize,
     ) -> Result<Self, ShellError> {
-        check_finite("edge force per unit length", &force)?;
-        Ok(EdgeForce {
-            force,
-            follower: None,
-            rule: EdgeRule::new(model, surface, edge, intervals, points, "edge force")?,
-        })
+        Self::with_frame(model, surface, edge, force, None, (intervals, points))
     }
 
     /// The follower force with components `[c_o, c_n, c_t]` per unit current length along the
@@ -1138,14 +1133,34 @@ impl EdgeForce {
         intervals: usize,
         points: usize,
     ) -> Result<Self, ShellError> {
-        check_finite("follower edge force per unit length", &components)?;
         let sigma = match edge {
             Edge::UMin | Edge::VMax => 1.0,
             Edge::UMax | Edge::VMin => -1.0,
         };
+        Self::with_frame(
+            model,
+            surface,
+            edge,
+            components,
+            Some(sigma),
+            (intervals, points),
+        )
+    }
+
+    /// The force `force` on `edge` of `surface`, dead (`follower = None`) or a follower with
+    /// the outward normal's orientation `Some(σ)`, integrated with `rule = (intervals, points)`.
+    fn with_frame(
+        model: &ShellModel,
+        surface: &Surface<f64>,
+        edge: Edge,
+        force: [f64; 3],
+        follower: Option<f64>,
+        (intervals, points): (usize, usize),
+    ) -> Result<Self, ShellError> {
+        check_finite("edge force per unit length", &force)?;
         Ok(EdgeForce {
-            force: components,
-            follower: Some(sigma),
+            force,
+            follower,
             rule: EdgeRule::new(model, surface, edge, intervals, points, "edge force")?,
         })
     }
