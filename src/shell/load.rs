@@ -946,7 +946,27 @@ impl EdgeRule {
         surface: &Surface<f64>,
         parameter: usize,
     ) -> Result<Vec<EdgeVelocity>, ShellError> {
-        rule_velocities(&self.points, surface, parameter, self.what)
+        let what = self.what;
+        self.points
+            .iter()
+            .map(|ep| {
+                let sd = surface
+                    .design_velocity(parameter, ep.uv[0], ep.uv[1])
+                    .map_err(|e| {
+                        ShellError::InvalidInput(format!(
+                            "{what}: design velocity at edge point {:?}: {e}",
+                            ep.uv
+                        ))
+                    })?;
+                let c = ep.x0a[0].cross(&ep.x0a[1]);
+                let c_dot = sd.xu.cross(&ep.x0a[1]) + ep.x0a[0].cross(&sd.xv);
+                let n = c / c.norm();
+                Ok(EdgeVelocity {
+                    x_a: [sd.xu, sd.xv],
+                    n: (c_dot - n * n.dot(&c_dot)) / c.norm(),
+                })
+            })
+            .collect()
     }
 
     /// The edge points' initial geometry on `surface` in `T`.
@@ -954,7 +974,20 @@ impl EdgeRule {
         &self,
         surface: &Surface<T>,
     ) -> Result<Vec<EdgeGeometry<T>>, ShellError> {
-        rule_geometry_on(&self.points, surface, self.what)
+        let what = self.what;
+        self.points
+            .iter()
+            .map(|ep| {
+                let sd = surface.eval(T::cst(ep.uv[0]), T::cst(ep.uv[1]));
+                let n = sd.normal().map_err(|e| {
+                    ShellError::InvalidInput(format!("{what} edge point {:?}: {e}", ep.uv))
+                })?;
+                Ok(EdgeGeometry {
+                    x_a: [sd.xu, sd.xv],
+                    n,
+                })
+            })
+            .collect()
     }
 
     /// The load is bound to the model it was built for (its edge shape functions are
@@ -970,55 +1003,6 @@ impl EdgeRule {
         }
         Ok(())
     }
-}
-
-fn rule_velocities(
-    points: &[EdgePoint],
-    surface: &Surface<f64>,
-    parameter: usize,
-    what: &str,
-) -> Result<Vec<EdgeVelocity>, ShellError> {
-    points
-        .iter()
-        .map(|ep| {
-            let sd = surface
-                .design_velocity(parameter, ep.uv[0], ep.uv[1])
-                .map_err(|e| {
-                    ShellError::InvalidInput(format!(
-                        "{what}: design velocity at edge point {:?}: {e}",
-                        ep.uv
-                    ))
-                })?;
-            let c = ep.x0a[0].cross(&ep.x0a[1]);
-            let c_dot = sd.xu.cross(&ep.x0a[1]) + ep.x0a[0].cross(&sd.xv);
-            let n = c / c.norm();
-            Ok(EdgeVelocity {
-                x_a: [sd.xu, sd.xv],
-                n: (c_dot - n * n.dot(&c_dot)) / c.norm(),
-            })
-        })
-        .collect()
-}
-
-/// The rule's initial geometry evaluated on `surface` in `T`.
-fn rule_geometry_on<T: Real>(
-    points: &[EdgePoint],
-    surface: &Surface<T>,
-    what: &str,
-) -> Result<Vec<EdgeGeometry<T>>, ShellError> {
-    points
-        .iter()
-        .map(|ep| {
-            let sd = surface.eval(T::cst(ep.uv[0]), T::cst(ep.uv[1]));
-            let n = sd.normal().map_err(|e| {
-                ShellError::InvalidInput(format!("{what} edge point {:?}: {e}", ep.uv))
-            })?;
-            Ok(EdgeGeometry {
-                x_a: [sd.xu, sd.xv],
-                n,
-            })
-        })
-        .collect()
 }
 
 /// The rule of a line load on `edge` of the parameter domain of `surface`: `intervals` equal
@@ -1545,16 +1529,10 @@ impl Moment {
         self.check_inputs(model, particles.map(<[_]>::len), q.len(), f.len())?;
         let m = V3::from(self.moment).map(|v| T::cst(v * factor));
         let mut map = GatherMap::new(model);
-        for ep in &self.rule.points {
-            let (mut d, weight) = match surface {
-                Some(s) => {
-                    let sd = s.eval(T::cst(ep.uv[0]), T::cst(ep.uv[1]));
-                    let n0 = sd.normal().map_err(|e| {
-                        ShellError::InvalidInput(format!("moment edge point {:?}: {e}", ep.uv))
-                    })?;
-                    let t = if ep.along == 0 { sd.xu } else { sd.xv };
-                    (n0, t.norm() * ep.gauss)
-                }
+        let initial = surface.map(|s| self.rule.geometry_on(s)).transpose()?;
+        for (g, ep) in self.rule.points.iter().enumerate() {
+            let (mut d, weight) = match &initial {
+                Some(geo) => (geo[g].n, geo[g].x_a[ep.along].norm() * ep.gauss),
                 None => (ep.n0.map(T::cst), T::cst(ep.weight)),
             };
             let mut da = Vec::with_capacity(ep.shape.len());
