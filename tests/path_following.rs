@@ -89,6 +89,109 @@ fn arc_length_passes_a_load_maximum_and_minimum_and_reports_both() {
     assert!(falling >= 3, "{falling} falling steps");
 }
 
+/// `r(u, λ) = u − g(λ)` with `g(λ) = (1 − (λ − 1)², ε λ)`: a path whose trace in the unknowns
+/// is a hairpin, out along `u₁` and back, turning at `λ = 1` with a radius of curvature `ε²/2`
+/// (0.005 at ε = 0.1). Committed states are kept, to read the steps' increments.
+struct Hairpin {
+    committed: Vec<([f64; 2], f64)>,
+}
+
+const HAIRPIN_EPS: f64 = 0.1;
+
+fn hairpin(l: f64) -> [f64; 2] {
+    [1.0 - (l - 1.0) * (l - 1.0), HAIRPIN_EPS * l]
+}
+
+impl NonlinearProblem for Hairpin {
+    fn n_dofs(&self) -> usize {
+        2
+    }
+    fn residual(&mut self, u: &[f64], load: f64, r: &mut [f64]) -> Result<(), ProblemError> {
+        let g = hairpin(load);
+        r[0] = u[0] - g[0];
+        r[1] = u[1] - g[1];
+        Ok(())
+    }
+    fn tangent(&mut self, _u: &[f64], _load: f64, k: &mut [f64]) -> Result<(), ProblemError> {
+        // The pattern of one 2 × 2 cell: identity.
+        k.copy_from_slice(&[1.0, 0.0, 0.0, 1.0]);
+        Ok(())
+    }
+    fn force_norm(&self, _load: f64) -> f64 {
+        1.0
+    }
+    fn load_derivative(
+        &mut self,
+        _u: &[f64],
+        load: f64,
+        out: &mut [f64],
+    ) -> Result<bool, ProblemError> {
+        out[0] = 2.0 * (load - 1.0);
+        out[1] = -HAIRPIN_EPS;
+        Ok(true)
+    }
+    fn commit(&mut self, u: &[f64], load: f64) {
+        self.committed.push(([u[0], u[1]], load));
+    }
+    fn restore(&mut self) {}
+}
+
+#[test]
+fn arc_length_goes_round_a_turn_sharper_than_its_arc_length_without_turning_back() {
+    let pattern = SparsityPattern::from_cells(2, &[vec![0, 1]]).unwrap();
+    let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+    // Δs = 0.05 is ten times the turn's radius of curvature: a step from just before the turn
+    // meets the path on both legs.
+    let arc = ArcLength {
+        end: 1.9,
+        initial_length: 0.05,
+        max_length: 0.05,
+        ..ArcLength::default()
+    };
+    let mut problem = Hairpin {
+        committed: vec![([0.0, 0.0], 0.0)],
+    };
+    let out = NewtonSolver::default()
+        .run_arc_length(
+            &mut problem,
+            &pattern,
+            &mut solver,
+            &[0.0, 0.0],
+            &arc,
+            |_| {},
+        )
+        .expect("the path round the turn to λ = 1.9");
+    assert!(out.report.load >= 1.9);
+    let states = &problem.committed;
+    // Every committed state is on the path: the residual within the driver's tolerance,
+    // `residual_rtol` (1e-8) times the force norm (1).
+    for (u, l) in states {
+        let g = hairpin(*l);
+        assert!((u[0] - g[0]).hypot(u[1] - g[1]) <= 1e-8, "{u:?} at λ {l}");
+    }
+    // The load factor only rises along this path: no step went back to an earlier point.
+    assert!(
+        states.windows(2).all(|w| w[1].1 > w[0].1),
+        "{:?}",
+        states.iter().map(|s| s.1).collect::<Vec<_>>()
+    );
+    // Consecutive increments make acute angles: the steps went round the turn, which the
+    // shortened arc lengths resolved.
+    let inc = |a: &([f64; 2], f64), b: &([f64; 2], f64)| [b.0[0] - a.0[0], b.0[1] - a.0[1]];
+    for w in states.windows(3) {
+        let (p, d) = (inc(&w[0], &w[1]), inc(&w[1], &w[2]));
+        assert!(p[0] * d[0] + p[1] * d[1] >= 0.0, "{w:?}");
+    }
+    // The steps that met the path on the leg behind were refused as such.
+    let reversed = out
+        .report
+        .attempts
+        .iter()
+        .filter(|a| matches!(a.failure, Some(FailureReason::PathReversed { .. })))
+        .count();
+    assert!(reversed >= 1, "no step was refused as reversed");
+}
+
 #[test]
 fn arc_length_refuses_a_problem_without_load_derivative() {
     struct NoDerivative;

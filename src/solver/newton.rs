@@ -621,6 +621,14 @@ pub enum FailureReason {
     Setup(String),
     /// `max_attempts` step attempts used up.
     TooManyAttempts(usize),
+    /// An arc-length step converged to a point behind the last one: its increment makes an
+    /// obtuse angle with the previous step's (over the path unknowns), so the corrector went
+    /// back along the path instead of on (a turn sharper than the arc length resolves, a cusp,
+    /// or a branch point). Retried with a shorter arc length.
+    PathReversed {
+        /// Cosine of the angle between the two increments (negative).
+        cosine: f64,
+    },
 }
 
 impl fmt::Display for FailureReason {
@@ -635,6 +643,12 @@ impl fmt::Display for FailureReason {
             FailureReason::Problem(e) => write!(f, "problem: {e}"),
             FailureReason::Setup(s) => write!(f, "setup: {s}"),
             FailureReason::TooManyAttempts(n) => write!(f, "{n} step attempts used up"),
+            FailureReason::PathReversed { cosine } => write!(
+                f,
+                "the arc-length step went back along the path (cosine {cosine:.3} between its \
+                 increment and the previous step's): the path turns more sharply than the arc \
+                 length resolves, or it has a cusp or a branch point there"
+            ),
         }
     }
 }
@@ -1882,7 +1896,8 @@ impl NewtonSolver {
     /// increment (`sign Δλ = sign(Δu_prevᵀ δu_q)`), which passes limit points. Convergence is
     /// the residual tolerance `‖r‖ ≤ max(rtol · force_norm(λ), atol)` or the round-off floor of
     /// [`NewtonSolver::run`]. A step failing (no real root, divergence, too many iterations, a
-    /// recoverable problem error, a singular tangent) is retried with `cut_factor · Δs`; easy
+    /// recoverable problem error, a singular tangent, or a converged point behind the last one:
+    /// [`FailureReason::PathReversed`]) is retried with `cut_factor · Δs`; easy
     /// steps grow `Δs` by `grow_factor` up to `max_length`. At every converged step the tangent
     /// there is factorised and `q·K⁻¹q` and the sign of `det K`
     /// ([`LinearSolver::determinant_sign`]) evaluated: a sign change of `q·K⁻¹q` is reported
@@ -1985,6 +2000,21 @@ impl NewtonSolver {
                 &mut rec,
                 &mut w,
             );
+            // A converged step whose increment turns back against the previous one has
+            // found the path behind the last point (the corrector's cylinder meets the path
+            // on both sides): taken, the next step's predictor (along the previous
+            // increment) would turn back again and the run would shuttle between two points.
+            let outcome = match (outcome, prev.as_deref()) {
+                (Ok(done), Some(p)) => {
+                    let cosine = increment_cosine(&done.0[..np], &u_n[..np], p);
+                    if cosine < 0.0 {
+                        Err(FailureReason::PathReversed { cosine })
+                    } else {
+                        Ok(done)
+                    }
+                }
+                (other, _) => other,
+            };
             match outcome {
                 Ok((u, load, stiffness, start_stiffness)) => {
                     rec.converged = true;
@@ -2229,6 +2259,22 @@ impl NewtonSolver {
             .and_then(|()| solver.solve_in_place(&mut w.du_q));
         rec.timing.solve_s += clock.elapsed().as_secs_f64();
         solved.map_err(FailureReason::LinearSolver)
+    }
+}
+
+/// Cosine of the angle between the increment `u − u_n` and `prev`; 1 where either is zero.
+fn increment_cosine(u: &[f64], u_n: &[f64], prev: &[f64]) -> f64 {
+    let (mut d, mut a, mut b) = (0.0, 0.0, 0.0);
+    for ((x, x0), p) in u.iter().zip(u_n).zip(prev) {
+        let du = x - x0;
+        d += du * p;
+        a += du * du;
+        b += p * p;
+    }
+    if a > 0.0 && b > 0.0 {
+        d / (a.sqrt() * b.sqrt())
+    } else {
+        1.0
     }
 }
 
