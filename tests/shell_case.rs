@@ -605,3 +605,31 @@ fn a_symmetry_row_made_only_of_held_components_is_rejected() {
     // held rows: accepted.
     parse(&square.replacen("components = [\"ux\", \"uy\"]", "components = [\"ux\"]", 1)).unwrap();
 }
+
+#[test]
+fn load_steps_are_required_with_load_stepping_and_not_with_arc_length() {
+    for key in ["initial_step", "min_step", "max_step"] {
+        let line = GOOD
+            .lines()
+            .find(|l| l.starts_with(key))
+            .expect("test set-up: the key in GOOD");
+        rejects(
+            &format!("{line}\n"),
+            "",
+            &[
+                &format!("`steps.{key}`"),
+                "(missing)",
+                "required with control = \"load\"",
+            ],
+        );
+    }
+    // Arc-length continuation does not use them: left out, the case reads.
+    let steps = "[steps]\ninitial_step = 0.1\nmin_step = 0.001\nmax_step = 0.2\n";
+    assert!(GOOD.contains(steps), "test set-up");
+    let arc = GOOD.replace(
+        steps,
+        "[steps]\ncontrol = \"arc-length\"\narc_length = 0.1\n",
+    );
+    let c = parse(&arc).unwrap();
+    assert_eq!(c.steps.arc_length, Some([0.1, 1e-5, 0.1]));
+}

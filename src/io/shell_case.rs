@@ -209,9 +209,12 @@ struct ContactFile {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct StepsFile {
-    initial_step: f64,
-    min_step: f64,
-    max_step: f64,
+    #[serde(default)]
+    initial_step: Option<f64>,
+    #[serde(default)]
+    min_step: Option<f64>,
+    #[serde(default)]
+    max_step: Option<f64>,
     #[serde(default = "one")]
     final_load: f64,
     #[serde(default = "default_max_iterations")]
@@ -2341,9 +2344,29 @@ impl Checker<'_> {
 
     fn steps(&self, s: &StepsFile) -> Result<StepsSpec, CaseError> {
         let final_load = self.positive("steps.final_load", s.final_load)?;
-        let min_step = self.positive("steps.min_step", s.min_step)?;
-        let initial_step = self.positive("steps.initial_step", s.initial_step)?;
-        let max_step = self.positive("steps.max_step", s.max_step)?;
+        // The load steps: required with load stepping; arc-length continuation does not use
+        // them (one step to `final_load` where they are left out).
+        let arc = s.control.as_deref() == Some("arc-length");
+        let step = |key: &str, v: Option<f64>, what: &str| match v {
+            Some(v) => self.positive(key, v),
+            None if arc => Ok(final_load),
+            None => Err(self.err(
+                key,
+                "(missing)",
+                format!("{what} (> 0; required with control = \"load\", the default)"),
+            )),
+        };
+        let min_step = step(
+            "steps.min_step",
+            s.min_step,
+            "the smallest load-factor step",
+        )?;
+        let initial_step = step(
+            "steps.initial_step",
+            s.initial_step,
+            "the first load-factor step",
+        )?;
+        let max_step = step("steps.max_step", s.max_step, "the largest load-factor step")?;
         if initial_step < min_step {
             return Err(self.err(
                 "steps.initial_step",
