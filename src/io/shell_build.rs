@@ -15,7 +15,7 @@ use super::shell_case::{
     edge_name, Boundary, CellLayout, Component, Load, LoadScalingSpec, Location, MonitorDirection,
     PenaltySpec, PredictorKind, ShellCase,
 };
-use super::shell_output::{OutputError, OutputGrid, Separation, ShellOutput, StepSummary};
+use super::shell_output::{OutputError, OutputGrid, PvdTime, Separation, ShellOutput, StepSummary};
 use crate::meshfree::quadrature::{CellQuadrature, QuadratureError};
 use crate::meshfree::vci::VciOrder;
 use crate::meshfree::Edge;
@@ -696,6 +696,11 @@ pub fn run(
         _ => None,
     });
     output.set_displacement_control(controlled);
+    output.set_pvd_time(if case.steps.arc_length.is_some() {
+        PvdTime::Step
+    } else {
+        PvdTime::LoadFactor
+    });
     output.initial(problem_model(&built.problem), &case.surface)?;
 
     let pattern = problem_pattern(&built.problem).clone();

@@ -628,6 +628,19 @@ pub struct ShellOutput {
     /// Reactions of the step being recorded (set before [`Self::converged_with_contact`]).
     pending_reactions: Vec<(String, f64)>,
     pending_director_unresolved: Option<[f64; 2]>,
+    pvd_time: PvdTime,
+}
+
+/// What `shell.pvd` gives ParaView as a written step's time (a collection's times must rise).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PvdTime {
+    /// The load factor: it rises at every step under load and displacement control (a tool's
+    /// path parameter `t` too, through loading and unloading).
+    #[default]
+    LoadFactor,
+    /// The converged step's number: under arc-length control the load factor falls after a
+    /// load maximum.
+    Step,
 }
 
 /// What [`ShellOutput`] tracks of the contact over the run.
@@ -698,6 +711,7 @@ impl ShellOutput {
             directions: Vec::new(),
             displacement_control: None,
             pending_reactions: Vec::new(),
+            pvd_time: PvdTime::default(),
             pending_director_unresolved: None,
         })
     }
@@ -713,6 +727,17 @@ impl ShellOutput {
     /// the prescribed motion) on its load axis.
     pub fn set_displacement_control(&mut self, sign: Option<f64>) {
         self.displacement_control = sign;
+    }
+
+    /// What `shell.pvd` gives as a step's time ([`PvdTime::Step`] for arc-length runs), also
+    /// written to results.json as `pvd_time`.
+    pub fn set_pvd_time(&mut self, time: PvdTime) {
+        self.pvd_time = time;
+        let name = match time {
+            PvdTime::LoadFactor => "load factor",
+            PvdTime::Step => "step",
+        };
+        self.set_info("pvd_time", Value::from(name));
     }
 
     /// The reactions of the `prescribed` entries at the step recorded next.
@@ -777,6 +802,10 @@ impl ShellOutput {
         });
         shell_vtu_with_contact(model, surface, &self.grid, pressure.as_deref())?
             .write(&self.dir.join(&rel))?;
+        let time = match self.pvd_time {
+            PvdTime::LoadFactor => time,
+            PvdTime::Step => step as f64,
+        };
         self.pvd.add(time, &rel)?;
         Ok(rel)
     }
