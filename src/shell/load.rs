@@ -1490,14 +1490,7 @@ impl Moment {
         f: usize,
     ) -> Result<(), ShellError> {
         self.rule.check_model(model)?;
-        check_sizes(model, q, Some(f))?;
-        match particles {
-            Some(got) if got != model.particles.len() => Err(ShellError::Dimension {
-                expected: model.particles.len(),
-                got,
-            }),
-            _ => Ok(()),
-        }
+        model.check_state_sizes(q, f, particles)
     }
 }
 

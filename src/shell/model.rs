@@ -346,6 +346,29 @@ impl ShellModel {
         self.particles.len()
     }
 
+    /// Sizes of a generalised vector `q`, a force vector `f` (both `n_dofs`) and, when given,
+    /// a list of per-particle states (`n_particles`).
+    pub(crate) fn check_state_sizes(
+        &self,
+        q: usize,
+        f: usize,
+        particles: Option<usize>,
+    ) -> Result<(), ShellError> {
+        let n = self.n_dofs();
+        for got in [q, f] {
+            if got != n {
+                return Err(ShellError::Dimension { expected: n, got });
+            }
+        }
+        match particles {
+            Some(got) if got != self.n_particles() => Err(ShellError::Dimension {
+                expected: self.n_particles(),
+                got,
+            }),
+            _ => Ok(()),
+        }
+    }
+
     /// Global DOFs of the cell of in-plane point `k` (5 per source particle).
     pub fn point_dofs(&self, k: usize) -> Vec<usize> {
         self.points[k]

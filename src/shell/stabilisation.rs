@@ -437,7 +437,7 @@ impl DirectorFilter {
         q: &[T],
         f: &mut [T],
     ) -> Result<(), ShellError> {
-        self.check(model, None, q.len(), f.len())?;
+        model.check_state_sizes(q.len(), f.len(), None)?;
         let blocks: Blocks<T> = self
             .blocks(model)
             .into_iter()
@@ -460,7 +460,7 @@ impl DirectorFilter {
         q: &[T],
         f: &mut [T],
     ) -> Result<(), ShellError> {
-        self.check(model, Some(particles.len()), q.len(), f.len())?;
+        model.check_state_sizes(q.len(), f.len(), Some(particles.len()))?;
         self.constant_only("the force on another committed state and design")?;
         let blocks = self.blocks_of(model, |j| model.particle_state_in(j, particles));
         apply(&blocks, |_| kappa, q, f);
@@ -480,7 +480,7 @@ impl DirectorFilter {
         q: &[f64],
         f: &mut [f64],
     ) -> Result<(), ShellError> {
-        self.check(model, Some(particles_dot.len()), q.len(), f.len())?;
+        model.check_state_sizes(q.len(), f.len(), Some(particles_dot.len()))?;
         self.constant_only("the design derivative")?;
         for row in &self.rows {
             // (source, B block, Ḃ block), merged by source.
@@ -532,30 +532,6 @@ impl DirectorFilter {
                 FilterStrength::DirectorForce.name(),
                 FilterStrength::Bending.name()
             ))),
-        }
-    }
-
-    /// Sizes: `q` and `f` are generalised vectors of the model, `particles` (when given) one
-    /// state per real particle.
-    fn check(
-        &self,
-        model: &ShellModel,
-        particles: Option<usize>,
-        q: usize,
-        f: usize,
-    ) -> Result<(), ShellError> {
-        let n = model.n_dofs();
-        for got in [q, f] {
-            if got != n {
-                return Err(ShellError::Dimension { expected: n, got });
-            }
-        }
-        match particles {
-            Some(got) if got != model.n_particles() => Err(ShellError::Dimension {
-                expected: model.n_particles(),
-                got,
-            }),
-            _ => Ok(()),
         }
     }
 
