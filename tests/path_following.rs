@@ -89,6 +89,89 @@ fn arc_length_passes_a_load_maximum_and_minimum_and_reports_both() {
     assert!(falling >= 3, "{falling} falling steps");
 }
 
+/// `r(u, λ) = (u₂ − λ, u₁ − f(u₂))` with the load on the first row (`q = e₁`): the load factor
+/// rises with `u₂`, and the displacement the load works on, `u₁ = f(u₂)`, turns back twice, at
+/// `u₂ = u₁`, `u₂` of [`Snap`] (a snap-back). `det K = −1` everywhere, and `q·K⁻¹q = f′(u₂)`.
+struct SnapBack;
+
+impl NonlinearProblem for SnapBack {
+    fn n_dofs(&self) -> usize {
+        2
+    }
+    fn residual(&mut self, u: &[f64], load: f64, r: &mut [f64]) -> Result<(), ProblemError> {
+        r[0] = u[1] - load;
+        r[1] = u[0] - f(u[1]);
+        Ok(())
+    }
+    fn tangent(&mut self, u: &[f64], _load: f64, k: &mut [f64]) -> Result<(), ProblemError> {
+        // [[0, 1], [1, −f′(u₂)]]: symmetric, so the storage order does not matter.
+        let df = 1.0 - 3.0 * u[1] + 1.8 * u[1] * u[1];
+        k.copy_from_slice(&[0.0, 1.0, 1.0, -df]);
+        Ok(())
+    }
+    fn force_norm(&self, load: f64) -> f64 {
+        load.abs()
+    }
+    fn load_derivative(
+        &mut self,
+        _u: &[f64],
+        _load: f64,
+        out: &mut [f64],
+    ) -> Result<bool, ProblemError> {
+        out[0] = -1.0;
+        out[1] = 0.0;
+        Ok(true)
+    }
+    fn commit(&mut self, _u: &[f64], _load: f64) {}
+    fn restore(&mut self) {}
+}
+
+#[test]
+fn arc_length_reports_a_snap_back_as_such_not_as_a_limit_point() {
+    let pattern = SparsityPattern::from_cells(2, &[vec![0, 1]]).unwrap();
+    // Both factorisations: the dense LU gives the determinant's sign, faer's sparse LU none;
+    // the kind follows from the direction of the load along the path in both.
+    for method in [Method::DenseLu, Method::Lu] {
+        snap_back_with(&pattern, method);
+    }
+}
+
+fn snap_back_with(pattern: &SparsityPattern, method: Method) {
+    let mut solver = LinearSolver::new(pattern, method, SolverOptions::default()).unwrap();
+    let arc = ArcLength {
+        end: 1.5,
+        initial_length: 0.05,
+        max_length: 0.05,
+        ..ArcLength::default()
+    };
+    let out = NewtonSolver::default()
+        .run_arc_length(
+            &mut SnapBack,
+            pattern,
+            &mut solver,
+            &[0.0, 0.0],
+            &arc,
+            |_| {},
+        )
+        .expect("the path to λ = 1.5");
+    // q·K⁻¹q changes sign twice and the determinant never: two snap-backs, no limit point
+    // (the load factor rises all the way) and no bifurcation.
+    let kinds: Vec<CriticalKind> = out.critical.iter().map(|c| c.kind).collect();
+    assert_eq!(
+        kinds,
+        [CriticalKind::SnapBack; 2],
+        "{method:?}: {:?}",
+        out.critical
+    );
+    let steps: Vec<&StepRecord> = out.report.converged_steps().collect();
+    assert!(steps.windows(2).all(|w| w[1].load > w[0].load));
+    // Each bracket holds its turning point (λ = u₂ there): a step moves λ by at most Δs.
+    let turns = [(3.0 - 1.8f64.sqrt()) / 3.6, (3.0 + 1.8f64.sqrt()) / 3.6];
+    for (c, t) in out.critical.iter().zip(turns) {
+        assert!(c.loads[0] <= t && t <= c.loads[1], "{c}: turn at λ = {t}");
+    }
+}
+
 /// `r(u, λ) = u − g(λ)` with `g(λ) = (1 − (λ − 1)², ε λ)`: a path whose trace in the unknowns
 /// is a hairpin, out along `u₁` and back, turning at `λ = 1` with a radius of curvature `ε²/2`
 /// (0.005 at ε = 0.1). Committed states are kept, to read the steps' increments.

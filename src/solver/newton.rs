@@ -1797,25 +1797,47 @@ impl Default for ArcLength {
 /// What kind of point a [`CriticalPoint`] is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum CriticalKind {
-    /// A limit point with the load factor at a maximum (it rose, then fell).
+    /// A limit point with the load factor at a maximum (it rose, then fell): `q·K⁻¹q` and the
+    /// determinant's sign changed, and the load had been rising.
     LoadMaximum,
-    /// A limit point with the load factor at a minimum.
+    /// A limit point with the load factor at a minimum (it had been falling).
     LoadMinimum,
     /// The tangent became singular while the load factor kept its direction: the
     /// determinant's sign changed, the current stiffness parameter's did not.
     Bifurcation,
+    /// A turning point of the displacement work-conjugate to the load, `qᵀu` (a snap-back: the
+    /// deflection under a point load turns back while the load factor keeps its direction):
+    /// `q·K⁻¹q = qᵀ du/dλ` passed through zero and the determinant kept its sign, so the
+    /// tangent is regular there. Not a critical point of the tangent; reported with them
+    /// because a load factor alone does not locate it on the path.
+    SnapBack,
 }
 
 impl CriticalKind {
     /// The name written to results.json and printed: `"limit point (load maximum)"`,
-    /// `"limit point (load minimum)"` or `"bifurcation"`.
+    /// `"limit point (load minimum)"`, `"bifurcation"` or
+    /// `"snap-back (turning point of the displacement)"`.
     pub fn label(self) -> &'static str {
         match self {
             CriticalKind::LoadMaximum => "limit point (load maximum)",
             CriticalKind::LoadMinimum => "limit point (load minimum)",
             CriticalKind::Bifurcation => "bifurcation",
+            CriticalKind::SnapBack => "snap-back (turning point of the displacement)",
         }
     }
+}
+
+/// A converged arc-length step ([`NewtonSolver::run_arc_length`]).
+struct ArcStep {
+    /// The unknowns.
+    u: Vec<f64>,
+    /// The load factor.
+    load: f64,
+    /// `q·K⁻¹q` at the step's start and end.
+    stiffness: [f64; 2],
+    /// Whether the load factor rises along the path (`dλ/ds > 0`, the path oriented by the
+    /// previous increment at the start and by this one at the end) at the start and the end.
+    rising: [bool; 2],
 }
 
 /// A critical point passed between two converged steps, where the tangent `K` became singular:
@@ -1824,7 +1846,9 @@ impl CriticalKind {
 ///   factor at an extremum;
 /// - a **bifurcation**: the sign of `det K` ([`LinearSolver::determinant_sign`]) changed and
 ///   that of `q·K⁻¹q` did not (arc length), or changed at all under load or displacement
-///   control (the load factor only rises there).
+///   control (the load factor only rises there);
+/// - with them, a **snap-back** (arc length): `q·K⁻¹q` changed sign and `det K` did not, so
+///   `K` stayed regular and `qᵀu` turned back ([`CriticalKind::SnapBack`]).
 ///
 /// The determinant is that of the factorised tangent with the essential conditions eliminated
 /// (unit diagonal) and the constraint multipliers' rows included: the `m` multiplier rows of
@@ -1841,7 +1865,7 @@ pub struct CriticalPoint {
     pub stiffness: Option<[f64; 2]>,
     /// Sign of `det K` at the two steps (`None` where the factorisation gives none).
     pub determinant_sign: [Option<f64>; 2],
-    /// Limit point (load maximum or minimum) or bifurcation.
+    /// Limit point (load maximum or minimum), bifurcation or snap-back.
     pub kind: CriticalKind,
 }
 
@@ -2006,7 +2030,7 @@ impl NewtonSolver {
             // increment) would turn back again and the run would shuttle between two points.
             let outcome = match (outcome, prev.as_deref()) {
                 (Ok(done), Some(p)) => {
-                    let cosine = increment_cosine(&done.0[..np], &u_n[..np], p);
+                    let cosine = increment_cosine(&done.u[..np], &u_n[..np], p);
                     if cosine < 0.0 {
                         Err(FailureReason::PathReversed { cosine })
                     } else {
@@ -2016,7 +2040,12 @@ impl NewtonSolver {
                 (other, _) => other,
             };
             match outcome {
-                Ok((u, load, stiffness, start_stiffness)) => {
+                Ok(ArcStep {
+                    u,
+                    load,
+                    stiffness: [start_stiffness, stiffness],
+                    rising,
+                }) => {
                     rec.converged = true;
                     rec.load = load;
                     rec.factorised_at = Some(FactorisedAt::Converged);
@@ -2049,10 +2078,12 @@ impl NewtonSolver {
                     let before = last_stiffness.unwrap_or(start_stiffness);
                     let sign_changed = matches!((last_sign, sign), (Some(a), Some(b)) if a != b);
                     let kind = if before.signum() != stiffness.signum() {
-                        Some(if before > 0.0 {
-                            CriticalKind::LoadMaximum
-                        } else {
-                            CriticalKind::LoadMinimum
+                        // `q·K⁻¹q = qᵀ(du/ds) / (dλ/ds)` changed sign: through a pole where
+                        // `dλ/ds` did (a load extremum), through zero where `qᵀu` turned back.
+                        Some(match rising {
+                            [true, false] => CriticalKind::LoadMaximum,
+                            [false, true] => CriticalKind::LoadMinimum,
+                            _ => CriticalKind::SnapBack,
                         })
                     } else {
                         sign_changed.then_some(CriticalKind::Bifurcation)
@@ -2097,8 +2128,7 @@ impl NewtonSolver {
         Ok(out)
     }
 
-    /// One arc-length step of length `ds` from `(u_n, l_n)`: the converged `(u, λ)`, `q·K⁻¹q`
-    /// there and at the start.
+    /// One arc-length step of length `ds` from `(u_n, l_n)`.
     #[allow(clippy::too_many_arguments)]
     fn arc_attempt<P: NonlinearProblem>(
         &self,
@@ -2113,7 +2143,7 @@ impl NewtonSolver {
         prev: Option<&[f64]>,
         rec: &mut StepRecord,
         w: &mut ArcWork,
-    ) -> Result<(Vec<f64>, f64, f64, f64), FailureReason> {
+    ) -> Result<ArcStep, FailureReason> {
         let o = self.options;
         let zeros = vec![0.0; bc.dofs().len()];
         let dot = |a: &[f64], b: &[f64]| -> f64 {
@@ -2160,7 +2190,16 @@ impl NewtonSolver {
                     Acceptance::Tolerance
                 });
                 let stiffness = free_dot(bc, &w.q, &w.du_q);
-                return Ok((u, load, stiffness, start_stiffness));
+                // `dλ/ds` along the step's direction at its end: the path's tangent is
+                // `(K⁻¹q, 1) dλ/ds`, oriented along the increment.
+                let increment: Vec<f64> = u.iter().zip(u_n).map(|(a, b)| a - b).collect();
+                let rising_end = dot(&increment, &w.du_q) > 0.0;
+                return Ok(ArcStep {
+                    u,
+                    load,
+                    stiffness: [start_stiffness, stiffness],
+                    rising: [sign > 0.0, rising_end],
+                });
             }
             let r_scale = r_ref.max(rec.residual_norms[0]);
             if k >= 1 && rnorm > o.divergence_factor * r_scale {
