@@ -358,3 +358,27 @@ fn a_bordered_tangent_is_factorised_by_the_supernodal_lu_itself() {
         unmarked.n_fallbacks()
     );
 }
+
+#[test]
+fn a_singular_matrix_counts_no_factorisation_and_no_fallback() {
+    // Two rows of one particle made equal: singular. The supernodal LU's probe fails, the
+    // sparse LU redoes it, its probe fails too, and the error stands: neither the
+    // factorisation nor the fallback is counted (the run's note reads "k of n factorisations
+    // were redone", so k ≤ n).
+    let (p, mut values) = shell_like(6, 0.1);
+    let (cp, ri) = (p.col_ptr().to_vec(), p.row_idx().to_vec());
+    let (r0, r1) = (10, 11);
+    for c in 0..p.n_dofs() {
+        let rows = &ri[cp[c]..cp[c + 1]];
+        let a = rows.iter().position(|&r| r == r0).map(|k| cp[c] + k);
+        let b = rows.iter().position(|&r| r == r1).map(|k| cp[c] + k);
+        assert_eq!(a.is_some(), b.is_some(), "the rows share a pattern");
+        if let (Some(a), Some(b)) = (a, b) {
+            values[b] = values[a];
+        }
+    }
+    let mut s = LinearSolver::new(&p, Method::SupernodalLu, SolverOptions::default()).unwrap();
+    assert!(s.factorize(&values).is_err());
+    assert_eq!((s.n_factorizations(), s.n_fallbacks()), (0, 0));
+    assert!(!s.is_factorized());
+}

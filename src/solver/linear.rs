@@ -574,12 +574,13 @@ impl LinearSolver {
                 // Pivots restricted to the supernodes' diagonal blocks may be poor where
                 // unrestricted ones are fine: redo with the sparse LU, whose verdict stands.
                 self.factorize_fallback(values)?;
-                self.n_fallbacks += 1;
                 self.factorized = true;
                 if let Err(e) = self.probe(values, tol) {
                     self.factorized = false;
                     return Err(e);
                 }
+                // Counted with the factorisations: only where the redone one is used.
+                self.n_fallbacks += 1;
             }
         }
         self.n_factorizations += 1;
