@@ -1054,7 +1054,7 @@ fn plot_material_path(
     check: &crate::verification::material_path::PathCheck,
     path: &Path,
 ) -> Result<(), crate::io::plot::PlotError> {
-    use crate::io::plot::{figure, Panel, Scale, Series};
+    use crate::io::plot::{figure, Panel, Scale, Series, Style};
     let steps = |f: &dyn Fn(usize) -> f64| -> Vec<(f64, f64)> {
         (0..states.len()).map(|k| ((k + 1) as f64, f(k))).collect()
     };
@@ -1075,17 +1075,17 @@ fn plot_material_path(
                     Series {
                         label: "σ11",
                         points: steps(&|k| states[k].stress[0]),
-                        markers: false,
+                        style: Style::Line,
                     },
                     Series {
                         label: "σ12",
                         points: steps(&|k| states[k].stress[2]),
-                        markers: false,
+                        style: Style::Line,
                     },
                     Series {
                         label: "α11",
                         points: steps(&|k| states[k].back_stress[0]),
-                        markers: false,
+                        style: Style::Line,
                     },
                 ],
             },
@@ -1099,17 +1099,17 @@ fn plot_material_path(
                     Series {
                         label: "continuum (eqs 44-49)",
                         points: steps(&|k| hand[k].stress[0]),
-                        markers: false,
+                        style: Style::Line,
                     },
                     Series {
                         label: "dual numbers",
                         points: steps(&|k| dual[k].stress[0].eps),
-                        markers: true,
+                        style: Style::Dots,
                     },
                     Series {
                         label: "central difference",
                         points: steps(&|k| (sp[k].stress[0] - sm[k].stress[0]) / (2.0 * h)),
-                        markers: true,
+                        style: Style::Dots,
                     },
                 ],
             },
@@ -1123,12 +1123,12 @@ fn plot_material_path(
                     Series {
                         label: "continuum vs dual",
                         points: steps(&|k| check.per_step[k].dual_error),
-                        markers: true,
+                        style: Style::Dots,
                     },
                     Series {
                         label: "continuum vs FD",
                         points: steps(&|k| check.per_step[k].fd_error),
-                        markers: true,
+                        style: Style::Dots,
                     },
                 ],
             },

@@ -5,7 +5,7 @@
 //! `--terms STEP`, the term groups of the continuum right-hand side against the dual reference
 //! as bars (`terms_step<STEP>.png`).
 
-use super::plot::{bar_figure, figure, BarPanel, Panel, PlotError, Scale, Series};
+use super::plot::{bar_figure, figure, BarPanel, Panel, PlotError, Scale, Series, Style};
 use crate::sensitivity::study::{max_rel_diff, DsaResult, VariableResult};
 use crate::sensitivity::terms::TermBreakdown;
 use std::path::{Path, PathBuf};
@@ -75,14 +75,14 @@ fn derivatives_figure(path: &Path, r: &DsaResult, v: &VariableResult) -> Result<
                 series.push(Series {
                     label: "continuum",
                     points: column(d, m),
-                    markers: false,
+                    style: Style::Line,
                 });
             }
             if let Some(d) = &v.dual {
                 series.push(Series {
                     label: "dual",
                     points: column(d, m),
-                    markers: true,
+                    style: Style::Dots,
                 });
             }
             for (c, label) in v.fd.iter().zip(&fd_labels) {
@@ -96,7 +96,7 @@ fn derivatives_figure(path: &Path, r: &DsaResult, v: &VariableResult) -> Result<
                         .filter(|(_, f)| !**f)
                         .map(|((row, &l), _)| (l, row[m]))
                         .collect(),
-                    markers: true,
+                    style: Style::Dots,
                 });
             }
             Panel {
@@ -187,14 +187,14 @@ fn fd_figure(path: &Path, r: &DsaResult, v: &VariableResult) -> Result<(), PlotE
         taylor.push(Series {
             label,
             points,
-            markers: false,
+            style: Style::Line,
         });
     }
     if let Some(p) = first_points {
         taylor.push(Series {
             label: "slope 2 (reference)",
             points: slope_two(&p),
-            markers: false,
+            style: Style::Line,
         });
     }
     let mut study: Vec<(f64, f64)> =
@@ -227,12 +227,12 @@ fn fd_figure(path: &Path, r: &DsaResult, v: &VariableResult) -> Result<(), PlotE
                 Series {
                     label: "unflagged steps, |ψ'| ≥ 1e-6 max|ψ'|",
                     points: study,
-                    markers: true,
+                    style: Style::Dots,
                 },
                 Series {
                     label: "slope 2 (reference)",
                     points: reference,
-                    markers: false,
+                    style: Style::Line,
                 },
             ],
         },

@@ -24,8 +24,20 @@ pub struct Series<'a> {
     pub label: &'a str,
     /// Points (x, y).
     pub points: Vec<(f64, f64)>,
-    /// Draw markers instead of a line.
-    pub markers: bool,
+    /// How the points are drawn.
+    pub style: Style,
+}
+
+/// How a series' points are drawn.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Style {
+    /// A line through the points.
+    Line,
+    /// A filled dot per point; later dot series smaller, so that coinciding points of several
+    /// series stay visible as concentric dots.
+    Dots,
+    /// A ring per point, larger than the dots: marks a few points of another series.
+    Rings,
 }
 
 /// Axis scaling.
@@ -328,7 +340,7 @@ where
                 Some((x, y))
             })
             .collect();
-        if s.markers {
+        if s.style == Style::Dots {
             // Later marker series are drawn smaller, so that coinciding points of several
             // series stay visible as concentric dots.
             let radius = 6u32.saturating_sub(2 * marker_series).max(2);
@@ -338,6 +350,15 @@ where
                 .map_err(|e| e.to_string())?
                 .label(s.label)
                 .legend(move |(x, y)| Circle::new((x + 10, y), 3, color.filled()));
+        } else if s.style == Style::Rings {
+            chart
+                .draw_series(
+                    pts.iter()
+                        .map(|&p| Circle::new(p, 10, color.stroke_width(3))),
+                )
+                .map_err(|e| e.to_string())?
+                .label(s.label)
+                .legend(move |(x, y)| Circle::new((x + 10, y), 5, color.stroke_width(2)));
         } else {
             chart
                 .draw_series(LineSeries::new(pts, color.stroke_width(2)))
@@ -444,12 +465,12 @@ mod tests {
                             Series {
                                 label: "markers",
                                 points: points.clone(),
-                                markers: true,
+                                style: Style::Dots,
                             },
                             Series {
                                 label: "line",
                                 points,
-                                markers: false,
+                                style: Style::Line,
                             },
                         ],
                     }],

@@ -813,6 +813,12 @@ pub fn run(
         })
         .collect();
     output.set_info("critical_points", json!(cps));
+    output.set_critical_points(
+        critical
+            .iter()
+            .map(|c| (c.kind, c.after_step + 1))
+            .collect(),
+    );
     output.set_info(
         "factorisations",
         json!({

@@ -61,7 +61,7 @@ pub use crate::shell::resultants::{
     director_rotation, point_resultants, resultant_frame, CellResultants,
 };
 use crate::shell::ShellError;
-use crate::solver::{FactorisedAt, StepRecord, StepTiming};
+use crate::solver::{CriticalKind, FactorisedAt, StepRecord, StepTiming};
 
 /// `{"residual_and_tangent", "residual", "factorise", "solve"}` in seconds.
 fn timing_json(t: &StepTiming) -> Value {
@@ -629,6 +629,9 @@ pub struct ShellOutput {
     pending_reactions: Vec<(String, f64)>,
     pending_director_unresolved: Option<[f64; 2]>,
     pvd_time: PvdTime,
+    /// Critical points passed, as (kind, converged step after it, 1-based), marked on the
+    /// load–displacement plot.
+    critical: Vec<(CriticalKind, usize)>,
 }
 
 /// What `shell.pvd` gives ParaView as a written step's time (a collection's times must rise).
@@ -667,6 +670,17 @@ pub const RESULTS_FILE: &str = "results.json";
 pub const STEPS_LOG_FILE: &str = "steps.jsonl";
 /// Plot file inside the output directory.
 pub const PLOT_FILE: &str = "load_displacement.png";
+
+/// The legend entries of the critical points on the load–displacement plot and the kinds each
+/// marks.
+const CRITICAL_GROUPS: [(&str, &[CriticalKind]); 3] = [
+    (
+        "step after a limit point",
+        &[CriticalKind::LoadMaximum, CriticalKind::LoadMinimum],
+    ),
+    ("step after a snap-back", &[CriticalKind::SnapBack]),
+    ("step after a bifurcation", &[CriticalKind::Bifurcation]),
+];
 /// Tool force table inside the output directory (cases with tools).
 pub const TOOL_FORCES_FILE: &str = "tool_forces.csv";
 /// Force–stroke plot inside the output directory (cases with tools).
@@ -713,6 +727,7 @@ impl ShellOutput {
             pending_reactions: Vec::new(),
             pvd_time: PvdTime::default(),
             pending_director_unresolved: None,
+            critical: Vec::new(),
         })
     }
 
@@ -770,6 +785,13 @@ impl ShellOutput {
     /// Warnings of the run (tools that never touched the sheet; set by [`Self::finish`]).
     pub fn warnings(&self) -> &[String] {
         self.contact.as_ref().map_or(&[], |c| &c.warnings)
+    }
+
+    /// The critical points the run passed, each as its kind and the converged step (1-based)
+    /// after it: the load–displacement plot marks that step (limit points, snap-backs and
+    /// bifurcations in three series) on the panels of monitors with a direction.
+    pub fn set_critical_points(&mut self, points: Vec<(CriticalKind, usize)>) {
+        self.critical = points;
     }
 
     /// Extra top-level entries of results.json (model size, settings).
@@ -1045,7 +1067,7 @@ impl ShellOutput {
     /// translation length of the release tool, else the first tool), in the order of the steps
     /// (loading and unloading branches both drawn).
     fn plot_tool_forces(&self, path: &Path) -> Result<(), OutputError> {
-        use super::plot::{figure, Panel, Scale, Series};
+        use super::plot::{figure, Panel, Scale, Series, Style};
         let Some(track) = &self.contact else {
             return Ok(());
         };
@@ -1069,7 +1091,7 @@ impl ShellOutput {
                         ))
                     }))
                     .collect(),
-                markers: false,
+                style: Style::Line,
             })
             .collect();
         let title = format!("{}: tool forces", self.title);
@@ -1349,9 +1371,10 @@ impl ShellOutput {
     /// One panel per monitor, from the unloaded state, a marker per converged step: the load
     /// (under displacement control, the reaction of the first `prescribed` entry; otherwise the
     /// load factor) against the monitor's displacement along its `direction`, or against its
-    /// three components.
+    /// three components. With a direction, the steps after critical points
+    /// ([`Self::set_critical_points`]) are marked again, one series per group of kinds.
     fn plot(&self, path: &Path) -> Result<(), OutputError> {
-        use super::plot::{figure, Panel, Scale, Series};
+        use super::plot::{figure, Panel, Scale, Series, Style};
         let sign = self
             .displacement_control
             .filter(|_| self.steps.first().is_some_and(|s| !s.reactions.is_empty()));
@@ -1383,17 +1406,33 @@ impl ShellOutput {
             .map(|k| {
                 let direction = self.directions.get(k).copied().flatten();
                 let series = match direction {
-                    Some(d) => vec![Series {
-                        label: &labels[k],
-                        points: std::iter::once((0.0, 0.0))
-                            .chain(
-                                self.steps
-                                    .iter()
-                                    .map(|s| (dot3(&s.monitors[k], &d), load(s))),
-                            )
-                            .collect(),
-                        markers: true,
-                    }],
+                    Some(d) => {
+                        let at = |s: &StepSummary| (dot3(&s.monitors[k], &d), load(s));
+                        let mut series = vec![Series {
+                            label: &labels[k],
+                            points: std::iter::once((0.0, 0.0))
+                                .chain(self.steps.iter().map(at))
+                                .collect(),
+                            style: Style::Dots,
+                        }];
+                        for (label, kinds) in CRITICAL_GROUPS {
+                            let points: Vec<(f64, f64)> = self
+                                .critical
+                                .iter()
+                                .filter(|(kind, _)| kinds.contains(kind))
+                                .filter_map(|(_, step)| self.steps.iter().find(|s| s.step == *step))
+                                .map(at)
+                                .collect();
+                            if !points.is_empty() {
+                                series.push(Series {
+                                    label,
+                                    points,
+                                    style: Style::Rings,
+                                });
+                            }
+                        }
+                        series
+                    }
                     None => ["ux", "uy", "uz"]
                         .iter()
                         .enumerate()
@@ -1402,7 +1441,7 @@ impl ShellOutput {
                             points: std::iter::once((0.0, 0.0))
                                 .chain(self.steps.iter().map(|s| (s.monitors[k][c], load(s))))
                                 .collect(),
-                            markers: true,
+                            style: Style::Dots,
                         })
                         .collect(),
                 };
