@@ -13,7 +13,12 @@ The path turns in load twice (a maximum, then a minimum below zero) and in defle
 """
 import json
 import math
+import os
 import sys
+
+sys.dont_write_bytecode = True  # no __pycache__ beside the shared module
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "calculix"))
+from paths import vertex  # noqa: E402
 
 P_MAX = 3000.0
 # (P/P_max, -W) at the load point (Sze 2004 §3.8, isotropic, h = 6.35).
@@ -28,16 +33,6 @@ REF = [(0.0, 0.0), (0.0517, 1.846), (0.1182, 5.271), (0.1583, 8.257), (0.1837, 1
        (0.4898, 33.388), (0.6417, 35.024), (0.8114, 36.626), (1.0313, 38.450)]
 # The deflection scale of the distance: Sze's last tabulated deflection.
 W_END = 38.45
-
-
-def vertex(pts, i):
-    """The vertex (x, y) of the parabola y(x) through the points i - 1, i, i + 1."""
-    (x0, y0), (x1, y1), (x2, y2) = pts[i - 1], pts[i], pts[i + 1]
-    d = (x0 - x1) * (x0 - x2) * (x1 - x2)
-    a = (x2 * (y1 - y0) + x1 * (y0 - y2) + x0 * (y2 - y1)) / d
-    b = (x2 * x2 * (y0 - y1) + x1 * x1 * (y2 - y0) + x0 * x0 * (y1 - y2)) / d
-    c = y1 - a * x1 * x1 - b * x1
-    return -b / (2 * a), c - b * b / (4 * a)
 
 
 def turning_points(path):
