@@ -1798,7 +1798,7 @@ impl Default for ArcLength {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum CriticalKind {
     /// A limit point with the load factor at a maximum (it rose, then fell): `q·K⁻¹q` and the
-    /// determinant's sign changed, and the load had been rising.
+    /// sign of `dλ/ds` changed, from rising.
     LoadMaximum,
     /// A limit point with the load factor at a minimum (it had been falling).
     LoadMinimum,
@@ -1807,9 +1807,9 @@ pub enum CriticalKind {
     Bifurcation,
     /// A turning point of the displacement work-conjugate to the load, `qᵀu` (a snap-back: the
     /// deflection under a point load turns back while the load factor keeps its direction):
-    /// `q·K⁻¹q = qᵀ du/dλ` passed through zero and the determinant kept its sign, so the
-    /// tangent is regular there. Not a critical point of the tangent; reported with them
-    /// because a load factor alone does not locate it on the path.
+    /// `q·K⁻¹q = qᵀ du/dλ` passed through zero and `dλ/ds` kept its sign, so the tangent is
+    /// regular there. Not a critical point of the tangent; reported with them because a load
+    /// factor alone does not locate it on the path.
     SnapBack,
 }
 
@@ -1842,13 +1842,14 @@ struct ArcStep {
 
 /// A critical point passed between two converged steps, where the tangent `K` became singular:
 /// - a **limit point** of the load factor (arc-length paths): the current stiffness parameter
-///   `q·K⁻¹q` (`q = −∂r/∂λ`) changed sign, i.e. `det K` passed through zero with the load
-///   factor at an extremum;
+///   `q·K⁻¹q` (`q = −∂r/∂λ`) changed sign through a pole, `det K` passing through zero with
+///   the load factor at an extremum (`dλ/ds`, read at both steps as `Δuᵀ K⁻¹q` along the
+///   path's increments, changed sign);
 /// - a **bifurcation**: the sign of `det K` ([`LinearSolver::determinant_sign`]) changed and
 ///   that of `q·K⁻¹q` did not (arc length), or changed at all under load or displacement
 ///   control (the load factor only rises there);
-/// - with them, a **snap-back** (arc length): `q·K⁻¹q` changed sign and `det K` did not, so
-///   `K` stayed regular and `qᵀu` turned back ([`CriticalKind::SnapBack`]).
+/// - with them, a **snap-back** (arc length): `q·K⁻¹q` changed sign through zero, `dλ/ds`
+///   kept its sign, `K` stayed regular and `qᵀu` turned back ([`CriticalKind::SnapBack`]).
 ///
 /// The determinant is that of the factorised tangent with the essential conditions eliminated
 /// (unit diagonal) and the constraint multipliers' rows included: the `m` multiplier rows of
@@ -2192,8 +2193,13 @@ impl NewtonSolver {
                 let stiffness = free_dot(bc, &w.q, &w.du_q);
                 // `dλ/ds` along the step's direction at its end: the path's tangent is
                 // `(K⁻¹q, 1) dλ/ds`, oriented along the increment.
-                let increment: Vec<f64> = u.iter().zip(u_n).map(|(a, b)| a - b).collect();
-                let rising_end = dot(&increment, &w.du_q) > 0.0;
+                let rising_end = u[..np]
+                    .iter()
+                    .zip(&u_n[..np])
+                    .zip(&w.du_q[..np])
+                    .map(|((a, b), q)| (a - b) * q)
+                    .sum::<f64>()
+                    > 0.0;
                 return Ok(ArcStep {
                     u,
                     load,
