@@ -1,6 +1,6 @@
 //! The `shelldsa` command line.
 //!
-//! Nothing it prints can panic: standard output goes through [`Console`], which ends the
+//! Nothing it prints can panic: standard output goes through `Console`, which ends the
 //! printed output quietly when its reader closes it (`shelldsa run CASE | head -1`; the run
 //! goes on and writes its files) and reports any other write error once (`> /dev/full`);
 //! standard error is written without failing. The exit statuses are [`EXIT_STATUS_HELP`].

@@ -277,7 +277,7 @@ fn entry_name(k: usize, b: &Boundary) -> String {
 }
 
 /// The rows of the case's `[[boundary]]` entries other than symmetry planes (which are in the
-/// model), in entry order, each labelled with its entry ([`entry_name`]). They may overlap:
+/// model), in entry order, each labelled with its entry (`entry_name`). They may overlap:
 /// the problem merges rows that repeat others ([`crate::shell::constraints::assemble`]).
 pub fn boundary_constraints(
     case: &ShellCase,

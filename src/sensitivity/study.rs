@@ -252,7 +252,7 @@ pub struct DsaResult {
     /// Methods and re-runs that failed after the plain analysis (their results are missing,
     /// everything else is kept).
     pub failures: Vec<DsaFailure>,
-    /// The VTU files of the run with the derivative methods ([`StepVtu`]), relative to the
+    /// The VTU files of the run with the derivative methods ([`StepVtu`](crate::io::dsa_output::StepVtu)), relative to the
     /// output directory.
     pub vtu: Vec<VtuStep>,
     /// Wall time of writing them (s; left out of the hooked run's total).
@@ -365,7 +365,7 @@ pub fn run(
 /// Run the analysis and the methods of `spec`. `progress` receives one line per run;
 /// `update` the results so far (to write `sensitivity.json` as the run goes): after converged
 /// steps of the plain analysis and of the run with the derivative methods (on the schedule of
-/// [`RewriteSchedule`]), after each of those runs, after every finite-difference step size of
+/// `RewriteSchedule`), after each of those runs, after every finite-difference step size of
 /// every variable, and before an error of the plain analysis is returned (with its converged
 /// steps). With `need_step`, a plain analysis with fewer converged steps is an error
 /// before the methods run ([`SensitivityError::StepOutOfRange`]).

@@ -215,7 +215,7 @@ impl LinearConstraint {
 
     /// The RK-interpolated rotation about the lamina vector `e_β` (`component` 0 or 1) of the
     /// real particle nearest to `uv` (in the parameter domain; the particle's own at a
-    /// particle): `Σ_J Ψ_J(uv) Σ_γ P_Jγβ α_Jγ = λ value` ([`rotation_matching`]).
+    /// particle): `Σ_J Ψ_J(uv) Σ_γ P_Jγβ α_Jγ = λ value` (`rotation_matching`).
     pub fn rotation(
         model: &ShellModel,
         uv: [f64; 2],

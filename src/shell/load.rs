@@ -908,7 +908,7 @@ pub struct EdgeGeometry<T> {
 }
 
 /// The Gauss rule of a load on an edge (an edge force or moment), with the model it was built
-/// for: the edge points, their weights, initial geometry and RK shape functions ([`edge_rule`]).
+/// for: the edge points, their weights, initial geometry and RK shape functions (`edge_rule`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct EdgeRule {
     /// What the rule belongs to, in errors.
@@ -1067,7 +1067,7 @@ fn edge_rule(
 }
 
 /// A force per unit length on a parametric edge, integrated with the Gauss rule of
-/// [`edge_rule`] on the edge's parameter line (translations only; `docs/loads.md`):
+/// `edge_rule` on the edge's parameter line (translations only; `docs/loads.md`):
 ///
 /// - **dead** ([`EdgeForce::on_edge`]): `p` in global axes per unit initial length,
 ///   `f_I = ∫_edge Ψ_I p ds⁰ = Σ_g Ψ_I(ξ_g) p |x̄⁰,t(ξ_g)| w_g`;

@@ -100,7 +100,7 @@ pub fn gmres(
 const ABORT_EVERY: usize = 3;
 
 /// [`gmres`] to the absolute tolerance `‖b − A x‖ ≤ tol`. With `abort_early`, the iteration
-/// also gives up (`Ok(None)`) at every [`ABORT_EVERY`]-th step `j` when the mean contraction so
+/// also gives up (`Ok(None)`) at every `ABORT_EVERY`-th step `j` when the mean contraction so
 /// far, `(‖r_j‖/‖r_0‖)^(1/j)`, would need more than `max_iterations` steps in all to reach
 /// `tol`: GMRES contracts at a rate that does not fall much once the preconditioner's error is
 /// resolved, so such a solve is very unlikely to end within the budget and the steps already

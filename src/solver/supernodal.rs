@@ -50,7 +50,7 @@ const PAR_SOLVE_ENTRIES: usize = 1 << 16;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum FillOrdering {
     /// Of the three orderings below, the one whose factorisation costs least by
-    /// [`SupernodalSymbolic::cost`] (each one's symbolic analysis is done; the pattern alone
+    /// `SupernodalSymbolic::cost` (each one's symbolic analysis is done; the pattern alone
     /// decides, so the choice is the same for every factorisation of a run and any number of
     /// threads): nested dissection unless another costs at most [`ORDERING_MARGIN`] of it.
     /// None is best on every grid of the shell tangents:
@@ -70,7 +70,7 @@ pub enum FillOrdering {
 /// Largest part (in DOFs) nested dissection does not cut further.
 pub const ND_LEAF: usize = 128;
 
-/// Operations one front entry costs in [`SupernodalSymbolic::cost`]: every entry is zeroed,
+/// Operations one front entry costs in `SupernodalSymbolic::cost`: every entry is zeroed,
 /// assembled and extend-added, memory-bound work. Fitted to one numeric factorisation of the
 /// shell tangents under the three orderings (`solver_probe`, 2026-11-27): on the 17² hemisphere
 /// METIS needs 21 % fewer operations than nested dissection and 41 % more front entries, and
