@@ -252,8 +252,8 @@ pub struct DsaResult {
     /// Methods and re-runs that failed after the plain analysis (their results are missing,
     /// everything else is kept).
     pub failures: Vec<DsaFailure>,
-    /// The VTU files of the run with the derivative methods ([`StepVtu`](crate::io::dsa_output::StepVtu)), relative to the
-    /// output directory.
+    /// The VTU files of the run with the derivative methods
+    /// ([`StepVtu`](crate::io::dsa_output::StepVtu)), relative to the output directory.
     pub vtu: Vec<VtuStep>,
     /// Wall time of writing them (s; left out of the hooked run's total).
     pub time_vtu: Option<f64>,
