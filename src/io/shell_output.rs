@@ -670,6 +670,10 @@ pub const RESULTS_FILE: &str = "results.json";
 pub const STEPS_LOG_FILE: &str = "steps.jsonl";
 /// Plot file inside the output directory.
 pub const PLOT_FILE: &str = "load_displacement.png";
+/// Tool force table inside the output directory (cases with tools).
+pub const TOOL_FORCES_FILE: &str = "tool_forces.csv";
+/// Force–stroke plot inside the output directory (cases with tools).
+pub const TOOL_PLOT_FILE: &str = "force_stroke.png";
 
 /// The legend entries of the critical points on the load–displacement plot and the kinds each
 /// marks.
@@ -681,10 +685,6 @@ const CRITICAL_GROUPS: [(&str, &[CriticalKind]); 3] = [
     ("step after a snap-back", &[CriticalKind::SnapBack]),
     ("step after a bifurcation", &[CriticalKind::Bifurcation]),
 ];
-/// Tool force table inside the output directory (cases with tools).
-pub const TOOL_FORCES_FILE: &str = "tool_forces.csv";
-/// Force–stroke plot inside the output directory (cases with tools).
-pub const TOOL_PLOT_FILE: &str = "force_stroke.png";
 
 impl ShellOutput {
     /// Output into `dir` (created if missing). `case` names the case (e.g. its file),
