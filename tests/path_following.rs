@@ -15,6 +15,11 @@ fn f(u: f64) -> f64 {
     u - 1.5 * u * u + 0.6 * u * u * u
 }
 
+/// `f′`.
+fn df(u: f64) -> f64 {
+    1.0 - 3.0 * u + 1.8 * u * u
+}
+
 impl NonlinearProblem for Snap {
     fn n_dofs(&self) -> usize {
         1
@@ -24,7 +29,7 @@ impl NonlinearProblem for Snap {
         Ok(())
     }
     fn tangent(&mut self, u: &[f64], _load: f64, k: &mut [f64]) -> Result<(), ProblemError> {
-        k[0] = 1.0 - 3.0 * u[0] + 1.8 * u[0] * u[0];
+        k[0] = df(u[0]);
         Ok(())
     }
     fn force_norm(&self, load: f64) -> f64 {
@@ -105,8 +110,7 @@ impl NonlinearProblem for SnapBack {
     }
     fn tangent(&mut self, u: &[f64], _load: f64, k: &mut [f64]) -> Result<(), ProblemError> {
         // [[0, 1], [1, −f′(u₂)]]: symmetric, so the storage order does not matter.
-        let df = 1.0 - 3.0 * u[1] + 1.8 * u[1] * u[1];
-        k.copy_from_slice(&[0.0, 1.0, 1.0, -df]);
+        k.copy_from_slice(&[0.0, 1.0, 1.0, -df(u[1])]);
         Ok(())
     }
     fn force_norm(&self, load: f64) -> f64 {

@@ -340,33 +340,37 @@ where
                 Some((x, y))
             })
             .collect();
-        if s.style == Style::Dots {
-            // Later marker series are drawn smaller, so that coinciding points of several
-            // series stay visible as concentric dots.
-            let radius = 6u32.saturating_sub(2 * marker_series).max(2);
-            marker_series += 1;
-            chart
-                .draw_series(pts.iter().map(|&p| Circle::new(p, radius, color.filled())))
-                .map_err(|e| e.to_string())?
-                .label(s.label)
-                .legend(move |(x, y)| Circle::new((x + 10, y), 3, color.filled()));
-        } else if s.style == Style::Rings {
-            chart
-                .draw_series(
-                    pts.iter()
-                        .map(|&p| Circle::new(p, 10, color.stroke_width(3))),
-                )
-                .map_err(|e| e.to_string())?
-                .label(s.label)
-                .legend(move |(x, y)| Circle::new((x + 10, y), 5, color.stroke_width(2)));
-        } else {
-            chart
-                .draw_series(LineSeries::new(pts, color.stroke_width(2)))
-                .map_err(|e| e.to_string())?
-                .label(s.label)
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                });
+        match s.style {
+            Style::Dots => {
+                // Later marker series are drawn smaller, so that coinciding points of several
+                // series stay visible as concentric dots.
+                let radius = 6u32.saturating_sub(2 * marker_series).max(2);
+                marker_series += 1;
+                chart
+                    .draw_series(pts.iter().map(|&p| Circle::new(p, radius, color.filled())))
+                    .map_err(|e| e.to_string())?
+                    .label(s.label)
+                    .legend(move |(x, y)| Circle::new((x + 10, y), 3, color.filled()));
+            }
+            Style::Rings => {
+                chart
+                    .draw_series(
+                        pts.iter()
+                            .map(|&p| Circle::new(p, 10, color.stroke_width(3))),
+                    )
+                    .map_err(|e| e.to_string())?
+                    .label(s.label)
+                    .legend(move |(x, y)| Circle::new((x + 10, y), 5, color.stroke_width(2)));
+            }
+            Style::Line => {
+                chart
+                    .draw_series(LineSeries::new(pts, color.stroke_width(2)))
+                    .map_err(|e| e.to_string())?
+                    .label(s.label)
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                    });
+            }
         }
     }
     chart
@@ -466,6 +470,11 @@ mod tests {
                                 label: "markers",
                                 points: points.clone(),
                                 style: Style::Dots,
+                            },
+                            Series {
+                                label: "rings",
+                                points: points.clone(),
+                                style: Style::Rings,
                             },
                             Series {
                                 label: "line",
