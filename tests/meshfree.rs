@@ -76,6 +76,8 @@ fn reproducing_conditions_on_jittered_sets() {
             Basis::Quadratic,
             [3.0, 3.5, 4.0],
         ),
+        (KernelFunction::CubicSpline, Basis::Cubic, [3.5, 4.0, 4.5]),
+        (KernelFunction::QuarticSpline, Basis::Cubic, [3.5, 4.0, 4.5]),
     ] {
         let mut worst = [0.0_f64; 2];
         for (s, &mult) in multiples.iter().enumerate() {
@@ -303,6 +305,8 @@ fn gradient_three_way_check() {
         (Basis::Linear, 3.0, 2),
         (Basis::Quadratic, 3.0, 3),
         (Basis::Quadratic, 3.5, 4),
+        (Basis::Cubic, 3.5, 5),
+        (Basis::Cubic, 4.0, 6),
     ] {
         let grid = jittered_grid(b, 9, 11, 0.3, seed);
         let f = ShapeOfPoint {

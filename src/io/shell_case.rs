@@ -1227,11 +1227,12 @@ impl Checker<'_> {
         let basis = match f.kernel.basis.as_str() {
             "linear" => Basis::Linear,
             "quadratic" => Basis::Quadratic,
+            "cubic" => Basis::Cubic,
             other => {
                 return Err(self.err(
                     "kernel.basis",
                     format!("{other:?}"),
-                    "\"linear\" or \"quadratic\"",
+                    "\"linear\", \"quadratic\" or \"cubic\"",
                 ))
             }
         };

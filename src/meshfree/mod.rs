@@ -70,21 +70,25 @@ pub enum Basis {
     Linear,
     /// `(1, Δu, Δv, Δu², ΔuΔv, Δv²)`: reproduces quadratic fields (6 terms).
     Quadratic,
+    /// The quadratic terms and `(Δu³, Δu²Δv, ΔuΔv², Δv³)`: reproduces cubic fields (10 terms).
+    Cubic,
 }
 
 impl Basis {
-    /// Number of basis terms (3 or 6): the minimum number of particles in support.
+    /// Number of basis terms (3, 6 or 10): the minimum number of particles in support.
     pub fn size(self) -> usize {
         match self {
             Basis::Linear => 3,
             Basis::Quadratic => 6,
+            Basis::Cubic => 10,
         }
     }
-    /// Polynomial order (1 or 2).
+    /// Polynomial order (1, 2 or 3).
     pub fn order(self) -> usize {
         match self {
             Basis::Linear => 1,
             Basis::Quadratic => 2,
+            Basis::Cubic => 3,
         }
     }
 }
@@ -94,6 +98,7 @@ impl fmt::Display for Basis {
         f.write_str(match self {
             Basis::Linear => "linear",
             Basis::Quadratic => "quadratic",
+            Basis::Cubic => "cubic",
         })
     }
 }

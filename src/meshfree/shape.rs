@@ -28,7 +28,7 @@ fn basis_terms<T: Real, const N: usize>(d: [T; 2], inv_s: [T; 2]) -> [[T; N]; 3]
     h[2] = d[1];
     hu[1] = inv_s[0];
     hv[2] = inv_s[1];
-    if N == 6 {
+    if N >= 6 {
         h[3] = d[0] * d[0];
         h[4] = d[0] * d[1];
         h[5] = d[1] * d[1];
@@ -36,6 +36,19 @@ fn basis_terms<T: Real, const N: usize>(d: [T; 2], inv_s: [T; 2]) -> [[T; N]; 3]
         hu[4] = d[1] * inv_s[0];
         hv[4] = d[0] * inv_s[1];
         hv[5] = d[1] * inv_s[1] * 2.0;
+    }
+    if N >= 10 {
+        let (a, b) = (d[0], d[1]);
+        h[6] = a * a * a;
+        h[7] = a * a * b;
+        h[8] = a * b * b;
+        h[9] = b * b * b;
+        hu[6] = a * a * inv_s[0] * 3.0;
+        hu[7] = a * b * inv_s[0] * 2.0;
+        hu[8] = b * b * inv_s[0];
+        hv[7] = a * a * inv_s[1];
+        hv[8] = a * b * inv_s[1] * 2.0;
+        hv[9] = b * b * inv_s[1] * 3.0;
     }
     [h, hu, hv]
 }
@@ -239,6 +252,7 @@ fn rk_dispatch<T: Real>(
         Basis::Quadratic => {
             rk_core::<T, 6>(x, basis, kernel, nbrs, pts, sup, limit, w, vals, grads)
         }
+        Basis::Cubic => rk_core::<T, 10>(x, basis, kernel, nbrs, pts, sup, limit, w, vals, grads),
     }
 }
 

@@ -1,0 +1,55 @@
+//! The MacNeal–Harder hemisphere (`verification/hemisphere-linear`, R/t = 250, 17 × 17) on
+//! particles jittered by 0.2 spacings. With the quadratic basis and 2 × 2 Gauss points per cell
+//! the jittered set locks in membrane (−29 % with this seed, −22 % with another; the case's
+//! README); the cubic basis with supports of 3.5 spacings follows the reference. Reference: the
+//! radial displacement at the load point, 0.0935 per unit load (`../shared/reference-values.md`
+//! §1), which the case's unit load and material give as 9.35e-5.
+
+use std::path::PathBuf;
+
+#[path = "common/cli.rs"]
+mod cli;
+use cli::run_case_text;
+
+const REFERENCE: f64 = 9.35e-5;
+
+/// u_x at A of the shipped case with `edits` applied, on particles jittered by 0.2 spacings.
+fn jittered_ux(name: &str, edits: &[(&str, &str)]) -> f64 {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let mut text =
+        std::fs::read_to_string(root.join("verification/hemisphere-linear/case.toml")).unwrap();
+    let grid = "grid = [17, 17]";
+    let all = [(grid, "grid = [17, 17]\njitter = 0.2\nseed = 5")];
+    for (from, to) in all.iter().chain(edits) {
+        assert!(text.contains(from), "no `{from}`");
+        text = text.replacen(from, to, 1);
+    }
+    let text = text.replacen("vtu = true", "vtu = false", 1);
+    let dir = root.join("target").join("jittered-particles").join(name);
+    let r = run_case_text(&dir, &text, &["--quiet"]);
+    assert_eq!(r["status"], "complete");
+    let steps = r["steps"].as_array().unwrap();
+    let last = steps.iter().rev().find(|s| s["converged"] == true).unwrap();
+    last["monitors"]["A"]["displacement"][0].as_f64().unwrap()
+}
+
+#[test]
+fn the_cubic_basis_does_not_lock_on_jittered_particles() {
+    let quadratic = jittered_ux("quadratic", &[]) / REFERENCE - 1.0;
+    let cubic = jittered_ux(
+        "cubic",
+        &[
+            ("basis = \"quadratic\"", "basis = \"cubic\""),
+            ("support = 3.0", "support = 3.5"),
+        ],
+    ) / REFERENCE
+        - 1.0;
+    println!(
+        "jittered hemisphere, 17 × 17: quadratic {:+.2} %, cubic {:+.2} %",
+        100.0 * quadratic,
+        100.0 * cubic
+    );
+    // Measured −1.74 % (another seed −0.73 %, 25 × 25 −0.01 %; the regular grid −0.68 %);
+    // 2.5 % holds the seeds' spread and rejects the quadratic basis' −29 %.
+    assert!(cubic.abs() <= 0.025, "cubic basis: {:+.2} %", 100.0 * cubic);
+}
