@@ -243,8 +243,12 @@ fn wrong_top_level_and_discretisation_values_are_named() {
     );
     rejects(
         "basis = \"quadratic\"",
-        "basis = \"cubic\"",
-        &["`kernel.basis`", "\"cubic\"", "\"quadratic\""],
+        "basis = \"quartic\"",
+        &[
+            "`kernel.basis`",
+            "\"quartic\"",
+            "\"quadratic\" or \"cubic\"",
+        ],
     );
     rejects(
         "support = 3.0",
