@@ -10,7 +10,7 @@ use std::path::PathBuf;
 
 #[path = "common/cli.rs"]
 mod cli;
-use cli::{dsa_case_text, run_case_text};
+use cli::{dsa_case_text, last_monitor, run_case_text};
 
 #[path = "common/dsa_checks.rs"]
 mod dsa_checks;
@@ -23,9 +23,8 @@ fn jittered_ux(name: &str, edits: &[(&str, &str)]) -> f64 {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let mut text =
         std::fs::read_to_string(root.join("verification/hemisphere-linear/case.toml")).unwrap();
-    let grid = "grid = [17, 17]";
-    let all = [(grid, "grid = [17, 17]\njitter = 0.2\nseed = 5")];
-    for (from, to) in all.iter().chain(edits) {
+    let jitter = ("grid = [17, 17]", "grid = [17, 17]\njitter = 0.2\nseed = 5");
+    for (from, to) in std::iter::once(&jitter).chain(edits) {
         assert!(text.contains(from), "no `{from}`");
         text = text.replacen(from, to, 1);
     }
@@ -33,9 +32,7 @@ fn jittered_ux(name: &str, edits: &[(&str, &str)]) -> f64 {
     let dir = root.join("target").join("jittered-particles").join(name);
     let r = run_case_text(&dir, &text, &["--quiet"]);
     assert_eq!(r["status"], "complete");
-    let steps = r["steps"].as_array().unwrap();
-    let last = steps.iter().rev().find(|s| s["converged"] == true).unwrap();
-    last["monitors"]["A"]["displacement"][0].as_f64().unwrap()
+    last_monitor(&r, "A")[0]
 }
 
 #[test]

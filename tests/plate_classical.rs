@@ -20,7 +20,7 @@ use std::path::PathBuf;
 
 #[path = "common/cli.rs"]
 mod cli;
-use cli::run_case_text;
+use cli::{last_monitor, run_case_text};
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -32,11 +32,7 @@ fn centre_deflection(name: &str, text: &str) -> f64 {
     let dir = root().join("target").join("plate-classical").join(name);
     let r = run_case_text(&dir, text, &["--quiet"]);
     assert_eq!(r["status"], "complete", "{name}");
-    let steps = r["steps"].as_array().unwrap();
-    let last = steps.iter().rev().find(|s| s["converged"] == true).unwrap();
-    -last["monitors"]["centre"]["displacement"][2]
-        .as_f64()
-        .unwrap()
+    -last_monitor(&r, "centre")[2]
 }
 
 /// The shipped case `verification/NAME/case.toml`, with the `(from, to)` line replacements.

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 
 #[path = "common/cli.rs"]
 mod cli;
-use cli::cli;
+use cli::{cli, last_monitor};
 
 /// A plate case with the given `[[boundary]]` tables, on `[0, side]²` (a quarter plate has
 /// side 0.5), monitoring the point `centre` (parameter coordinates).
@@ -98,11 +98,7 @@ fn centre_deflection(out: &Path) -> f64 {
     let text = std::fs::read_to_string(out.join("results.json")).unwrap();
     let r: serde_json::Value = serde_json::from_str(&text).unwrap();
     assert_eq!(r["status"], "complete", "{}", out.display());
-    let steps = r["steps"].as_array().unwrap();
-    let last = steps.iter().rev().find(|s| s["converged"] == true).unwrap();
-    -last["monitors"]["centre"]["displacement"][2]
-        .as_f64()
-        .unwrap()
+    -last_monitor(&r, "centre")[2]
 }
 
 /// Check and run the case `text`; the number of rows merged, and the centre deflection.

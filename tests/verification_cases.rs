@@ -10,7 +10,7 @@ use std::path::PathBuf;
 
 #[path = "common/cli.rs"]
 mod cli;
-use cli::run_case_text;
+use cli::{last_monitor, run_case_text};
 
 /// Run `verification/NAME/case.toml` with the CLI; return the parsed results.json.
 fn run_case(name: &str) -> Value {
@@ -35,14 +35,6 @@ fn run_case(name: &str) -> Value {
     );
     let text = std::fs::read_to_string(out.join("results.json")).unwrap();
     serde_json::from_str(&text).unwrap()
-}
-
-/// Displacement of monitor `name` at the last converged step.
-fn last_monitor(results: &Value, name: &str) -> [f64; 3] {
-    let steps = results["steps"].as_array().unwrap();
-    let last = steps.iter().rev().find(|s| s["converged"] == true).unwrap();
-    let d = &last["monitors"][name]["displacement"];
-    [0, 1, 2].map(|i| d[i].as_f64().unwrap())
 }
 
 /// MacNeal–Harder pinched hemisphere, linear (reference-values §1): radial displacement at A

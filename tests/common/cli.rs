@@ -62,3 +62,12 @@ fn command_on_text(
     args.extend_from_slice(extra);
     (cli(&args), case, out)
 }
+
+/// Displacement of monitor `name` at the last converged step of a `results.json`.
+#[allow(dead_code)]
+pub fn last_monitor(results: &serde_json::Value, name: &str) -> [f64; 3] {
+    let steps = results["steps"].as_array().unwrap();
+    let last = steps.iter().rev().find(|s| s["converged"] == true).unwrap();
+    let d = &last["monitors"][name]["displacement"];
+    [0, 1, 2].map(|i| d[i].as_f64().unwrap())
+}
