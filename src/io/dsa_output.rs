@@ -316,6 +316,7 @@ pub fn to_json(case: &ShellCase, r: &DsaResult, status: &str) -> Value {
                         "used_h": f.used,
                         "excluded_h_active_set": f.excluded,
                         "exact_h": f.exact,
+                        "roundoff_h": f.roundoff,
                     })
                 })
                 .collect();
@@ -493,6 +494,18 @@ pub fn table(r: &DsaResult, v: usize) -> String {
         .collect();
     if !rates.is_empty() {
         s.push_str(&format!("Taylor rate per step: {}\n", rates.join(", ")));
+    }
+    let roundoff: Vec<String> = var
+        .taylor
+        .iter()
+        .filter(|f| f.rate.is_none() && !f.roundoff.is_empty())
+        .map(|f| (f.step + 1).to_string())
+        .collect();
+    if !roundoff.is_empty() {
+        s.push_str(&format!(
+            "Taylor remainder at the responses' round-off (no rate) at step {}\n",
+            roundoff.join(", ")
+        ));
     }
     let flagged: Vec<String> = var
         .fd

@@ -18,6 +18,15 @@
 //! recorded for the problem's contact load, [`response`]). Such a step, and every later one
 //! (the history carries the kink), is *flagged*: its difference is reported but left out of
 //! comparisons and of the rate fit, never silently ([`CentralDifference::flagged`], [`TaylorFit::excluded`]).
+//!
+//! **Converged below the differences.** A run converged to the case's Newton tolerance carries
+//! an iteration error that depends smoothly on the design (the iterates, not only the
+//! solution, move with `τ`), so `ψ(τ + h) − ψ(τ)` carries an error proportional to `h`: on the
+//! jittered plastic hemisphere at `residual_rtol = 1e-8`, 2.5e-12 · |ψ| at `h = 10⁻³ τ` where
+//! the converged state does not depend on `σ0` at all, which the Taylor fit read as a rate of
+//! 1. Every run of this module ([`run_at`]), the nominal one included, therefore converges to
+//! at least [`RERUN_RESIDUAL_RTOL`]; that remainder fell to 3 ε |ψ|, and a remainder at the
+//! responses' round-off is reported apart ([`TaylorFit::roundoff`]), not fitted.
 
 use super::dual::SensitivityError;
 use super::{Design, DesignVariable, Monitor};
@@ -145,13 +154,28 @@ pub trait Analysis {
     }
 }
 
-/// One complete run of `analysis` at `design`, recording `monitors` (and the contact status).
+/// The relative residual tolerance every finite-difference run converges to when its case
+/// asks for less (module documentation). With it the Newton iteration's error is below the
+/// smallest Taylor remainders a study resolves (about 1e-9 |ψ| on the shipped cases); the
+/// acceptance at the residual's round-off floor still ends a step whose residual cannot fall
+/// that far.
+pub const RERUN_RESIDUAL_RTOL: f64 = 1e-12;
+
+/// A remainder at most `ROUNDOFF_FACTOR · ε · max_m |ψ_m(τ)|` is at the responses' round-off
+/// ([`TaylorFit::roundoff`]): the unknowns of a converged run are known to about `ε |u|`, and
+/// the Newton driver's round-off floor was measured at up to 10³ `ε` times its estimate
+/// (`crate::solver::newton`).
+pub const ROUNDOFF_FACTOR: f64 = 1e3;
+
+/// One complete run of `analysis` at `design`, recording `monitors` (and the contact status),
+/// converged to at least [`RERUN_RESIDUAL_RTOL`].
 pub fn run_at(
     analysis: &dyn Analysis,
     design: &Design,
     monitors: &[Monitor],
 ) -> Result<RunResponse, SensitivityError> {
-    let (problem, newton) = analysis.build(design)?;
+    let (problem, mut newton) = analysis.build(design)?;
+    newton.options.residual_rtol = newton.options.residual_rtol.min(RERUN_RESIDUAL_RTOL);
     response(problem, &newton, analysis.solver(), monitors)
 }
 
@@ -268,6 +292,8 @@ pub struct TaylorRow {
     pub remainder: Vec<f64>,
     /// Per step: the yield status differs between `τ` and `τ + h` (at this or an earlier step).
     pub flagged: Vec<bool>,
+    /// Per step: `max_m |ψ_m(τ)|`, the scale of the responses' round-off.
+    pub scale: Vec<f64>,
 }
 
 /// The Taylor remainder of `derivatives[step][monitor]` (the sensitivity under test, e.g. the
@@ -316,6 +342,11 @@ pub fn taylor_row(
         h,
         remainder,
         flagged: flags(&[nominal, plus]),
+        scale: nominal
+            .values
+            .iter()
+            .map(|v| v.iter().fold(0.0f64, |a, x| a.max(x.abs())))
+            .collect(),
     }
 }
 
@@ -334,17 +365,26 @@ pub struct TaylorFit {
     /// Step sizes left out because the remainder is exactly zero (a response that does not
     /// depend on the variable at this step, e.g. σ0 before first yield).
     pub exact: Vec<f64>,
+    /// Step sizes left out because the remainder is positive but at most
+    /// [`ROUNDOFF_FACTOR`]` · ε · max_m |ψ_m(τ)|`: the responses' round-off, which has no rate
+    /// (e.g. σ0 at a step whose converged state no yielding point reaches, where Newton's
+    /// intermediate iterates did yield).
+    pub roundoff: Vec<f64>,
 }
 
-/// Fit the rate of the remainders at `step` over the unflagged rows with a positive remainder.
+/// Fit the rate of the remainders at `step` over the unflagged rows with a remainder above the
+/// responses' round-off.
 pub fn fit_rate(rows: &[TaylorRow], step: usize) -> TaylorFit {
-    let (mut used, mut excluded, mut exact) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut used, mut excluded, mut exact, mut roundoff) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut pts = Vec::new();
     for r in rows {
         if r.flagged[step] {
             excluded.push(r.h);
         } else if r.remainder[step] <= 0.0 {
             exact.push(r.h);
+        } else if r.remainder[step] <= ROUNDOFF_FACTOR * f64::EPSILON * r.scale[step] {
+            roundoff.push(r.h);
         } else {
             used.push(r.h);
             pts.push((r.h.abs().ln(), r.remainder[step].ln()));
@@ -364,5 +404,6 @@ pub fn fit_rate(rows: &[TaylorRow], step: usize) -> TaylorFit {
         used,
         excluded,
         exact,
+        roundoff,
     }
 }
