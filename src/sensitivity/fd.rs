@@ -23,9 +23,9 @@
 //! an iteration error that depends smoothly on the design (the iterates, not only the
 //! solution, move with `τ`), so `ψ(τ + h) − ψ(τ)` carries an error proportional to `h`: on the
 //! jittered plastic hemisphere at `residual_rtol = 1e-8`, 2.5e-12 · |ψ| at `h = 10⁻³ τ` where
-//! the converged state does not depend on `σ0` at all, which the Taylor fit read as a rate of
-//! 1. Every run of this module ([`run_at`]), the nominal one included, therefore converges to
-//! at least [`RERUN_RESIDUAL_RTOL`]; that remainder fell to 3 ε |ψ|, and a remainder at the
+//! the converged state does not depend on `σ0` at all, which the Taylor fit read as a rate
+//! of 1. Every run of this module ([`run_at`]), the nominal one included, therefore converges
+//! to at least [`RERUN_RESIDUAL_RTOL`]; that remainder fell to 3 ε |ψ|, and a remainder at the
 //! responses' round-off is reported apart ([`TaylorFit::roundoff`]), not fitted.
 
 use super::dual::SensitivityError;
