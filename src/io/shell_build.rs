@@ -145,6 +145,7 @@ pub fn newton_settings(case: &ShellCase) -> (NewtonOptions, LoadStepping) {
             energy_rtol: s.energy_rtol,
             energy_atol: s.energy_atol,
             max_iterations: s.max_iterations,
+            max_active_set_iterations: s.max_active_set_iterations,
             linear_updates: s.linear_updates,
             line_search: s.line_search,
             ..NewtonOptions::default()

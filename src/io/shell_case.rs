@@ -219,6 +219,8 @@ struct StepsFile {
     final_load: f64,
     #[serde(default = "default_max_iterations")]
     max_iterations: i64,
+    #[serde(default = "default_max_iterations")]
+    max_active_set_iterations: i64,
     #[serde(default = "default_residual_rtol")]
     residual_rtol: f64,
     #[serde(default)]
@@ -560,8 +562,11 @@ pub struct StepsSpec {
     pub max_step: f64,
     /// Final load factor (> 0).
     pub final_load: f64,
-    /// Newton iterations per step.
+    /// Newton iterations per step, not counting those whose iterate changed the contact
+    /// active set.
     pub max_iterations: usize,
+    /// Newton iterations per step whose iterate changed the contact active set.
+    pub max_active_set_iterations: usize,
     /// Relative residual tolerance.
     pub residual_rtol: f64,
     /// Absolute residual floor.
@@ -2383,6 +2388,12 @@ impl Checker<'_> {
             ));
         }
         let max_iterations = self.count("steps.max_iterations", s.max_iterations, 1, Some(1000))?;
+        let max_active_set_iterations = self.count(
+            "steps.max_active_set_iterations",
+            s.max_active_set_iterations,
+            0,
+            Some(1000),
+        )?;
         let residual_rtol = self.fraction("steps.residual_rtol", s.residual_rtol)?;
         let energy_rtol = self.fraction("steps.energy_rtol", s.energy_rtol)?;
         let max_attempts = self.count("steps.max_attempts", s.max_attempts, 1, None)?;
@@ -2530,6 +2541,7 @@ impl Checker<'_> {
             max_step,
             final_load,
             max_iterations,
+            max_active_set_iterations,
             residual_rtol,
             residual_atol: s.residual_atol,
             energy_rtol,

@@ -539,6 +539,9 @@ pub struct StepSummary {
     pub load_factor: f64,
     /// Newton iterations.
     pub iterations: usize,
+    /// Of them, those whose iterate changed the contact active set
+    /// ([`crate::solver::StepRecord::active_set_iterations`]).
+    pub active_set_iterations: usize,
     /// Residual norms of every evaluation.
     pub residual_norms: Vec<f64>,
     /// Residual-only evaluations `(k, ‖r_k‖)` of the residual-first acceptance
@@ -928,6 +931,7 @@ impl ShellOutput {
             step,
             load_factor: record.load,
             iterations: record.iterations,
+            active_set_iterations: record.active_set_iterations,
             residual_norms: record.residual_norms.clone(),
             residual_only: record.residual_only.clone(),
             accepted_residual_only: record.factorised_at == Some(FactorisedAt::PreviousIterate),
@@ -1128,6 +1132,7 @@ impl ShellOutput {
             "step": s.step,
             "load_factor": s.load_factor,
             "iterations": s.iterations,
+            "active_set_iterations": s.active_set_iterations,
             "residual_norms": s.residual_norms,
             "residual_only": s.residual_only,
             "accepted_residual_only": s.accepted_residual_only,
@@ -1215,6 +1220,7 @@ impl ShellOutput {
                     "load_factor": a.load,
                     "step_size": a.step_size,
                     "iterations": a.iterations,
+                    "active_set_iterations": a.active_set_iterations,
                     "residual_norms": a.residual_norms,
                     "converged": false,
                     "failure": a.failure.as_ref().map(|f| f.to_string()),

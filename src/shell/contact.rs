@@ -108,6 +108,11 @@ pub(super) struct Site {
 struct Tracker {
     last: Option<(f64, Vec<Vec<Option<f64>>>)>,
     touched: Vec<bool>,
+    /// Per slave point, the tool it penetrates (its force's tool) at the last tracked
+    /// evaluation.
+    active: Option<Vec<Option<usize>>>,
+    /// Slave points whose entry of `active` changed, summed over the tracked evaluations.
+    changes: u64,
 }
 
 /// One tool in a [`ContactReport`].
@@ -347,6 +352,8 @@ impl ShellContact {
             tracker: Mutex::new(Tracker {
                 last: None,
                 touched: vec![false; n_tools],
+                active: None,
+                changes: 0,
             }),
         })
     }
@@ -677,17 +684,35 @@ impl ShellContact {
                 }
             }
         }
-        for ev in evals {
-            for fe in &ev.faces {
-                if let Some((i, cp)) = fe.nearest() {
-                    if cp.is_active() {
-                        tr.touched[i] = true;
-                    }
-                }
-            }
+        let active: Vec<Option<usize>> = evals
+            .iter()
+            .flat_map(|ev| ev.faces.iter())
+            .map(|fe| {
+                fe.nearest()
+                    .filter(|(_, cp)| cp.is_active())
+                    .map(|(i, _)| i)
+            })
+            .collect();
+        for i in active.iter().flatten() {
+            tr.touched[*i] = true;
         }
+        if let Some(before) = &tr.active {
+            let changed = before.iter().zip(&active).filter(|(a, b)| a != b).count();
+            tr.changes += changed as u64;
+        }
+        tr.active = Some(active);
         tr.last = Some((t, gaps));
         Ok(())
+    }
+
+    /// The slave points that changed the tool they penetrate (or started or stopped
+    /// penetrating) from one tracked evaluation to the next, summed since the contact was
+    /// built: the active set's changes ([`crate::solver::NonlinearProblem::active_set_changes`]).
+    pub fn active_set_changes(&self) -> u64 {
+        self.tracker
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .changes
     }
 
     /// The f64 evaluation of the analysis (tracked).

@@ -633,6 +633,15 @@ impl NonlinearProblem for ShellProblem {
     fn describe_unknown(&self, dof: usize) -> Option<String> {
         Some(self.describe_dof(dof))
     }
+    /// The contacts' count of slave points that changed the tool they penetrate (or started
+    /// or stopped penetrating) between tracked evaluations ([`ShellContact::active_set_changes`]).
+    fn active_set_changes(&self) -> u64 {
+        self.loads
+            .iter()
+            .filter_map(|l| l.contact())
+            .map(|c| c.contact.active_set_changes())
+            .sum()
+    }
     fn force_norm(&self, load: f64) -> f64 {
         // The prescribed loads' force (contact) at the last evaluation: at the driver's first
         // evaluation of a step, the predicted state.

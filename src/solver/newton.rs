@@ -235,6 +235,13 @@ pub trait NonlinearProblem {
     fn describe_unknown(&self, _dof: usize) -> Option<String> {
         None
     }
+    /// A count of the changes of an inequality's active set (e.g. which slave points penetrate
+    /// which tool) from one evaluation to the next, accumulated over the run (default 0: no
+    /// inequalities). An iteration whose iterate changed it is not counted against
+    /// `max_iterations` ([`NewtonOptions::max_active_set_iterations`]).
+    fn active_set_changes(&self) -> u64 {
+        0
+    }
     /// Accept the converged state `u` at `load` (trial history becomes committed).
     fn commit(&mut self, u: &[f64], load: f64);
     /// Reject the current trial state (back to the committed history).
@@ -328,8 +335,15 @@ pub struct NewtonOptions {
     pub energy_rtol: f64,
     /// Absolute energy floor (default 0).
     pub energy_atol: f64,
-    /// Maximum iterations per step (default 20).
+    /// Maximum iterations per step (default 20), not counting those whose iterate changed the
+    /// problem's active set ([`NonlinearProblem::active_set_changes`]).
     pub max_iterations: usize,
+    /// Maximum iterations per step whose iterate changed the active set (default 20). Such an
+    /// iteration's update was solved with another active set (a contact switched on or off),
+    /// so it says nothing of Newton's convergence on the current one, and a shorter step does
+    /// not remove it: a sheet lifting off a die at the first touch of a punch changes its
+    /// active set in the first iterations of every step size.
+    pub max_active_set_iterations: usize,
     /// How the Newton updates are solved (default [`LinearUpdates::Direct`]).
     pub linear_updates: LinearUpdates,
     /// Divergence when `‖r_k‖ > factor · r_ref` or `|Δu_kᵀ r_k| > factor · |Δu_0ᵀ r_0|`
@@ -349,6 +363,7 @@ impl Default for NewtonOptions {
             energy_rtol: 1e-14,
             energy_atol: 0.0,
             max_iterations: 20,
+            max_active_set_iterations: 20,
             divergence_factor: 1e8,
             linear_updates: LinearUpdates::Direct,
             line_search: LineSearch::OnFailure,
@@ -606,6 +621,8 @@ impl Default for LoadStepping {
 pub enum FailureReason {
     /// No convergence within `max_iterations`.
     MaxIterations(usize),
+    /// The active set changed in more than `max_active_set_iterations` iterations.
+    ActiveSetIterations(usize),
     /// Residual or energy grew by more than `divergence_factor` (`ratio` observed).
     Diverged {
         /// Observed growth over iteration 0.
@@ -635,6 +652,10 @@ impl fmt::Display for FailureReason {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             FailureReason::MaxIterations(n) => write!(f, "no convergence in {n} iterations"),
+            FailureReason::ActiveSetIterations(n) => write!(
+                f,
+                "the contact active set still changed after {n} iterations that changed it"
+            ),
             FailureReason::Diverged { ratio } => {
                 write!(f, "diverged (growth {ratio:.3e} over the first iteration)")
             }
@@ -737,6 +758,9 @@ pub struct StepRecord {
     pub step_size: f64,
     /// Number of Newton updates applied (= residual evaluations − 1 when converged).
     pub iterations: usize,
+    /// How many of the evaluated iterates changed the problem's active set (not counted
+    /// against `max_iterations`).
+    pub active_set_iterations: usize,
     /// `‖r_k‖` over free DOFs for every evaluation `k`.
     pub residual_norms: Vec<f64>,
     /// `|Δu_kᵀ r_k|` for every solve.
@@ -779,6 +803,7 @@ impl StepRecord {
             load,
             step_size,
             iterations: 0,
+            active_set_iterations: 0,
             residual_norms: Vec::new(),
             energy_norms: Vec::new(),
             converged: false,
@@ -1188,6 +1213,9 @@ impl NewtonSolver {
         let mut tries = 0;
         let mut k = 0;
         loop {
+            // The active set's count before this iterate's evaluations: a change shows against
+            // the previous iterate's (or, at k = 0, the last state evaluated).
+            let active_before = problem.active_set_changes();
             let marks = (
                 rec.residual_norms.len(),
                 rec.roundoff_floors.len(),
@@ -1421,7 +1449,15 @@ impl NewtonSolver {
             if stagnated {
                 accept!(Acceptance::Stagnation);
             }
-            if k == o.max_iterations {
+            if k >= 1 && problem.active_set_changes() != active_before {
+                rec.active_set_iterations += 1;
+                if rec.active_set_iterations > o.max_active_set_iterations {
+                    return Err(FailureReason::ActiveSetIterations(
+                        o.max_active_set_iterations,
+                    ));
+                }
+            }
+            if k - rec.active_set_iterations == o.max_iterations {
                 return Err(FailureReason::MaxIterations(o.max_iterations));
             }
             if line_search {
@@ -2167,7 +2203,8 @@ impl NewtonSolver {
         let mut du: Vec<f64> = w.du_q.iter().map(|x| dl * x).collect();
         let mut u: Vec<f64> = u_n.iter().zip(&du).map(|(a, b)| a + b).collect();
         rec.predictor = Predictor::Secant;
-        for k in 0..=o.max_iterations {
+        for k in 0.. {
+            let active_before = problem.active_set_changes();
             let load = l_n + dl;
             rec.load = load;
             self.arc_tangent(problem, pattern, solver, bc, &u, load, rec, w, &zeros)?;
@@ -2213,7 +2250,15 @@ impl NewtonSolver {
                     ratio: rnorm / r_scale,
                 });
             }
-            if k == o.max_iterations {
+            if k >= 1 && problem.active_set_changes() != active_before {
+                rec.active_set_iterations += 1;
+                if rec.active_set_iterations > o.max_active_set_iterations {
+                    return Err(FailureReason::ActiveSetIterations(
+                        o.max_active_set_iterations,
+                    ));
+                }
+            }
+            if k - rec.active_set_iterations == o.max_iterations {
                 return Err(FailureReason::MaxIterations(o.max_iterations));
             }
             // Corrector: Δu + δu_r + δλ δu_q on the cylinder ‖·‖ = Δs.
@@ -2255,7 +2300,7 @@ impl NewtonSolver {
             }
             rec.iterations = k + 1;
         }
-        unreachable!("the loop returns at k = max_iterations")
+        unreachable!("the loop returns by max_iterations and max_active_set_iterations")
     }
 
     /// Residual, tangent and load derivative at `(u, load)`; the tangent factorised with the

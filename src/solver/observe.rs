@@ -216,6 +216,9 @@ impl<P: NonlinearProblem, O: StepObserver<P>> NonlinearProblem for Observed<P, O
     fn describe_unknown(&self, dof: usize) -> Option<String> {
         self.problem.describe_unknown(dof)
     }
+    fn active_set_changes(&self) -> u64 {
+        self.problem.active_set_changes()
+    }
     fn on_converged(&mut self, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
         self.check()?;
         self.problem.on_converged(step)?;
@@ -279,6 +282,9 @@ impl<P: NonlinearProblem + ?Sized> NonlinearProblem for &mut P {
     }
     fn describe_unknown(&self, dof: usize) -> Option<String> {
         (**self).describe_unknown(dof)
+    }
+    fn active_set_changes(&self) -> u64 {
+        (**self).active_set_changes()
     }
     fn on_converged(&mut self, step: &ConvergedStep<'_>) -> Result<(), ProblemError> {
         (**self).on_converged(step)
