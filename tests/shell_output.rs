@@ -128,6 +128,7 @@ fn record(load_start: f64, load: f64, converged: bool) -> StepRecord {
         load,
         step_size: load - load_start,
         iterations: 2,
+        active_set_iterations: 0,
         residual_norms: vec![1.0, 1e-3, 1e-12],
         energy_norms: vec![1.0, 1e-20],
         converged,
