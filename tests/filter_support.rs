@@ -165,9 +165,14 @@ fn the_unresolved_share_is_zero_on_quadratics_and_near_one_on_a_checkerboard() {
     assert!((resolution.step_share(&model) - checkerboard).abs() < 1e-12);
     resolution.advance(&model);
     assert_eq!(resolution.step_share(&model), 0.0);
+    assert_eq!(resolution.step_change_ratio(&model), 0.0);
     for (p, q) in model.particles.iter_mut().zip(&uv) {
         p.d += 1e-3 * quadratic(*q);
     }
+    // The step's changes against all since the reference (checkerboard + quadratic, each of
+    // order 1e-3): of order 1, far above the negligible level.
+    let ratio = resolution.step_change_ratio(&model);
+    assert!(ratio > 0.1 && ratio < 10.0, "step change ratio {ratio}");
     let step = resolution.step_share(&model);
     assert!(step < 1e-10, "quadratic step on a checkerboard: {step:e}");
     assert!(resolution.unresolved_share(&model) > 0.1);

@@ -214,6 +214,11 @@ fn bending_springback(grid: &str, name: &str) {
     }
     let dir = root.join("target/verification-tests").join(name);
     let r = run_case_text(&dir, &text, &[]);
+    // After the separation nothing moves: the last steps change the directors by 1e-16 of
+    // their accumulated changes, whose unresolved share (of round-off) is not reported, so no
+    // step warns of a checkerboard.
+    let last = r["steps"].as_array().unwrap().last().unwrap();
+    assert!(last["director_unresolved_step"].is_null(), "{last}");
     let n = r["n_unknowns"].as_f64().unwrap();
     let steps: Vec<&Value> = r["steps"]
         .as_array()

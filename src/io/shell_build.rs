@@ -30,7 +30,7 @@ use crate::shell::load;
 use crate::shell::model::{Discretisation, ShellModel};
 use crate::shell::point::DOFS_PER_PARTICLE;
 use crate::shell::problem::ShellProblem;
-use crate::shell::stabilisation::DirectorResolution;
+use crate::shell::stabilisation::{DirectorResolution, NEGLIGIBLE_STEP_CHANGE};
 use crate::shell::symmetry::SymmetryPlane;
 use crate::shell::ShellError;
 use crate::solver::observe::{Observed, StepObserver};
@@ -749,9 +749,12 @@ pub fn run(
                 None => None,
             };
             output.set_step_reactions(prescribed_reactions(case, p));
+            // A step that moved the directors only by its states' convergence noise has no
+            // meaningful share.
+            let moved = resolution.step_change_ratio(model) > NEGLIGIBLE_STEP_CHANGE;
             output.set_step_director_unresolved(
                 resolution.unresolved_share(model),
-                resolution.step_share(model),
+                moved.then(|| resolution.step_share(model)),
             );
             resolution.advance(model);
             let s = output.converged_with_contact(model, surface, rec, report.as_ref())?;

@@ -573,7 +573,8 @@ pub struct StepSummary {
     /// The share of the particles' director changes that the RK approximation leaves out
     /// ([`crate::shell::stabilisation::DirectorResolution`]): near 1 for the checkerboard mode.
     pub director_unresolved: Option<f64>,
-    /// The same share of the step's own director changes.
+    /// The same share of the step's own director changes (`None` where they are negligible,
+    /// [`crate::shell::stabilisation::NEGLIGIBLE_STEP_CHANGE`]).
     pub director_unresolved_step: Option<f64>,
 }
 
@@ -630,7 +631,7 @@ pub struct ShellOutput {
     displacement_control: Option<f64>,
     /// Reactions of the step being recorded (set before [`Self::converged_with_contact`]).
     pending_reactions: Vec<(String, f64)>,
-    pending_director_unresolved: Option<[f64; 2]>,
+    pending_director_unresolved: Option<(f64, Option<f64>)>,
     pvd_time: PvdTime,
     /// Critical points passed, as (kind, converged step after it, 1-based), marked on the
     /// load–displacement plot.
@@ -764,9 +765,9 @@ impl ShellOutput {
     }
 
     /// The unresolved shares of the director changes, since the reference state and in the
-    /// step, at the step recorded next.
-    pub fn set_step_director_unresolved(&mut self, total: f64, step: f64) {
-        self.pending_director_unresolved = Some([total, step]);
+    /// step (`None`: the step's changes are negligible), at the step recorded next.
+    pub fn set_step_director_unresolved(&mut self, total: f64, step: Option<f64>) {
+        self.pending_director_unresolved = Some((total, step));
     }
 
     /// Record contact with the named tools (in case order): per-step tool positions, forces
@@ -944,8 +945,8 @@ impl ShellOutput {
             contact,
             separation,
             reactions: std::mem::take(&mut self.pending_reactions),
-            director_unresolved: self.pending_director_unresolved.map(|s| s[0]),
-            director_unresolved_step: self.pending_director_unresolved.take().map(|s| s[1]),
+            director_unresolved: self.pending_director_unresolved.map(|s| s.0),
+            director_unresolved_step: self.pending_director_unresolved.take().and_then(|s| s.1),
         });
         let summary = self.steps.last().expect("just pushed");
         let line = serde_json::to_string(&self.step_json(summary))?;
