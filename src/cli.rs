@@ -782,7 +782,23 @@ fn run_shell(con: &Console, c: &ShellCase, out: &Path, quiet: bool) -> i32 {
                     remedy
                 );
             }
-            if matches!(summary.status, RunStatus::Failed(_))
+            if let (Some((n, smallest)), Some(cs)) = (summary.stopped_switching, &c.contact) {
+                let penalty = match cs.penalty {
+                    crate::io::shell_case::PenaltySpec::Value(w) => format!("penalty = {w:e}"),
+                    crate::io::shell_case::PenaltySpec::Factor(f) => {
+                        format!("penalty_factor = {f:e}")
+                    }
+                };
+                say!(
+                    con,
+                    "note: each of the {n} attempts after the last converged step changed the \
+                     contact active set (a slave point started or stopped penetrating a tool) \
+                     and failed, down to a step of {smallest:.3e}: a shorter step does not help. \
+                     A penalty too stiff for the sheet's bending stiffness does this (one \
+                     switching point moves the sheet far more than the step does); try a \
+                     smaller [contact] penalty (here {penalty}; docs/contact.md §5)."
+                );
+            } else if matches!(summary.status, RunStatus::Failed(_))
                 && c.integration.director == crate::shell::point::DirectorField::Interpolated
                 && c.integration.director_stabilisation == 0.0
                 && c.steps.arc_length.is_none()

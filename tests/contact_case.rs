@@ -316,9 +316,64 @@ fn tool_that_never_touches_is_a_warning() {
         assert_eq!(s["active_contact_points"].as_u64(), Some(die));
         let fz = s["tools"]["die"]["force"][2].as_f64().unwrap();
         assert!((fz + 4e-3).abs() <= 1e-6 * 4e-3, "die force {fz}");
+        // The plate settles onto the die without rotating: its directors change by round-off
+        // only (rms 7e-16), which has no unresolved share (it read 0.92 and warned of a
+        // checkerboard).
+        assert!(s["director_unresolved"].is_null(), "{s}");
+        assert!(s["director_unresolved_step"].is_null(), "{s}");
     }
     let csv = std::fs::read_to_string(out.join("tool_forces.csv")).unwrap();
     assert!(csv.starts_with("step,t,stroke,punch_x,"), "{csv}");
     assert_eq!(csv.lines().count(), 1 + steps.len());
     assert!(out.join("force_stroke.png").exists());
+}
+
+/// A penalty too stiff for the sheet's bending stiffness: the bending case
+/// (`verification/cylindrical-bending`) with the default penalty (`ω = 10 E/t`, 7e5 N/mm³,
+/// instead of the case's 1000) stops in its second step, where every attempt, down to a step of
+/// 2e-5, changes the contact active set and fails. The run says so and names the penalty key
+/// (and not the director-field note of a stopped run without contact, which would mislead
+/// here). About 2 s.
+#[test]
+fn a_stop_where_every_attempt_switches_contact_names_the_penalty() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let text =
+        std::fs::read_to_string(root.join("verification/cylindrical-bending/case.toml")).unwrap();
+    assert!(
+        text.contains("\npenalty = 1000.0"),
+        "the case's penalty line"
+    );
+    let text = text
+        .replace("\npenalty = 1000.0", "\n")
+        .replace("vtu = true", "vtu = false");
+    let dir = root.join("target/contact-case-stiff-penalty");
+    std::fs::create_dir_all(&dir).unwrap();
+    let case = dir.join("case.toml");
+    std::fs::write(&case, text).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_shelldsa"))
+        .args(["run", case.to_str().unwrap(), "--quiet", "--out"])
+        .arg(dir.join("out"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(3), "{stdout}");
+    assert!(
+        stdout.contains("changed the contact active set")
+            && stdout.contains("penalty_factor = 1e1"),
+        "{stdout}"
+    );
+    assert!(!stdout.contains("director field"), "{stdout}");
+    let results: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("out/results.json")).unwrap())
+            .unwrap();
+    let failed: Vec<&serde_json::Value> = results["steps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|s| s["converged"] == false)
+        .collect();
+    assert!(failed.len() >= 5, "{} failed attempts", failed.len());
+    for a in failed.iter().rev().take(5) {
+        assert!(a["active_set_iterations"].as_u64().unwrap() >= 1, "{a}");
+    }
 }

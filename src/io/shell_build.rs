@@ -30,7 +30,9 @@ use crate::shell::load;
 use crate::shell::model::{Discretisation, ShellModel};
 use crate::shell::point::DOFS_PER_PARTICLE;
 use crate::shell::problem::ShellProblem;
-use crate::shell::stabilisation::{DirectorResolution, NEGLIGIBLE_STEP_CHANGE};
+use crate::shell::stabilisation::{
+    DirectorResolution, NEGLIGIBLE_DIRECTOR_CHANGE, NEGLIGIBLE_STEP_CHANGE,
+};
 use crate::shell::symmetry::SymmetryPlane;
 use crate::shell::ShellError;
 use crate::solver::observe::{Observed, StepObserver};
@@ -614,6 +616,9 @@ pub struct RunSummary {
     pub separation: Option<Separation>,
     /// Warnings (tools that never touched the sheet), also in results.json.
     pub warnings: Vec<String>,
+    /// A stopped run whose every attempt after its last converged step changed the contact
+    /// active set: `Some((attempts, smallest step size))`.
+    pub stopped_switching: Option<(usize, f64)>,
 }
 
 /// The commit hook of a run: `on_commit` sees the committed problem and the step's record
@@ -749,11 +754,12 @@ pub fn run(
                 None => None,
             };
             output.set_step_reactions(prescribed_reactions(case, p));
-            // A step that moved the directors only by its states' convergence noise has no
-            // meaningful share.
-            let moved = resolution.step_change_ratio(model) > NEGLIGIBLE_STEP_CHANGE;
+            // Directors that moved only by round-off (in all) or by the states' convergence
+            // noise (in the step) have no meaningful share.
+            let changed = resolution.change_rms(model) > NEGLIGIBLE_DIRECTOR_CHANGE;
+            let moved = changed && resolution.step_change_ratio(model) > NEGLIGIBLE_STEP_CHANGE;
             output.set_step_director_unresolved(
-                resolution.unresolved_share(model),
+                changed.then(|| resolution.unresolved_share(model)),
                 moved.then(|| resolution.step_share(model)),
             );
             resolution.advance(model);
@@ -851,6 +857,20 @@ pub fn run(
         return Err(BuildError::Output(e));
     }
     output.finish(model, &case.surface, &status.label(), &attempts)?;
+    let failing = attempts
+        .iter()
+        .rposition(|a| a.converged)
+        .map_or(&attempts[..], |i| &attempts[i + 1..]);
+    let stopped_switching = (matches!(status, RunStatus::Failed(_))
+        && !failing.is_empty()
+        && failing.iter().all(|a| a.active_set_iterations > 0))
+    .then(|| {
+        let smallest = failing
+            .iter()
+            .map(|a| a.step_size.abs())
+            .fold(f64::INFINITY, f64::min);
+        (failing.len(), smallest)
+    });
     Ok(RunSummary {
         status,
         steps: output.steps().to_vec(),
@@ -858,5 +878,6 @@ pub fn run(
         wall_time_s: start.elapsed().as_secs_f64(),
         separation: output.separation().cloned(),
         warnings: output.warnings().to_vec(),
+        stopped_switching,
     })
 }

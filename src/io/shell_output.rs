@@ -631,7 +631,7 @@ pub struct ShellOutput {
     displacement_control: Option<f64>,
     /// Reactions of the step being recorded (set before [`Self::converged_with_contact`]).
     pending_reactions: Vec<(String, f64)>,
-    pending_director_unresolved: Option<(f64, Option<f64>)>,
+    pending_director_unresolved: Option<(Option<f64>, Option<f64>)>,
     pvd_time: PvdTime,
     /// Critical points passed, as (kind, converged step after it, 1-based), marked on the
     /// load–displacement plot.
@@ -765,8 +765,8 @@ impl ShellOutput {
     }
 
     /// The unresolved shares of the director changes, since the reference state and in the
-    /// step (`None`: the step's changes are negligible), at the step recorded next.
-    pub fn set_step_director_unresolved(&mut self, total: f64, step: Option<f64>) {
+    /// step (`None`: the changes are negligible), at the step recorded next.
+    pub fn set_step_director_unresolved(&mut self, total: Option<f64>, step: Option<f64>) {
         self.pending_director_unresolved = Some((total, step));
     }
 
@@ -945,7 +945,7 @@ impl ShellOutput {
             contact,
             separation,
             reactions: std::mem::take(&mut self.pending_reactions),
-            director_unresolved: self.pending_director_unresolved.map(|s| s.0),
+            director_unresolved: self.pending_director_unresolved.and_then(|s| s.0),
             director_unresolved_step: self.pending_director_unresolved.take().and_then(|s| s.1),
         });
         let summary = self.steps.last().expect("just pushed");

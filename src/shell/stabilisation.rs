@@ -311,6 +311,12 @@ pub const UNRESOLVED_STEP_SHARE_WARNING: f64 = 0.75;
 /// and the last two steps 8e-17 and 1e-18, whose shares of round-off read 0.55 and 0.76.
 pub const NEGLIGIBLE_STEP_CHANGE: f64 = 1e-8;
 
+/// Director changes since the reference state whose root mean square over the real particles
+/// ([`DirectorResolution::change_rms`]) is at most this are the round-off of the unit directors
+/// (`10³ ε`), and their shares are not reported: a plate translated onto a die without
+/// rotating (`tests/contact_case.rs`) has changes of 6.9e-16 whose share read 0.92.
+pub const NEGLIGIBLE_DIRECTOR_CHANGE: f64 = 1e3 * f64::EPSILON;
+
 /// How much of the particles' director changes the RK approximation leaves out: the
 /// diagnostic of the checkerboard mode (docs/stability.md), for any director field and
 /// stabilisation.
@@ -367,6 +373,23 @@ impl DirectorResolution {
     /// committed step.
     pub fn step_share(&self, model: &ShellModel) -> f64 {
         self.share_of(|j| model.particle_state(j).d - self.last[j])
+    }
+
+    /// The root mean square of the directors' changes since the reference state,
+    /// `(Σ_I |d_I − d_I⁰|² / n)^½` over the `n` real particles.
+    pub fn change_rms(&self, model: &ShellModel) -> f64 {
+        let n = self.rows.len();
+        let sum: f64 = (0..n)
+            .map(|i| {
+                let st = model.particle_state(i);
+                (st.d - st.d0).norm_squared()
+            })
+            .sum();
+        if n > 0 {
+            (sum / n as f64).sqrt()
+        } else {
+            0.0
+        }
     }
 
     /// The size of the changes since the last [`DirectorResolution::advance`] relative to

@@ -1212,6 +1212,7 @@ impl NewtonSolver {
         }
         let mut tries = 0;
         let mut k = 0;
+        let mut counted_at = None;
         loop {
             // The active set's count before this iterate's evaluations: a change shows against
             // the previous iterate's (or, at k = 0, the last state evaluated).
@@ -1286,13 +1287,22 @@ impl NewtonSolver {
                     }
                 }
             }
-            if !std::mem::take(&mut evaluated_here) {
+            let evaluated = if std::mem::take(&mut evaluated_here) {
+                Ok(())
+            } else {
                 let clock = Instant::now();
                 let evaluated = problem.residual_and_tangent(u, load, &mut w.r, &mut w.values);
                 rec.timing.residual_and_tangent_s += clock.elapsed().as_secs_f64();
-                if let Err(e) = evaluated {
-                    reject!(FailureReason::Problem(e));
-                }
+                evaluated
+            };
+            // An iterate that changed the active set, counted once per k (also when its
+            // evaluation fails: the failures of an attempt that switches are reported so).
+            if k >= 1 && counted_at != Some(k) && problem.active_set_changes() != active_before {
+                counted_at = Some(k);
+                rec.active_set_iterations += 1;
+            }
+            if let Err(e) = evaluated {
+                reject!(FailureReason::Problem(e));
             }
             unknowns_terms = unknowns_term_scale(pattern, &w.values, u, u_n, &bc, &mut w.s);
             bc.increments_into(u, &mut w.g);
@@ -1449,13 +1459,10 @@ impl NewtonSolver {
             if stagnated {
                 accept!(Acceptance::Stagnation);
             }
-            if k >= 1 && problem.active_set_changes() != active_before {
-                rec.active_set_iterations += 1;
-                if rec.active_set_iterations > o.max_active_set_iterations {
-                    return Err(FailureReason::ActiveSetIterations(
-                        o.max_active_set_iterations,
-                    ));
-                }
+            if rec.active_set_iterations > o.max_active_set_iterations {
+                return Err(FailureReason::ActiveSetIterations(
+                    o.max_active_set_iterations,
+                ));
             }
             if k - rec.active_set_iterations == o.max_iterations {
                 return Err(FailureReason::MaxIterations(o.max_iterations));
