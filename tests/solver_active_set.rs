@@ -52,16 +52,6 @@ impl NonlinearProblem for Switching {
         k[0] = self.a;
         Ok(())
     }
-    fn residual_and_tangent(
-        &mut self,
-        u: &[f64],
-        load: f64,
-        r: &mut [f64],
-        values: &mut [f64],
-    ) -> Result<(), ProblemError> {
-        self.residual(u, load, r)?;
-        self.tangent(u, load, values)
-    }
     fn active_set_changes(&self) -> u64 {
         self.changes
     }
