@@ -95,6 +95,7 @@ min_step = 0.01
 max_step = 0.5
 final_load = 1.0
 max_iterations = 15
+max_active_set_iterations = 20
 residual_rtol = 1e-8
 residual_atol = 0.0
 energy_rtol = 1e-14
