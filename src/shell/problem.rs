@@ -634,7 +634,7 @@ impl NonlinearProblem for ShellProblem {
         Some(self.describe_dof(dof))
     }
     /// The contacts' count of slave points that changed the tool they penetrate (or started
-    /// or stopped penetrating) between tracked evaluations ([`ShellContact::active_set_changes`]).
+    /// or stopped penetrating) between tracked evaluations ([`crate::shell::contact::ShellContact::active_set_changes`]).
     fn active_set_changes(&self) -> u64 {
         self.loads
             .iter()
