@@ -66,6 +66,13 @@
 //! factorisation as a preconditioner, so only the factorisation is saved; not accepted, the
 //! evaluation serves the next Newton update and nothing is evaluated twice.
 //!
+//! **Active set.** An iterate whose evaluation changed the problem's active set
+//! ([`NonlinearProblem::active_set_changes`]: a contact switched on or off) is not counted
+//! against `max_iterations`: the update that led to it was solved with the other active set,
+//! so it says nothing of Newton's convergence, and a shorter step does not remove such
+//! iterations. They are counted in [`StepRecord::active_set_iterations`] and limited by
+//! [`NewtonOptions::max_active_set_iterations`] ([`FailureReason::ActiveSetIterations`]).
+//!
 //! **Line search on failure** ([`LineSearch::OnFailure`], the default). An iterate at which
 //! the iteration cannot go on (a recoverable [`ProblemError`] such as an inverted cell or a
 //! return map that did not converge, a non-finite residual, a residual or energy beyond
