@@ -783,12 +783,7 @@ fn run_shell(con: &Console, c: &ShellCase, out: &Path, quiet: bool) -> i32 {
                 );
             }
             if let (Some((n, smallest)), Some(cs)) = (summary.stopped_switching, &c.contact) {
-                let penalty = match cs.penalty {
-                    crate::io::shell_case::PenaltySpec::Value(w) => format!("penalty = {w:e}"),
-                    crate::io::shell_case::PenaltySpec::Factor(f) => {
-                        format!("penalty_factor = {f:e}")
-                    }
-                };
+                let penalty = cs.penalty.as_key();
                 say!(
                     con,
                     "note: each of the {n} attempts after the last converged step changed the \

@@ -674,6 +674,14 @@ impl PenaltySpec {
             PenaltySpec::Value(w) => w,
         }
     }
+
+    /// The `[contact]` key and value this penalty was given by, e.g. `penalty = 1e3`.
+    pub fn as_key(&self) -> String {
+        match *self {
+            PenaltySpec::Factor(c) => format!("penalty_factor = {c:e}"),
+            PenaltySpec::Value(w) => format!("penalty = {w:e}"),
+        }
+    }
 }
 
 /// `[contact]`: settings of the frictionless penalty contact with the `[[tool]]`s

@@ -379,14 +379,8 @@ impl DirectorResolution {
     /// `(Σ_I |d_I − d_I⁰|² / n)^½` over the `n` real particles.
     pub fn change_rms(&self, model: &ShellModel) -> f64 {
         let n = self.rows.len();
-        let sum: f64 = (0..n)
-            .map(|i| {
-                let st = model.particle_state(i);
-                (st.d - st.d0).norm_squared()
-            })
-            .sum();
         if n > 0 {
-            (sum / n as f64).sqrt()
+            (self.total_sq(model) / n as f64).sqrt()
         } else {
             0.0
         }
@@ -396,17 +390,25 @@ impl DirectorResolution {
     /// those since the reference state, `(Σ_I |d_I − d_I^last|² / Σ_I |d_I − d_I⁰|²)^½` over
     /// the real particles (0 where no director has changed).
     pub fn step_change_ratio(&self, model: &ShellModel) -> f64 {
-        let (mut step, mut all) = (0.0, 0.0);
-        for i in 0..self.rows.len() {
-            let st = model.particle_state(i);
-            step += (st.d - self.last[i]).norm_squared();
-            all += (st.d - st.d0).norm_squared();
-        }
+        let all = self.total_sq(model);
         if all > 0.0 {
+            let step: f64 = (0..self.rows.len())
+                .map(|i| (model.particle_state(i).d - self.last[i]).norm_squared())
+                .sum();
             (step / all).sqrt()
         } else {
             0.0
         }
+    }
+
+    /// `Σ_I |d_I − d_I⁰|²` over the real particles.
+    fn total_sq(&self, model: &ShellModel) -> f64 {
+        (0..self.rows.len())
+            .map(|i| {
+                let st = model.particle_state(i);
+                (st.d - st.d0).norm_squared()
+            })
+            .sum()
     }
 
     /// Take the model's committed directors as the start of the next step.

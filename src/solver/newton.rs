@@ -750,6 +750,21 @@ pub enum Acceptance {
 
 /// `‖r_k‖ ≤ ROUNDOFF_BAND · ε · r_ref` is a residual at the round-off of its reference
 /// ([`Acceptance::ResidualRoundoff`]): 10³ is the largest ratio of the stalled residual to
+/// The iteration limits after iterate `k` of an attempt: more than `max_active_set_iterations`
+/// iterates that changed the active set, or `max_iterations` that did not (module
+/// documentation, "Active set").
+fn iteration_limits(o: &NewtonOptions, rec: &StepRecord, k: usize) -> Result<(), FailureReason> {
+    if rec.active_set_iterations > o.max_active_set_iterations {
+        return Err(FailureReason::ActiveSetIterations(
+            o.max_active_set_iterations,
+        ));
+    }
+    if k - rec.active_set_iterations == o.max_iterations {
+        return Err(FailureReason::MaxIterations(o.max_iterations));
+    }
+    Ok(())
+}
+
 /// `ε` times the summed terms measured on the shells with large rotations (module
 /// documentation, round-off floor).
 const ROUNDOFF_BAND: f64 = 1e3;
@@ -1466,14 +1481,7 @@ impl NewtonSolver {
             if stagnated {
                 accept!(Acceptance::Stagnation);
             }
-            if rec.active_set_iterations > o.max_active_set_iterations {
-                return Err(FailureReason::ActiveSetIterations(
-                    o.max_active_set_iterations,
-                ));
-            }
-            if k - rec.active_set_iterations == o.max_iterations {
-                return Err(FailureReason::MaxIterations(o.max_iterations));
-            }
+            iteration_limits(&o, rec, k)?;
             if line_search {
                 w.base.copy_from_slice(u);
                 w.dir.copy_from_slice(&w.du);
@@ -2266,15 +2274,8 @@ impl NewtonSolver {
             }
             if k >= 1 && problem.active_set_changes() != active_before {
                 rec.active_set_iterations += 1;
-                if rec.active_set_iterations > o.max_active_set_iterations {
-                    return Err(FailureReason::ActiveSetIterations(
-                        o.max_active_set_iterations,
-                    ));
-                }
             }
-            if k - rec.active_set_iterations == o.max_iterations {
-                return Err(FailureReason::MaxIterations(o.max_iterations));
-            }
+            iteration_limits(&o, rec, k)?;
             // Corrector: Δu + δu_r + δλ δu_q on the cylinder ‖·‖ = Δs.
             let base: Vec<f64> = du.iter().zip(&w.du_r).map(|(a, b)| a + b).collect();
             let a = dot(&w.du_q, &w.du_q);
