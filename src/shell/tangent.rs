@@ -363,6 +363,28 @@ impl<'a> ThicknessTangent<'a> {
         let ht = self.half_t;
         let [m0, m1, m2] = &self.moments;
         let unit = self.unit.map(|u| UnitMaps::new(&u, &self.p_moments, ht));
+        // The rotation rows' images are linear in the weights `t/2 (Ψ̃,1, Ψ̃,2, Ψ)`: image `o`
+        // is `c₀ w₀ + c₁ w₁ + c₂ w₂` with the moments' columns `c` below, formed once per point.
+        // With a unit director the rows map u ↦ N′u on t/2 Ψ and t/2 Ψ̃,α, plus t/2 Ψ H(r,α) u on
+        // the ζ-moment's column α (module docs), so the maps act on the `c` here too.
+        let rot_coef: [[Vector3<f64>; 3]; NY] = std::array::from_fn(|o| {
+            let (ma, mb) = if o < 9 {
+                (&m0[o], &m1[o])
+            } else {
+                (&m1[o - 9], &m2[o - 9])
+            };
+            let c0 = Vector3::new(mb[0], mb[1], mb[2]);
+            let c1 = Vector3::new(mb[3], mb[4], mb[5]);
+            let c2 = Vector3::new(ma[6], ma[7], ma[8]);
+            match &unit {
+                None => [c0, c1, c2],
+                Some(un) => [
+                    un.np * c0,
+                    un.np * c1,
+                    un.np * c2 + un.h[0] * c0 + un.h[1] * c1,
+                ],
+            }
+        });
         ROW_IMAGES.with(|buf| {
             let mut x = buf.borrow_mut();
             x.clear();
@@ -386,28 +408,10 @@ impl<'a> ThicknessTangent<'a> {
                 // Rotation row u = ∂d/∂α_b: r̃₀ = vec(u ⊗ (0, 0, t/2 Ψ)) has entries 6 + j,
                 // r̃₁ = vec(u ⊗ t/2 (Ψ̃,1, Ψ̃,2, 0)) entries j and 3 + j; `t` maps u to the image.
                 let (w0, w1, w2) = (ht * t1, ht * t2, ht * sh.psi);
-                let mut t = [[0.0; 3]; NY];
-                for (o, to) in t.iter_mut().enumerate() {
-                    for (j, tj) in to.iter_mut().enumerate() {
-                        *tj = if o < 9 {
-                            m0[o][6 + j] * w2 + m1[o][j] * w0 + m1[o][3 + j] * w1
-                        } else {
-                            m1[o - 9][6 + j] * w2 + m2[o - 9][j] * w0 + m2[o - 9][3 + j] * w1
-                        };
-                    }
-                }
-                if let Some(un) = &unit {
-                    // Rows of the unit director: u ↦ N′u on t/2 Ψ and t/2 Ψ̃,α, plus
-                    // t/2 Ψ H(r,α) u on the ζ-moment's column α (module docs).
-                    for (o, to) in t.iter_mut().enumerate() {
-                        let m = if o < 9 { &m1[o] } else { &m2[o - 9] };
-                        let b1 = Vector3::new(m[0], m[1], m[2]);
-                        let b2 = Vector3::new(m[3], m[4], m[5]);
-                        let v = un.np * Vector3::new(to[0], to[1], to[2])
-                            + (un.h[0] * b1 + un.h[1] * b2) * w2;
-                        *to = [v[0], v[1], v[2]];
-                    }
-                }
+                let t: [[f64; 3]; NY] = std::array::from_fn(|o| {
+                    let [c0, c1, c2] = &rot_coef[o];
+                    std::array::from_fn(|j| c0[j] * w0 + c1[j] * w1 + c2[j] * w2)
+                });
                 let mut u = dir.d_a;
                 if let Some((q, det)) = cs.image {
                     // Rows of Tᵀ K: translation row c is Σ_r Q[r, c] (row e_r), rotations × det.
@@ -448,6 +452,36 @@ impl<'a> ThicknessTangent<'a> {
                         }
                     }
                 }
+                // The unit director couples every pair of rotations through N″ and N‴:
+                // K[(I, b), (J, γ)] += a_Ibᵀ [Ψ_I Ψ_J S + Σ_α (Ψ_I Ψ_J,α + Ψ̃_I,α Ψ_J) H(y_α)] v_Jγ,
+                // S = H(y₃) + Σ_α T(y_α, r,α), y₃ = t/2 (Σ P)_{:3}, y_α = t/2 (Σ ζP)_{:α}, with
+                // a = ∂d/∂α (× det Q for an image) on both sides. As a function of the column
+                // this is v_Jγ · (Ψ_J w₃ + Ψ_J,1 w₁ + Ψ_J,2 w₂) with the row's
+                // w₃ = Sᵀ Ψ_I a + Σ_α Ψ̃_I,α H(y_α)ᵀ a, w_α = H(y_α)ᵀ Ψ_I a: the form the column
+                // loop gives the rotation columns, whose weights are t/2 (Ψ, Ψ,1, Ψ,2). So the
+                // w / (t/2) join the row's images 6..15 and the pairs need no loop of their own.
+                let inv_ht = 1.0 / ht;
+                for (i, (sh, dir)) in self.shape.iter().zip(&self.dirs).enumerate() {
+                    let cs = slot_of(i);
+                    let det = cs.image.map_or(1.0, |(_, det)| det);
+                    let [t1, t2] = sh.dpsi_test;
+                    let r0 = DOFS_PER_PARTICLE * cs.slot + 3;
+                    for (b, a) in dir.d_a.iter().enumerate() {
+                        let a = a * det;
+                        let ya = a * (sh.psi * inv_ht);
+                        let w = [
+                            un.s.tr_mul(&ya)
+                                + (un.hy[0].tr_mul(&a) * t1 + un.hy[1].tr_mul(&a) * t2) * inv_ht,
+                            un.hy[0].tr_mul(&ya),
+                            un.hy[1].tr_mul(&ya),
+                        ];
+                        for (o, wo) in [6, 9, 12].into_iter().zip(&w) {
+                            for c in 0..3 {
+                                x[(o + c) * nr + r0 + b] += wo[c];
+                            }
+                        }
+                    }
+                }
             }
             add_columns(&x, nr, ht, self.shape, &self.dirs, slots, k);
         });
@@ -475,50 +509,9 @@ impl<'a> ThicknessTangent<'a> {
                 }
             }
         }
-        if let Some(un) = &unit {
-            // The unit director couples every pair of rotations through N″ and N‴:
-            // K[(I, b), (J, γ)] += a_Ibᵀ [Ψ_I Ψ_J S + Σ_α (Ψ_I Ψ_J,α + Ψ̃_I,α Ψ_J) H(y_α)] v_Jγ,
-            // S = H(y₃) + Σ_α T(y_α, r,α), y₃ = t/2 (Σ P)_{:3}, y_α = t/2 (Σ ζP)_{:α}.
-            let n = self.shape.len();
-            // The rotation directions ∂d/∂α of each neighbour, × det Q for an image.
-            let dirs: Vec<[Vector3<f64>; 2]> = (0..n)
-                .map(|i| {
-                    let det = slot_of(i).image.map_or(1.0, |(_, det)| det);
-                    self.dirs[i].d_a.map(|v| v * det)
-                })
-                .collect();
-            // c_J = Ψ_J S v + Σ_α Ψ_J,α H(y_α) v; r_I = Σ_α Ψ̃_I,α H(y_α) a.
-            let (cols, rows): (Vec<Pair>, Vec<Pair>) = self
-                .shape
-                .iter()
-                .zip(&dirs)
-                .map(|(sh, d)| {
-                    let c = un.s * sh.psi + un.hy[0] * sh.dpsi[0] + un.hy[1] * sh.dpsi[1];
-                    let r = un.hy[0] * sh.dpsi_test[0] + un.hy[1] * sh.dpsi_test[1];
-                    (d.map(|v| c * v), d.map(|a| r * a))
-                })
-                .unzip();
-            for i in 0..n {
-                let r0 = DOFS_PER_PARTICLE * slot_of(i).slot + 3;
-                let psi_i = self.shape[i].psi;
-                for j in 0..n {
-                    let c0 = DOFS_PER_PARTICLE * slot_of(j).slot + 3;
-                    let psi_j = self.shape[j].psi;
-                    for b in 0..2 {
-                        for g in 0..2 {
-                            k[(c0 + g) * nr + r0 + b] += dirs[i][b].dot(&cols[j][g]) * psi_i
-                                + rows[i][b].dot(&dirs[j][g]) * psi_j;
-                        }
-                    }
-                }
-            }
-        }
         Ok(())
     }
 }
-
-/// The two rotation directions of a neighbour (or their images under a map).
-type Pair = [Vector3<f64>; 2];
 
 /// The maps of a normalised director field at one in-plane point (module
 /// [`crate::kinematics::unit_director`]): `N′`, `H(r,α)`, `H(y_α)` and `S`.
