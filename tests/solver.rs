@@ -83,6 +83,42 @@ fn pattern_is_sorted_csc_with_diagonal_and_cell_slots() {
     assert_eq!(p.diag_slot(4), 8);
 }
 
+/// The runs of every cell column cover its local rows once, in order, and map each to the
+/// slot `cell_slots` gives: on random cells (unsorted DOF lists), a cell with a repeated DOF,
+/// and particle-like cells whose DOFs come in consecutive blocks (long runs).
+#[test]
+fn cell_column_runs_reproduce_the_cell_slots() {
+    let mut rng = Rng(0x5EED);
+    let n = 60;
+    let mut cells = random_cells(n, 40, &mut rng);
+    cells.push(vec![4, 9, 4, 5, 6]);
+    cells.push((10..25).chain(40..50).collect());
+    let p = SparsityPattern::from_cells(n, &cells).unwrap();
+    let mut longest = 0;
+    for (c, dofs) in cells.iter().enumerate() {
+        let m = dofs.len();
+        let slots = p.cell_slots(c);
+        for jj in 0..m {
+            let mut next = 0;
+            for run in p.cell_column_runs(c, jj) {
+                assert_eq!(
+                    run.row as usize, next,
+                    "cell {c} column {jj}: rows in order"
+                );
+                assert!(run.len >= 1);
+                for t in 0..run.len as usize {
+                    assert_eq!(slots[jj * m + next + t], run.slot + t as u32);
+                }
+                next += run.len as usize;
+                longest = longest.max(run.len);
+            }
+            assert_eq!(next, m, "cell {c} column {jj}: every row once");
+        }
+    }
+    // The block cell's columns 10..25 and 40..50 are contiguous in every column's rows.
+    assert!(longest >= 10, "longest run {longest}");
+}
+
 #[test]
 fn pattern_rejects_out_of_range_dof_naming_cell_and_index() {
     let err = SparsityPattern::from_cells(4, &[vec![0, 1], vec![2, 7, 1]]).unwrap_err();

@@ -304,13 +304,16 @@ fn scatter(
     cols: std::ops::Range<usize>,
 ) {
     let dofs = pattern.cell_dofs(c);
-    let slots = pattern.cell_slots(c);
     let m = dofs.len();
     for (jj, &col) in dofs.iter().enumerate() {
         if cols.contains(&col) {
             let kcol = &kk[jj * m..(jj + 1) * m];
-            for (v, &s) in kcol.iter().zip(&slots[jj * m..(jj + 1) * m]) {
-                vals[s as usize - base] += v;
+            // Runs of consecutive rows and slots: slice additions the compiler vectorises.
+            for run in pattern.cell_column_runs(c, jj) {
+                let (a, s, len) = (run.row as usize, run.slot as usize - base, run.len as usize);
+                for (v, x) in vals[s..s + len].iter_mut().zip(&kcol[a..a + len]) {
+                    *v += x;
+                }
             }
             r[col - cols.start] += f[jj];
         }

@@ -19,10 +19,26 @@ pub struct SparsityPattern {
     /// Cell slots as `u32` (half the memory traffic of the assembly's scatter); patterns with
     /// more than `u32::MAX` stored entries are rejected.
     slots: Vec<u32>,
+    /// The cell slots as runs: per cell column (`run_ptr` over all cells' columns in order),
+    /// maximal runs of consecutive local rows whose slots are consecutive too.
+    run_ptr: Vec<usize>,
+    runs: Vec<SlotRun>,
     diag: Vec<usize>,
     /// First DOF of the multipliers of a bordered (saddle-point) system, `n` when none: the
     /// DOFs from here on have a zero diagonal block ([`Self::with_multipliers_from`]).
     multipliers_from: usize,
+}
+
+/// A run of a cell column's slots ([`SparsityPattern::cell_column_runs`]): local rows
+/// `row..row + len` go to the slots `slot..slot + len`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SlotRun {
+    /// First local row.
+    pub row: u32,
+    /// Its slot.
+    pub slot: u32,
+    /// Number of rows.
+    pub len: u32,
 }
 
 impl SparsityPattern {
@@ -122,6 +138,30 @@ impl SparsityPattern {
             cell_ptr.push(cell_dofs.len());
             slot_ptr.push(slots.len());
         }
+        // Runs: a cell's DOFs list the particles' DOFs in order, so its columns' slots come in
+        // long runs (a row of neighbouring particles); the scatter adds them slice by slice.
+        let mut run_ptr = vec![0usize];
+        let mut runs = Vec::new();
+        for c in 0..cells.len() {
+            let m = cell_ptr[c + 1] - cell_ptr[c];
+            let cs = &slots[slot_ptr[c]..slot_ptr[c + 1]];
+            for col in cs.chunks_exact(m.max(1)).take(m) {
+                let mut a = 0;
+                while a < m {
+                    let mut len = 1;
+                    while a + len < m && col[a + len] == col[a] + len as u32 {
+                        len += 1;
+                    }
+                    runs.push(SlotRun {
+                        row: a as u32,
+                        slot: col[a],
+                        len: len as u32,
+                    });
+                    a += len;
+                }
+                run_ptr.push(runs.len());
+            }
+        }
         let symbolic = SymbolicSparseColMat::new_checked(n_dofs, n_dofs, col_ptr, None, row_idx);
         Ok(Self {
             n: n_dofs,
@@ -130,6 +170,8 @@ impl SparsityPattern {
             cell_dofs,
             slot_ptr,
             slots,
+            run_ptr,
+            runs,
             diag,
             multipliers_from: n_dofs,
         })
@@ -213,6 +255,8 @@ impl SparsityPattern {
             cell_dofs: Vec::new(),
             slot_ptr: vec![0],
             slots: Vec::new(),
+            run_ptr: vec![0],
+            runs: Vec::new(),
             diag,
             multipliers_from: n_dofs,
         })
@@ -267,6 +311,13 @@ impl SparsityPattern {
     /// Slots of cell `c`: local `(i, j)` of an `m × m` cell matrix is stored at `slots[j * m + i]`.
     pub fn cell_slots(&self, c: usize) -> &[u32] {
         &self.slots[self.slot_ptr[c]..self.slot_ptr[c + 1]]
+    }
+
+    /// The slots of column `jj` of cell `c` as runs ([`SlotRun`]): the same map as
+    /// [`Self::cell_slots`], `slots[jj * m + row + t] = slot + t` for `t < len`.
+    pub fn cell_column_runs(&self, c: usize, jj: usize) -> &[SlotRun] {
+        let k = self.cell_ptr[c] + jj;
+        &self.runs[self.run_ptr[k]..self.run_ptr[k + 1]]
     }
 
     /// Slot of the diagonal entry of DOF `i`.
