@@ -2801,17 +2801,22 @@ fd_steps = [1e-3]
         assert!(e.contains("memory") && e.contains("max_memory_gb"), "{e}");
     }
 
+    /// The good case on a quarter cylinder of radius 1 and length 12 with the thickness given.
+    fn cylinder_case(thickness: &str) -> String {
+        with(
+            "type = \"rectangle\"\norigin = [0.0, 0.0, 0.0]\nedge_u = [12.0, 0.0, 0.0]\n\
+         edge_v = [0.0, 1.0, 0.0]",
+            "type = \"cylinder-sector\"\norigin = [0.0, 0.0, 0.0]\naxis = [0.0, 0.0, 1.0]\n\
+         reference = [1.0, 0.0, 0.0]\nradius = 1.0\nangle_deg = [0.0, 90.0]\n\
+         length = [0.0, 12.0]",
+        )
+        .replacen("thickness = 0.1", &format!("thickness = {thickness}"), 1)
+    }
+
     #[test]
     fn jittered_thin_curved_shell_with_a_quadratic_basis_is_a_warning() {
         // A cylinder of radius 1 with t = 0.01 (R/t = 100).
-        let cyl = with(
-            "type = \"rectangle\"\norigin = [0.0, 0.0, 0.0]\nedge_u = [12.0, 0.0, 0.0]\n\
-             edge_v = [0.0, 1.0, 0.0]",
-            "type = \"cylinder-sector\"\norigin = [0.0, 0.0, 0.0]\naxis = [0.0, 0.0, 1.0]\n\
-             reference = [1.0, 0.0, 0.0]\nradius = 1.0\nangle_deg = [0.0, 90.0]\n\
-             length = [0.0, 12.0]",
-        )
-        .replacen("thickness = 0.1", "thickness = 0.01", 1);
+        let cyl = cylinder_case("0.01");
         let locks = |text: &str| {
             parse(text)
                 .unwrap()
@@ -2845,14 +2850,7 @@ fd_steps = [1e-3]
     #[test]
     fn implausible_geometry_is_a_warning() {
         // A cylinder of radius 1 with t = 1.5: thicker than its radius of curvature.
-        let cyl = with(
-            "type = \"rectangle\"\norigin = [0.0, 0.0, 0.0]\nedge_u = [12.0, 0.0, 0.0]\n\
-             edge_v = [0.0, 1.0, 0.0]",
-            "type = \"cylinder-sector\"\norigin = [0.0, 0.0, 0.0]\naxis = [0.0, 0.0, 1.0]\n\
-             reference = [1.0, 0.0, 0.0]\nradius = 1.0\nangle_deg = [0.0, 90.0]\n\
-             length = [0.0, 12.0]",
-        )
-        .replacen("thickness = 0.1", "thickness = 1.5", 1);
+        let cyl = cylinder_case("1.5");
         let c = parse(&cyl).unwrap();
         assert!(
             c.warnings.iter().any(|w| w.contains("radius of curvature")),
