@@ -1025,9 +1025,9 @@ fn resonance_warning(kernel: &KernelSpec) -> Option<String> {
     })
 }
 
-/// Smallest radius of curvature over thickness from which [`geometry_warnings`] warns of
-/// membrane locking on jittered particles with a basis below cubic: a thin curved shell, whose
-/// inextensional bending the discrete membrane constraints hold back.
+/// Smallest radius of curvature over thickness from which the case check warns of membrane
+/// locking on jittered particles with a basis below cubic (`ShellCase::warnings`): a thin curved
+/// shell, whose inextensional bending the discrete membrane constraints hold back.
 pub const JITTER_LOCKING_RADIUS_OVER_T: f64 = 50.0;
 
 /// Warnings about geometry outside the regime of the shell model: a thickness not small
