@@ -84,7 +84,7 @@ fn pattern_is_sorted_csc_with_diagonal_and_cell_slots() {
 }
 
 /// The runs of every cell column cover its local rows once, in order, and map each to the
-/// slot `cell_slots` gives: on random cells (unsorted DOF lists), a cell with a repeated DOF,
+/// slot of its entry (and `cell_slots` expands them to the same): on random cells (unsorted DOF lists), a cell with a repeated DOF,
 /// and particle-like cells whose DOFs come in consecutive blocks (long runs).
 #[test]
 fn cell_column_runs_reproduce_the_cell_slots() {
@@ -107,6 +107,9 @@ fn cell_column_runs_reproduce_the_cell_slots() {
                 );
                 assert!(run.len >= 1);
                 for t in 0..run.len as usize {
+                    // Against the pattern's own look-up of the entry.
+                    let slot = p.slot(dofs[next + t], dofs[jj]).unwrap();
+                    assert_eq!((run.slot + t as u32) as usize, slot);
                     assert_eq!(slots[jj * m + next + t], run.slot + t as u32);
                 }
                 next += run.len as usize;

@@ -15,12 +15,10 @@ pub struct SparsityPattern {
     symbolic: SymbolicSparseColMat<usize>,
     cell_ptr: Vec<usize>,
     cell_dofs: Vec<usize>,
-    slot_ptr: Vec<usize>,
-    /// Cell slots as `u32` (half the memory traffic of the assembly's scatter); patterns with
-    /// more than `u32::MAX` stored entries are rejected.
-    slots: Vec<u32>,
-    /// The cell slots as runs: per cell column (`run_ptr` over all cells' columns in order),
-    /// maximal runs of consecutive local rows whose slots are consecutive too.
+    /// The cell slots (the slot of each local `(i, j)`) as runs: per cell column (`run_ptr` over
+    /// all cells' columns in order), maximal runs of consecutive local rows whose slots are
+    /// consecutive too. Slots are `u32`; patterns with more than `u32::MAX` stored entries are
+    /// rejected.
     run_ptr: Vec<usize>,
     runs: Vec<SlotRun>,
     diag: Vec<usize>,
@@ -105,11 +103,13 @@ impl SparsityPattern {
             return Err(SolverError::TooManyEntries { nnz: row_idx.len() });
         }
         let mut cell_ptr = Vec::with_capacity(cells.len() + 1);
-        let mut slot_ptr = Vec::with_capacity(cells.len() + 1);
         cell_ptr.push(0);
-        slot_ptr.push(0);
         let mut cell_dofs = Vec::new();
-        let mut slots = Vec::new();
+        // A cell's DOFs list the particles' DOFs in order, so its columns' slots come in long
+        // runs (a row of neighbouring particles): only the runs are kept (a few per column
+        // against one `u32` per entry), and the scatter adds them slice by slice.
+        let mut run_ptr = vec![0usize];
+        let mut runs = Vec::new();
         let mut order: Vec<usize> = Vec::new();
         let mut column: Vec<u32> = Vec::new();
         for dofs in cells {
@@ -132,35 +132,23 @@ impl SparsityPattern {
                     debug_assert_eq!(rows[k], ri, "cell pair in pattern");
                     column[a] = (col_ptr[cj] + k) as u32;
                 }
-                slots.extend_from_slice(&column);
-            }
-            cell_dofs.extend_from_slice(dofs);
-            cell_ptr.push(cell_dofs.len());
-            slot_ptr.push(slots.len());
-        }
-        // Runs: a cell's DOFs list the particles' DOFs in order, so its columns' slots come in
-        // long runs (a row of neighbouring particles); the scatter adds them slice by slice.
-        let mut run_ptr = vec![0usize];
-        let mut runs = Vec::new();
-        for c in 0..cells.len() {
-            let m = cell_ptr[c + 1] - cell_ptr[c];
-            let cs = &slots[slot_ptr[c]..slot_ptr[c + 1]];
-            for col in cs.chunks_exact(m.max(1)).take(m) {
                 let mut a = 0;
                 while a < m {
                     let mut len = 1;
-                    while a + len < m && col[a + len] == col[a] + len as u32 {
+                    while a + len < m && column[a + len] == column[a] + len as u32 {
                         len += 1;
                     }
                     runs.push(SlotRun {
                         row: a as u32,
-                        slot: col[a],
+                        slot: column[a],
                         len: len as u32,
                     });
                     a += len;
                 }
                 run_ptr.push(runs.len());
             }
+            cell_dofs.extend_from_slice(dofs);
+            cell_ptr.push(cell_dofs.len());
         }
         let symbolic = SymbolicSparseColMat::new_checked(n_dofs, n_dofs, col_ptr, None, row_idx);
         Ok(Self {
@@ -168,8 +156,6 @@ impl SparsityPattern {
             symbolic,
             cell_ptr,
             cell_dofs,
-            slot_ptr,
-            slots,
             run_ptr,
             runs,
             diag,
@@ -253,8 +239,6 @@ impl SparsityPattern {
             symbolic,
             cell_ptr: vec![0],
             cell_dofs: Vec::new(),
-            slot_ptr: vec![0],
-            slots: Vec::new(),
             run_ptr: vec![0],
             runs: Vec::new(),
             diag,
@@ -308,13 +292,21 @@ impl SparsityPattern {
         &self.cell_dofs[self.cell_ptr[c]..self.cell_ptr[c + 1]]
     }
 
-    /// Slots of cell `c`: local `(i, j)` of an `m × m` cell matrix is stored at `slots[j * m + i]`.
-    pub fn cell_slots(&self, c: usize) -> &[u32] {
-        &self.slots[self.slot_ptr[c]..self.slot_ptr[c + 1]]
+    /// Slots of cell `c`, expanded from its runs: local `(i, j)` of an `m × m` cell matrix is
+    /// stored at `slots[j * m + i]`.
+    pub fn cell_slots(&self, c: usize) -> Vec<u32> {
+        let m = self.cell_dofs(c).len();
+        let mut slots = Vec::with_capacity(m * m);
+        for jj in 0..m {
+            for run in self.cell_column_runs(c, jj) {
+                slots.extend((0..run.len).map(|t| run.slot + t));
+            }
+        }
+        slots
     }
 
-    /// The slots of column `jj` of cell `c` as runs ([`SlotRun`]): the same map as
-    /// [`Self::cell_slots`], `slots[jj * m + row + t] = slot + t` for `t < len`.
+    /// The slots of column `jj` of cell `c` as runs ([`SlotRun`]): local rows
+    /// `row..row + len` of that column are stored at `slot..slot + len`.
     pub fn cell_column_runs(&self, c: usize, jj: usize) -> &[SlotRun] {
         let k = self.cell_ptr[c] + jj;
         &self.runs[self.run_ptr[k]..self.run_ptr[k + 1]]
