@@ -468,12 +468,13 @@ impl<'a> ThicknessTangent<'a> {
                     let r0 = DOFS_PER_PARTICLE * cs.slot + 3;
                     for (b, a) in dir.d_a.iter().enumerate() {
                         let a = a * det;
-                        let ya = a * (sh.psi * inv_ht);
+                        let psi = sh.psi * inv_ht;
+                        // H(y_α)ᵀ a once each: the rows' w₃ and w_α both take it.
+                        let h = [un.hy[0].tr_mul(&a), un.hy[1].tr_mul(&a)];
                         let w = [
-                            un.s.tr_mul(&ya)
-                                + (un.hy[0].tr_mul(&a) * t1 + un.hy[1].tr_mul(&a) * t2) * inv_ht,
-                            un.hy[0].tr_mul(&ya),
-                            un.hy[1].tr_mul(&ya),
+                            un.s.tr_mul(&a) * psi + (h[0] * t1 + h[1] * t2) * inv_ht,
+                            h[0] * psi,
+                            h[1] * psi,
                         ];
                         for (o, wo) in [6, 9, 12].into_iter().zip(&w) {
                             for c in 0..3 {
