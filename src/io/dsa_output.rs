@@ -218,7 +218,7 @@ pub const NOTES: [&str; 6] = [
      hook), the nominal run of the finite differences; timing_s.continuum and timing_s.dual: \
      each method's own time inside its analysis run with the hook (the whole hooked runs: \
      continuum_run_total_s, dual_run_total_s; with both methods asked for, one run observed \
-     by both, so the two totals are the same run's); timing_s.continuum_stages: the continuum DSA by stage (fictitious loads, solve, history update, monitors; s), with the preconditioned iterations (refinement and GMRES steps) of its solves on the converged tangents (krylov_iterations) and the steps where GMRES gave up and the DSA factorised the tangent (krylov_fallbacks); timing_s.fd: all finite-difference re-runs",
+     by both, so the two totals are the same run's); timing_s.continuum_stages: the continuum DSA by stage (fictitious loads, solve, history update, monitors; s), with the preconditioned iterations (GMRES's Arnoldi steps) of its solves on the converged tangents (krylov_iterations) and the steps where GMRES gave up and the DSA factorised the tangent (krylov_fallbacks); timing_s.fd: all finite-difference re-runs",
     "fd_central and fd_step are lists, one entry per step size of the variable's fd_steps \
      (relative steps h/|tau|; fd_step holds the absolute h); fd_flagged[k] marks load steps \
      where the yield status of some layer point differs among the runs at tau-h, tau, tau+h \

@@ -50,7 +50,7 @@ use crate::shell::model::ShellModel;
 use crate::shell::point::{ParticleState, PointHistory, SurfacePoint, DOFS_PER_PARTICLE};
 use crate::shell::point_sensitivity::{commit_particle_dot, ModelSeeds, StepLinearisation};
 use crate::shell::problem::ShellProblem;
-use crate::solver::krylov::{csc_mul, gmres_to};
+use crate::solver::krylov::{csc_abs_mul_columns, gmres_columns_to};
 use crate::solver::newton::{FailureReason, NewtonFailure};
 use crate::solver::observe::{Observed, StepObserver};
 use crate::solver::Failure;
@@ -295,7 +295,7 @@ pub struct ContinuumTiming {
     /// tangent the analysis' driver factorises). Not part of the DSA's own time.
     pub tangent: f64,
     /// Preconditioned iterations of the sensitivity solves ([`SensitivitySolve::Krylov`]:
-    /// refinement steps and Arnoldi steps), over all steps and right-hand sides.
+    /// Arnoldi steps), over all steps and right-hand sides.
     pub krylov_iterations: usize,
     /// Steps whose sensitivity systems GMRES did not solve within its budget
     /// ([`SensitivitySolve::Krylov`]): the DSA factorised the tangent itself there.
@@ -321,11 +321,11 @@ pub enum SensitivitySolve {
     /// Iteratively on the converged tangent, which the driver assembles where it tests
     /// convergence but does not factorise (`ConvergedTangent::Assembled`), preconditioned by
     /// the factorisation the driver holds (an earlier iterate's), to a residual of
-    /// [`KRYLOV_RTOL`] of each right-hand side: the preconditioner's solution of all
-    /// right-hand sides and one step of iterative refinement, each one pass over the factors,
-    /// then GMRES on the columns still above the tolerance. A step whose systems GMRES does
-    /// not solve within [`KRYLOV_MAX_ITERATIONS`] is solved with a factorisation of the
-    /// DSA's own.
+    /// [`KRYLOV_RTOL`] of each right-hand side: from the preconditioner's solution of all
+    /// right-hand sides, GMRES on the columns above the tolerance in lock step
+    /// ([`gmres_columns_to`]: each Arnoldi step reads the factors and the tangent once for all
+    /// of them). A step whose systems GMRES does not solve within [`KRYLOV_MAX_ITERATIONS`] is
+    /// solved with a factorisation of the DSA's own.
     #[default]
     Krylov,
 }
@@ -575,98 +575,44 @@ impl ContinuumDsa {
         };
         let n = pattern.n_dofs();
         let norm = |a: &[f64]| a.iter().map(|t| t * t).sum::<f64>().sqrt();
-        // The residuals `b − K x` of the columns `cols` of `x` into `r` (one n-block each), and
-        // the columns whose residual is above KRYLOV_RTOL of their right-hand side.
-        let residuals = |x: &[f64], b: &[f64], cols: &[usize], r: &mut Vec<f64>| {
-            r.resize(n * cols.len(), 0.0);
-            let mut above = Vec::new();
-            for (k, &v) in cols.iter().enumerate() {
-                let rk = &mut r[k * n..(k + 1) * n];
-                let (xv, bv) = (&x[v * n..(v + 1) * n], &b[v * n..(v + 1) * n]);
-                csc_mul(pattern, values, xv, rk);
-                for (ri, bi) in rk.iter_mut().zip(bv) {
-                    *ri = bi - *ri;
-                }
-                if norm(rk) > KRYLOV_RTOL * norm(bv) {
-                    above.push(v);
-                }
-            }
-            above
-        };
         // The preconditioner's solutions of all columns in one pass (the factors are read
-        // once), then one step of iterative refinement of the columns whose residual with the
-        // converged tangent is above the tolerance, again in one pass.
+        // once): GMRES's initial guesses.
         let mut x = b[..n * nv].to_vec();
         preconditioner
             .solve_columns_in_place(&mut x, nv)
             .map_err(fatal)?;
-        let all: Vec<usize> = (0..nv).collect();
-        let mut r = Vec::new();
-        let mut pending = residuals(&x, b, &all, &mut r);
-        if !pending.is_empty() {
-            let mut d = Vec::with_capacity(n * pending.len());
-            for &v in &pending {
-                let k = all.iter().position(|&c| c == v).expect("a column");
-                d.extend_from_slice(&r[k * n..(k + 1) * n]);
-            }
-            preconditioner
-                .solve_columns_in_place(&mut d, pending.len())
-                .map_err(fatal)?;
-            for (k, &v) in pending.iter().enumerate() {
-                for (a, c) in x[v * n..(v + 1) * n].iter_mut().zip(&d[k * n..(k + 1) * n]) {
-                    *a += c;
-                }
-            }
-            self.timing.krylov_iterations += pending.len();
-            let cols = pending.clone();
-            let still = residuals(&x, b, &cols, &mut r);
-            // GMRES on the columns still above it, to KRYLOV_RTOL of the right-hand side or
-            // the round-off of the residual's own evaluation, `ε |K| |x|` (the size of the
-            // terms that cancel in r), which a backward-stable solve leaves too.
-            let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
-            let (mut scale, mut dv) = (vec![0.0; n], vec![0.0; n]);
-            pending.clear();
-            for &v in &still {
-                let k = cols.iter().position(|&c| c == v).expect("a column");
-                let rk = &r[k * n..(k + 1) * n];
-                let xv = &mut x[v * n..(v + 1) * n];
-                scale.fill(0.0);
-                for j in 0..n {
-                    for p in cp[j]..cp[j + 1] {
-                        scale[ri[p]] += (values[p] * xv[j]).abs();
-                    }
-                }
-                let tol = (KRYLOV_RTOL * norm(&b[v * n..(v + 1) * n]))
-                    .max(16.0 * f64::EPSILON * norm(&scale));
-                if norm(rk) <= tol {
-                    continue;
-                }
-                let info = gmres_to(
-                    pattern,
-                    values,
-                    preconditioner,
-                    rk,
-                    &mut dv,
-                    tol,
-                    KRYLOV_MAX_ITERATIONS,
-                    false,
-                )
-                .map_err(fatal)?;
-                match info {
-                    Some(info) => {
-                        self.timing.krylov_iterations += info.iterations;
-                        for (a, c) in xv.iter_mut().zip(&dv) {
-                            *a += c;
-                        }
-                    }
-                    None => pending.push(v),
-                }
-            }
-        }
-        let mut solved = vec![true; nv];
-        for &v in &pending {
-            solved[v] = false;
-        }
+        // Each column's tolerance: KRYLOV_RTOL of its right-hand side or the round-off of its
+        // residual's own evaluation, `16 ε ‖ |K| |x| ‖` (the size of the terms that cancel in
+        // `b − K x`), which a backward-stable direct solve leaves too; `|K| |x|` of all
+        // columns in one pass over the matrix.
+        let mut scale = vec![0.0; n * nv];
+        csc_abs_mul_columns(pattern, values, &x, nv, &mut scale);
+        let tols: Vec<f64> = (0..nv)
+            .map(|v| {
+                (KRYLOV_RTOL * norm(&b[v * n..(v + 1) * n]))
+                    .max(16.0 * f64::EPSILON * norm(&scale[v * n..(v + 1) * n]))
+            })
+            .collect();
+        // GMRES on the columns whose residual with the converged tangent is above their
+        // tolerance, in lock step (one pass over the factors and the matrix per Arnoldi step
+        // for all of them).
+        let outcome = gmres_columns_to(
+            pattern,
+            values,
+            preconditioner,
+            &b[..n * nv],
+            &mut x,
+            nv,
+            &tols,
+            KRYLOV_MAX_ITERATIONS,
+        )
+        .map_err(fatal)?;
+        self.timing.krylov_iterations += outcome
+            .iter()
+            .flatten()
+            .map(|i| i.iterations)
+            .sum::<usize>();
+        let solved: Vec<bool> = outcome.iter().map(Option::is_some).collect();
         for (v, col) in b.chunks_mut(n).enumerate().take(nv) {
             if solved[v] {
                 col.copy_from_slice(&x[v * n..(v + 1) * n]);

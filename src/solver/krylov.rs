@@ -37,14 +37,14 @@ pub fn csc_mul(pattern: &SparsityPattern, values: &[f64], x: &[f64], y: &mut [f6
     let nnz = cp[cp.len() - 1];
     y.fill(0.0);
     if nnz < PAR_PRODUCT_NNZ {
-        csc_mul_columns(pattern, values, x, 0..x.len(), y);
+        csc_mul_range(pattern, values, x, 0..x.len(), y);
         return;
     }
     let mid = cp.partition_point(|&p| p < nnz / 2).min(x.len());
     let mut upper = vec![0.0; y.len()];
     rayon::join(
-        || csc_mul_columns(pattern, values, x, 0..mid, y),
-        || csc_mul_columns(pattern, values, x, mid..x.len(), &mut upper),
+        || csc_mul_range(pattern, values, x, 0..mid, y),
+        || csc_mul_range(pattern, values, x, mid..x.len(), &mut upper),
     );
     for (yi, ui) in y.iter_mut().zip(&upper) {
         *yi += ui;
@@ -52,7 +52,7 @@ pub fn csc_mul(pattern: &SparsityPattern, values: &[f64], x: &[f64], y: &mut [f6
 }
 
 /// `y += A[:, cols] x[cols]`.
-fn csc_mul_columns(
+fn csc_mul_range(
     pattern: &SparsityPattern,
     values: &[f64],
     x: &[f64],
@@ -235,4 +235,294 @@ pub fn gmres_to(
         iterations: k,
         relative_residual: res / b_norm,
     }))
+}
+
+/// `Y = A X` for the `k` columns of `x` (column-major, `n` rows each) into `y`, with the
+/// matrix read once for all of them. Below `PAR_PRODUCT_NNZ` stored entries times `k` each
+/// column's sums are formed in [`csc_mul`]'s order (the same bits as a product of that column
+/// alone); above it the columns of `A` are split in two halves as in [`csc_mul`], so the
+/// result does not depend on the number of threads.
+pub fn csc_mul_columns(
+    pattern: &SparsityPattern,
+    values: &[f64],
+    x: &[f64],
+    k: usize,
+    y: &mut [f64],
+) {
+    csc_mul_columns_with::<false>(pattern, values, x, k, y);
+}
+
+/// `Y = |A| |X|` (entrywise absolute values) for the `k` columns of `x`, as
+/// [`csc_mul_columns`]: the size of the terms that cancel in a residual `b − A x`.
+pub fn csc_abs_mul_columns(
+    pattern: &SparsityPattern,
+    values: &[f64],
+    x: &[f64],
+    k: usize,
+    y: &mut [f64],
+) {
+    csc_mul_columns_with::<true>(pattern, values, x, k, y);
+}
+
+fn csc_mul_columns_with<const ABS: bool>(
+    pattern: &SparsityPattern,
+    values: &[f64],
+    x: &[f64],
+    k: usize,
+    y: &mut [f64],
+) {
+    let n = pattern.n_dofs();
+    let cp = pattern.col_ptr();
+    let nnz = cp[cp.len() - 1];
+    y[..n * k].fill(0.0);
+    if nnz * k < PAR_PRODUCT_NNZ {
+        csc_mul_many::<ABS>(pattern, values, x, k, 0..n, &mut y[..n * k]);
+        return;
+    }
+    let mid = cp.partition_point(|&p| p < nnz / 2).min(n);
+    let mut upper = vec![0.0; n * k];
+    rayon::join(
+        || csc_mul_many::<ABS>(pattern, values, x, k, 0..mid, &mut y[..n * k]),
+        || csc_mul_many::<ABS>(pattern, values, x, k, mid..n, &mut upper),
+    );
+    for (yi, ui) in y.iter_mut().zip(&upper) {
+        *yi += ui;
+    }
+}
+
+/// Columns of a product formed together: each stored entry is read once and multiplies
+/// this many interleaved values (two SIMD lanes of two, or one of four).
+const PRODUCT_GROUP: usize = 4;
+
+/// `Y += A[:, cols] X[cols, :]` for `k` column-major columns, in groups of
+/// [`PRODUCT_GROUP`] columns interleaved row by row (with `ABS`, of `|A|` and `|X|`).
+fn csc_mul_many<const ABS: bool>(
+    pattern: &SparsityPattern,
+    values: &[f64],
+    x: &[f64],
+    k: usize,
+    cols: std::ops::Range<usize>,
+    y: &mut [f64],
+) {
+    const G: usize = PRODUCT_GROUP;
+    let n = pattern.n_dofs();
+    let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
+    let mut xi = vec![[0.0f64; G]; n];
+    let mut yi = vec![[0.0f64; G]; n];
+    for g in (0..k).step_by(G) {
+        let w = (k - g).min(G);
+        for j in cols.clone() {
+            let mut row = [0.0; G];
+            for (c, r) in row.iter_mut().enumerate().take(w) {
+                let v = x[(g + c) * n + j];
+                *r = if ABS { v.abs() } else { v };
+            }
+            xi[j] = row;
+        }
+        yi.fill([0.0; G]);
+        for j in cols.clone() {
+            let xj = xi[j];
+            for p in cp[j]..cp[j + 1] {
+                let a = if ABS { values[p].abs() } else { values[p] };
+                let yr = &mut yi[ri[p]];
+                for c in 0..G {
+                    yr[c] += a * xj[c];
+                }
+            }
+        }
+        for c in 0..w {
+            for (yv, r) in y[(g + c) * n..(g + c + 1) * n].iter_mut().zip(&yi) {
+                *yv += r[c];
+            }
+        }
+    }
+}
+
+/// One column's Arnoldi process in [`gmres_columns_to`].
+struct ColumnArnoldi {
+    /// The column's index among the right-hand sides.
+    col: usize,
+    tol: f64,
+    v: Vec<Vec<f64>>,
+    zs: Vec<Vec<f64>>,
+    r: Vec<Vec<f64>>,
+    rot: Vec<(f64, f64)>,
+    g: Vec<f64>,
+}
+
+impl ColumnArnoldi {
+    /// Takes the product `w = A M⁻¹ v_j` of step `j`: orthogonalises it, rotates the new
+    /// Hessenberg column, and tells whether the column is done (`Some(true)`: converged or
+    /// an invariant space, `Some(false)`: broken down) or goes on (`None`).
+    fn step(&mut self, z: Vec<f64>, mut w: Vec<f64>) -> Option<bool> {
+        let j = self.zs.len();
+        self.zs.push(z);
+        let mut h = Vec::with_capacity(j + 2);
+        for vi in &self.v {
+            let hij = dot(&w, vi);
+            for (wk, vk) in w.iter_mut().zip(vi) {
+                *wk -= hij * vk;
+            }
+            h.push(hij);
+        }
+        let h_next = norm(&w);
+        h.push(h_next);
+        for (i, &(c, s)) in self.rot.iter().enumerate() {
+            let (a, bb) = (h[i], h[i + 1]);
+            h[i] = c * a + s * bb;
+            h[i + 1] = -s * a + c * bb;
+        }
+        let (a, bb) = (h[j], h[j + 1]);
+        let d = a.hypot(bb);
+        if d == 0.0 || !d.is_finite() {
+            return Some(false);
+        }
+        let (c, s) = (a / d, bb / d);
+        h[j] = d;
+        h[j + 1] = 0.0;
+        self.rot.push((c, s));
+        let gj = self.g[j];
+        self.g[j] = c * gj;
+        self.g.push(-s * gj);
+        h.truncate(j + 1);
+        self.r.push(h);
+        if self.g[j + 1].abs() <= self.tol || h_next == 0.0 {
+            // Converged, or the Krylov space is invariant and the least-squares solution
+            // exact.
+            return Some(true);
+        }
+        w.iter_mut().for_each(|x| *x /= h_next);
+        self.v.push(w);
+        None
+    }
+
+    /// `x += M⁻¹ V y` with `R y = g` (back substitution).
+    fn update(&self, x: &mut [f64]) {
+        let k = self.r.len();
+        let mut y = vec![0.0; k];
+        for i in (0..k).rev() {
+            let mut s = self.g[i];
+            for (l, yl) in y.iter().enumerate().take(k).skip(i + 1) {
+                s -= self.r[l][i] * yl;
+            }
+            y[i] = s / self.r[i][i];
+        }
+        for (zi, yi) in self.zs.iter().zip(&y) {
+            for (xk, zk) in x.iter_mut().zip(zi) {
+                *xk += yi * zk;
+            }
+        }
+    }
+}
+
+/// [`gmres_to`] for the `k` right-hand sides in the columns of `b` (column-major, `n` rows
+/// each) at once, from the initial guesses in `x`, each column to its own absolute tolerance
+/// `tols[c]` on `‖b_c − A x_c‖`. The columns run their own Arnoldi processes in lock step,
+/// so that each step reads the factors once ([`LinearSolver::solve_columns_in_place`]) and the
+/// matrix once ([`csc_mul_columns`]) for all columns still iterating; a column leaves when it
+/// converges. Per column, the same iteration as [`gmres_to`] from the guess `x_c` (whose
+/// chord step `M⁻¹ b` is the usual one), without the early abort.
+///
+/// Returns each column's outcome: `None` where it did not converge within `max_iterations`
+/// or its true residual missed its tolerance by more than a factor 10 (that column of `x` is
+/// then unspecified).
+#[allow(clippy::too_many_arguments)]
+pub fn gmres_columns_to(
+    pattern: &SparsityPattern,
+    values: &[f64],
+    m: &LinearSolver,
+    b: &[f64],
+    x: &mut [f64],
+    k: usize,
+    tols: &[f64],
+    max_iterations: usize,
+) -> Result<Vec<Option<GmresInfo>>, SolverError> {
+    let n = pattern.n_dofs();
+    let mut ax = vec![0.0; n * k];
+    csc_mul_columns(pattern, values, x, k, &mut ax);
+    let mut out: Vec<Option<GmresInfo>> = vec![None; k];
+    let mut active = Vec::new();
+    for c in 0..k {
+        let bc = &b[c * n..(c + 1) * n];
+        let r0: Vec<f64> = bc
+            .iter()
+            .zip(&ax[c * n..(c + 1) * n])
+            .map(|(bi, ai)| bi - ai)
+            .collect();
+        let beta = norm(&r0);
+        let b_norm = norm(bc);
+
+        if beta <= tols[c] {
+            out[c] = Some(GmresInfo {
+                iterations: 0,
+                relative_residual: if b_norm > 0.0 { beta / b_norm } else { 0.0 },
+            });
+            continue;
+        }
+        active.push(ColumnArnoldi {
+            col: c,
+            tol: tols[c],
+            v: vec![r0.iter().map(|r| r / beta).collect()],
+            zs: Vec::new(),
+            r: Vec::new(),
+            rot: Vec::new(),
+            g: vec![beta],
+        });
+    }
+    let mut done = Vec::new();
+    let mut zbuf = Vec::new();
+    let mut wbuf = Vec::new();
+    for _ in 0..max_iterations {
+        if active.is_empty() {
+            break;
+        }
+        let na = active.len();
+        zbuf.clear();
+        for a in &active {
+            zbuf.extend_from_slice(a.v.last().expect("a basis vector"));
+        }
+        m.solve_columns_in_place(&mut zbuf, na)?;
+        wbuf.resize(n * na, 0.0);
+        csc_mul_columns(pattern, values, &zbuf, na, &mut wbuf);
+        let mut still = Vec::with_capacity(na);
+        for (i, mut a) in active.drain(..).enumerate() {
+            let z = zbuf[i * n..(i + 1) * n].to_vec();
+            let w = wbuf[i * n..(i + 1) * n].to_vec();
+            match a.step(z, w) {
+                None => still.push(a),
+                Some(true) => done.push(a),
+                Some(false) => {}
+            }
+        }
+        active = still;
+    }
+    // The converged columns' updates and their true residuals, in one product.
+    for a in &done {
+        a.update(&mut x[a.col * n..(a.col + 1) * n]);
+    }
+    if !done.is_empty() {
+        let mut xs = Vec::with_capacity(n * done.len());
+        for a in &done {
+            xs.extend_from_slice(&x[a.col * n..(a.col + 1) * n]);
+        }
+        let mut axs = vec![0.0; n * done.len()];
+        csc_mul_columns(pattern, values, &xs, done.len(), &mut axs);
+        for (i, a) in done.iter().enumerate() {
+            let bc = &b[a.col * n..(a.col + 1) * n];
+            let res = bc
+                .iter()
+                .zip(&axs[i * n..(i + 1) * n])
+                .map(|(bi, ai)| (bi - ai).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            // A NaN residual fails too.
+            if !(res.is_nan() || res > 10.0 * a.tol) {
+                out[a.col] = Some(GmresInfo {
+                    iterations: a.r.len(),
+                    relative_residual: res / norm(bc),
+                });
+            }
+        }
+    }
+    Ok(out)
 }
