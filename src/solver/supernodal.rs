@@ -842,15 +842,23 @@ pub(crate) fn permutation_is_odd(p: &[usize]) -> bool {
     transpositions % 2 == 1
 }
 
-/// Reorder rows `0..p.len()` of `a` so that new row `i` is old row `p[i]`.
+/// Reorder rows `0..p.len()` of `a` so that new row `i` is old row `p[i]`. Only the rows the
+/// permutation moves are touched (they are a permutation of themselves): a panel's pivoting
+/// swaps a few rows of a block of hundreds.
 fn permute_rows(mut a: MatMut<'_, f64>, p: &[usize], tmp: &mut Vec<f64>) {
-    tmp.resize(p.len(), 0.0);
+    let moved: Vec<(usize, usize)> = p
+        .iter()
+        .enumerate()
+        .filter(|&(i, &pi)| i != pi)
+        .map(|(i, &pi)| (i, pi))
+        .collect();
+    tmp.resize(moved.len(), 0.0);
     for j in 0..a.ncols() {
         let mut col = a.rb_mut().col_mut(j);
-        for (t, &pi) in tmp.iter_mut().zip(p) {
+        for (t, &(_, pi)) in tmp.iter_mut().zip(&moved) {
             *t = col[pi];
         }
-        for (i, t) in tmp.iter().enumerate() {
+        for (&(i, _), t) in moved.iter().zip(tmp.iter()) {
             col[i] = *t;
         }
     }
