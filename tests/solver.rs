@@ -1688,13 +1688,25 @@ fn gmres_on_several_columns_in_lock_step_matches_gmres_column_by_column() {
     for c in 0..k {
         let info = out[c].expect("converges");
         let mut xc = vec![0.0; n];
-        let alone = gmres_to(&p, &ad, &m, &b[c * n..(c + 1) * n], &mut xc, tols[c], 40, false)
-            .unwrap()
-            .expect("converges alone");
+        let alone = gmres_to(
+            &p,
+            &ad,
+            &m,
+            &b[c * n..(c + 1) * n],
+            &mut xc,
+            tols[c],
+            40,
+            false,
+        )
+        .unwrap()
+        .expect("converges alone");
         println!("column {c}: together {info:?}, alone {alone:?}");
         assert_eq!(info.iterations, alone.iterations, "column {c}");
         let bn = norm(&b[c * n..(c + 1) * n]);
-        assert!(info.relative_residual * bn <= 10.0 * tols[c], "column {c}: {info:?}");
+        assert!(
+            info.relative_residual * bn <= 10.0 * tols[c],
+            "column {c}: {info:?}"
+        );
         let d = xc
             .iter()
             .zip(&x[c * n..(c + 1) * n])

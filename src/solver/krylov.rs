@@ -137,89 +137,35 @@ pub fn gmres_to(
             relative_residual: beta / b_norm,
         }));
     }
-    let mut v: Vec<Vec<f64>> = vec![r0.iter().map(|r| r / beta).collect()];
-    // Columns of the Hessenberg matrix after the rotations (upper triangular R), the
-    // rotations (c, s) and the rotated right-hand side g.
-    let mut r: Vec<Vec<f64>> = Vec::new();
-    let mut rot: Vec<(f64, f64)> = Vec::new();
-    let mut g = vec![beta];
-    // The preconditioned basis `M⁻¹ v_j`, kept so that the update `M⁻¹ V y` costs no
-    // further solve.
-    let mut zs: Vec<Vec<f64>> = Vec::new();
-    let mut w = vec![0.0; n];
+    let mut col = ColumnArnoldi::new(0, tol, &r0, beta);
     let mut converged = false;
     for j in 0..max_iterations {
-        let mut z = v[j].clone();
+        let mut z = col.last().to_vec();
         m.solve_in_place(&mut z)?;
+        let mut w = vec![0.0; n];
         csc_mul(pattern, values, &z, &mut w);
-        zs.push(z);
-        let mut h = Vec::with_capacity(j + 2);
-        for vi in &v {
-            let hij = dot(&w, vi);
-            for (wk, vk) in w.iter_mut().zip(vi) {
-                *wk -= hij * vk;
+        match col.step(z, w) {
+            Some(true) => {
+                converged = true;
+                break;
             }
-            h.push(hij);
-        }
-        let h_next = norm(&w);
-        h.push(h_next);
-        for (i, &(c, s)) in rot.iter().enumerate() {
-            let (a, bb) = (h[i], h[i + 1]);
-            h[i] = c * a + s * bb;
-            h[i + 1] = -s * a + c * bb;
-        }
-        let (a, bb) = (h[j], h[j + 1]);
-        let d = a.hypot(bb);
-        if d == 0.0 || !d.is_finite() {
-            return Ok(None);
-        }
-        let (c, s) = (a / d, bb / d);
-        h[j] = d;
-        h[j + 1] = 0.0;
-        rot.push((c, s));
-        let gj = g[j];
-        g[j] = c * gj;
-        g.push(-s * gj);
-        h.truncate(j + 1);
-        r.push(h);
-        if g[j + 1].abs() <= tol {
-            converged = true;
-            break;
+            Some(false) => return Ok(None),
+            None => {}
         }
         if abort_early && (j + 1) % ABORT_EVERY == 0 {
             // Steps in all at the mean contraction so far.
-            let rate = (g[j + 1].abs() / beta).ln() / (j + 1) as f64;
+            let rate = (col.residual_estimate() / beta).ln() / (j + 1) as f64;
             let needed = (tol / beta).ln() / rate;
             if rate >= 0.0 || needed > max_iterations as f64 {
                 return Ok(None);
             }
         }
-        if h_next == 0.0 {
-            // Lucky breakdown: the Krylov space is invariant and the least-squares solution
-            // exact.
-            converged = true;
-            break;
-        }
-        v.push(w.iter().map(|x| x / h_next).collect());
     }
     if !converged {
         return Ok(None);
     }
-    // Back substitution R y = g, then x += M⁻¹ V y = Σ y_i M⁻¹ v_i.
-    let k = r.len();
-    let mut y = vec![0.0; k];
-    for i in (0..k).rev() {
-        let mut s = g[i];
-        for (l, yl) in y.iter().enumerate().take(k).skip(i + 1) {
-            s -= r[l][i] * yl;
-        }
-        y[i] = s / r[i][i];
-    }
-    for (zi, yi) in zs.iter().zip(&y) {
-        for (xk, zk) in x.iter_mut().zip(zi) {
-            *xk += yi * zk;
-        }
-    }
+    col.update(x);
+    let k = col.r.len();
     csc_mul(pattern, values, x, &mut ax);
     let res = b
         .iter()
@@ -338,7 +284,11 @@ fn csc_mul_many<const ABS: bool>(
     }
 }
 
-/// One column's Arnoldi process in [`gmres_columns_to`].
+/// One right-hand side's Arnoldi process ([`gmres_to`], [`gmres_columns_to`]): the
+/// orthonormal basis `V` of the Krylov space of `A M⁻¹` on `r₀` (modified Gram–Schmidt), the
+/// preconditioned basis `M⁻¹ v_j` (kept so that the update costs no further solve), the
+/// Hessenberg columns after the Givens rotations (upper triangular `R`), the rotations and the
+/// rotated right-hand side `g`.
 struct ColumnArnoldi {
     /// The column's index among the right-hand sides.
     col: usize,
@@ -351,6 +301,29 @@ struct ColumnArnoldi {
 }
 
 impl ColumnArnoldi {
+    /// The process of column `col` on the residual `r0` of norm `beta > 0`, to `‖r‖ ≤ tol`.
+    fn new(col: usize, tol: f64, r0: &[f64], beta: f64) -> Self {
+        Self {
+            col,
+            tol,
+            v: vec![r0.iter().map(|r| r / beta).collect()],
+            zs: Vec::new(),
+            r: Vec::new(),
+            rot: Vec::new(),
+            g: vec![beta],
+        }
+    }
+
+    /// The newest basis vector `v_j`, which step `j` applies `A M⁻¹` to.
+    fn last(&self) -> &[f64] {
+        self.v.last().expect("a basis vector")
+    }
+
+    /// The residual norm of the least-squares solution so far, `|g_{j+1}|`.
+    fn residual_estimate(&self) -> f64 {
+        self.g.last().expect("g starts with β").abs()
+    }
+
     /// Takes the product `w = A M⁻¹ v_j` of step `j`: orthogonalises it, rotates the new
     /// Hessenberg column, and tells whether the column is done (`Some(true)`: converged or
     /// an invariant space, `Some(false)`: broken down) or goes on (`None`).
@@ -459,15 +432,7 @@ pub fn gmres_columns_to(
             });
             continue;
         }
-        active.push(ColumnArnoldi {
-            col: c,
-            tol: tols[c],
-            v: vec![r0.iter().map(|r| r / beta).collect()],
-            zs: Vec::new(),
-            r: Vec::new(),
-            rot: Vec::new(),
-            g: vec![beta],
-        });
+        active.push(ColumnArnoldi::new(c, tols[c], &r0, beta));
     }
     let mut done = Vec::new();
     let mut zbuf = Vec::new();
@@ -479,7 +444,7 @@ pub fn gmres_columns_to(
         let na = active.len();
         zbuf.clear();
         for a in &active {
-            zbuf.extend_from_slice(a.v.last().expect("a basis vector"));
+            zbuf.extend_from_slice(a.last());
         }
         m.solve_columns_in_place(&mut zbuf, na)?;
         wbuf.resize(n * na, 0.0);
