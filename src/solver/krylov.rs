@@ -33,19 +33,32 @@ const PAR_PRODUCT_NNZ: usize = 1 << 20;
 /// stored entries, fixed by the pattern): the second half sums into a buffer that is added
 /// to `y` at the end, so the result does not depend on the number of threads.
 pub fn csc_mul(pattern: &SparsityPattern, values: &[f64], x: &[f64], y: &mut [f64]) {
+    let nnz = pattern.nnz();
+    in_halves(pattern, nnz, y, |cols, y| {
+        csc_mul_range(pattern, values, x, cols, y)
+    });
+}
+
+/// `y = 0`, then `part(cols, y)` adds the product of the columns `cols` of a matrix over
+/// `pattern` into `y`: over all columns at once when `work` (stored entries times columns) is
+/// below `PAR_PRODUCT_NNZ`, else in two halves (split at the column that halves the stored entries, fixed by the pattern) on two
+/// rayon tasks, the second into a buffer added to `y` at the end, so that the result does not
+/// depend on the number of threads.
+fn in_halves<F>(pattern: &SparsityPattern, work: usize, y: &mut [f64], part: F)
+where
+    F: Fn(std::ops::Range<usize>, &mut [f64]) + Sync,
+{
+    let n = pattern.n_dofs();
     let cp = pattern.col_ptr();
     let nnz = cp[cp.len() - 1];
     y.fill(0.0);
-    if nnz < PAR_PRODUCT_NNZ {
-        csc_mul_range(pattern, values, x, 0..x.len(), y);
+    if work < PAR_PRODUCT_NNZ {
+        part(0..n, y);
         return;
     }
-    let mid = cp.partition_point(|&p| p < nnz / 2).min(x.len());
+    let mid = cp.partition_point(|&p| p < nnz / 2).min(n);
     let mut upper = vec![0.0; y.len()];
-    rayon::join(
-        || csc_mul_range(pattern, values, x, 0..mid, y),
-        || csc_mul_range(pattern, values, x, mid..x.len(), &mut upper),
-    );
+    rayon::join(|| part(0..mid, y), || part(mid..n, &mut upper));
     for (yi, ui) in y.iter_mut().zip(&upper) {
         *yi += ui;
     }
@@ -218,22 +231,9 @@ fn csc_mul_columns_with<const ABS: bool>(
     y: &mut [f64],
 ) {
     let n = pattern.n_dofs();
-    let cp = pattern.col_ptr();
-    let nnz = cp[cp.len() - 1];
-    y[..n * k].fill(0.0);
-    if nnz * k < PAR_PRODUCT_NNZ {
-        csc_mul_many::<ABS>(pattern, values, x, k, 0..n, &mut y[..n * k]);
-        return;
-    }
-    let mid = cp.partition_point(|&p| p < nnz / 2).min(n);
-    let mut upper = vec![0.0; n * k];
-    rayon::join(
-        || csc_mul_many::<ABS>(pattern, values, x, k, 0..mid, &mut y[..n * k]),
-        || csc_mul_many::<ABS>(pattern, values, x, k, mid..n, &mut upper),
-    );
-    for (yi, ui) in y.iter_mut().zip(&upper) {
-        *yi += ui;
-    }
+    in_halves(pattern, pattern.nnz() * k, &mut y[..n * k], |cols, y| {
+        csc_mul_many::<ABS>(pattern, values, x, k, cols, y)
+    });
 }
 
 /// Columns of a product formed together: each stored entry is read once and multiplies
