@@ -178,22 +178,8 @@ pub fn gmres_to(
         return Ok(None);
     }
     col.update(x);
-    let k = col.r.len();
     csc_mul(pattern, values, x, &mut ax);
-    let res = b
-        .iter()
-        .zip(&ax)
-        .map(|(bi, ai)| (bi - ai).powi(2))
-        .sum::<f64>()
-        .sqrt();
-    // A NaN residual fails too.
-    if res.is_nan() || res > 10.0 * tol {
-        return Ok(None);
-    }
-    Ok(Some(GmresInfo {
-        iterations: k,
-        relative_residual: res / b_norm,
-    }))
+    Ok(col.accept(b, &ax))
 }
 
 /// `Y = A X` for the `k` columns of `x` (column-major, `n` rows each) into `y`, with the
@@ -369,6 +355,26 @@ impl ColumnArnoldi {
         None
     }
 
+    /// The outcome of a converged process from the true residual `b − A x` of its updated
+    /// `x` (`ax = A x`): `None` where it missed the tolerance by more than a factor 10 (the
+    /// estimate drifted from the true residual) or is NaN.
+    fn accept(&self, b: &[f64], ax: &[f64]) -> Option<GmresInfo> {
+        let res = b
+            .iter()
+            .zip(ax)
+            .map(|(bi, ai)| (bi - ai).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        // A NaN residual fails too.
+        if res.is_nan() || res > 10.0 * self.tol {
+            return None;
+        }
+        Some(GmresInfo {
+            iterations: self.r.len(),
+            relative_residual: res / norm(b),
+        })
+    }
+
     /// `x += M⁻¹ V y` with `R y = g` (back substitution).
     fn update(&self, x: &mut [f64]) {
         let k = self.r.len();
@@ -473,20 +479,7 @@ pub fn gmres_columns_to(
         let mut axs = vec![0.0; n * done.len()];
         csc_mul_columns(pattern, values, &xs, done.len(), &mut axs);
         for (i, a) in done.iter().enumerate() {
-            let bc = &b[a.col * n..(a.col + 1) * n];
-            let res = bc
-                .iter()
-                .zip(&axs[i * n..(i + 1) * n])
-                .map(|(bi, ai)| (bi - ai).powi(2))
-                .sum::<f64>()
-                .sqrt();
-            // A NaN residual fails too.
-            if !(res.is_nan() || res > 10.0 * a.tol) {
-                out[a.col] = Some(GmresInfo {
-                    iterations: a.r.len(),
-                    relative_residual: res / norm(bc),
-                });
-            }
+            out[a.col] = a.accept(&b[a.col * n..(a.col + 1) * n], &axs[i * n..(i + 1) * n]);
         }
     }
     Ok(out)
