@@ -252,6 +252,7 @@ fn bench_plastic(c: &mut Criterion) {
         let opts = SolverOptions {
             parallelism: par,
             singularity_probe: None,
+            ..SolverOptions::default()
         };
         let mut solver = LinearSolver::new(&pattern, Method::Lu, opts).unwrap();
         let mut dense = LinearSolver::new(&pattern, Method::auto(&pattern), opts).unwrap();

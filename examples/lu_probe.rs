@@ -61,6 +61,7 @@ fn main() {
             SolverOptions {
                 singularity_probe: probe,
                 parallelism: par,
+                ..SolverOptions::default()
             },
         )
         .unwrap();

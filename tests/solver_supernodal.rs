@@ -382,3 +382,77 @@ fn a_singular_matrix_counts_no_factorisation_and_no_fallback() {
     assert_eq!((s.n_factorizations(), s.n_fallbacks()), (0, 0));
     assert!(!s.is_factorized());
 }
+
+#[test]
+fn the_single_precision_preconditioner_solves_to_single_precision_and_gmres_to_double() {
+    // The same factorisation applied as a preconditioner in single precision
+    // (`PreconditionerPrecision::Single`, the default) and in double: on this moderately
+    // conditioned matrix (cond < 1e2) the two differ by single precision's rounding of the
+    // factors and of the substitutions, a relative 6e-8 amplified by the conditioning and the
+    // solve's length, so below 1e-5 of the solution's size and above double precision's
+    // 1e-12 (the single path is really taken). With `Double` the preconditioner is the solve
+    // itself, bit for bit. GMRES with the single-precision preconditioner on the matrix it
+    // factorised still reaches a double-precision tolerance (1e-13), in a few steps.
+    use shelldsa::solver::krylov::gmres_to;
+    let (p, values) = shell_like(10, 0.3);
+    let n = p.n_dofs();
+    let k = 3;
+    let b = rhs(n, k);
+    let solver = |preconditioner| {
+        let options = SolverOptions {
+            preconditioner,
+            ..SolverOptions::default()
+        };
+        let mut s = LinearSolver::new(&p, Method::SupernodalLu, options).unwrap();
+        s.factorize(&values).unwrap();
+        s
+    };
+    let single = solver(PreconditionerPrecision::Single);
+    let double = solver(PreconditionerPrecision::Double);
+    let mut exact = b.clone();
+    double.solve_columns_in_place(&mut exact, k).unwrap();
+    let mut same = b.clone();
+    double.precondition_columns_in_place(&mut same, k).unwrap();
+    assert_eq!(same, exact, "Double: the preconditioner is the solve");
+    let mut rounded = b.clone();
+    single
+        .precondition_columns_in_place(&mut rounded, k)
+        .unwrap();
+    let scale = exact.iter().map(|v| v.abs()).fold(0.0, f64::max);
+    let diff = rounded
+        .iter()
+        .zip(&exact)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    assert!(
+        diff <= 1e-5 * scale && diff >= 1e-12 * scale,
+        "single against double: {diff:.2e} of {scale:.2e}"
+    );
+    for c in 0..k {
+        let bc = &b[c * n..(c + 1) * n];
+        let mut x = vec![0.0; n];
+        let info = gmres_to(
+            &p,
+            &values,
+            &single,
+            bc,
+            &mut x,
+            1e-13 * norm(bc),
+            20,
+            false,
+        )
+        .unwrap()
+        .expect("converges");
+        assert!(
+            info.iterations <= 3,
+            "column {c}: {} steps",
+            info.iterations
+        );
+        let rel = relative_residual(&p, &values, &x, bc);
+        assert!(rel <= 1e-13, "column {c}: residual {rel:.2e}");
+    }
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}

@@ -38,6 +38,12 @@ pub struct CaseAnalysis<'a> {
 }
 
 impl Analysis for CaseAnalysis<'_> {
+    fn solver(&self) -> crate::solver::SolverOptions {
+        crate::solver::SolverOptions {
+            preconditioner: self.case.steps.preconditioner,
+            ..Default::default()
+        }
+    }
     /// The case with the design's thickness, material, surface and tool offsets (each tool's
     /// whole path translated, [`crate::contact::ToolPath::translated`], the tool as built
     /// rotated about its pivot, [`crate::contact::ToolPath::rotated`], and reshaped,

@@ -726,6 +726,7 @@ pub fn run(
         method,
         SolverOptions {
             parallelism,
+            preconditioner: case.steps.preconditioner,
             ..SolverOptions::default()
         },
     )?;

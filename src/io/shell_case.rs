@@ -240,6 +240,8 @@ struct StepsFile {
     #[serde(default)]
     linear_updates: Option<String>,
     #[serde(default)]
+    preconditioner: Option<String>,
+    #[serde(default)]
     line_search: Option<String>,
     #[serde(default)]
     stop_failure: Option<String>,
@@ -590,6 +592,13 @@ pub struct StepsSpec {
     /// Measured on the plastic hemisphere at 17², 25², 33²: `"auto"` and `"krylov"` take the
     /// same CPU time within the machine's noise, so the simplest is the default.
     pub linear_updates: crate::solver::LinearUpdates,
+    /// The precision of the triangular solves that apply a held factorisation as GMRES's
+    /// preconditioner (`steps.preconditioner`): `"single"` (the default: the factors rounded
+    /// to single precision, half the memory traffic) or `"double"`
+    /// ([`crate::solver::PreconditionerPrecision`]). Only the supernodal LU of large systems
+    /// has a single-precision copy; every solution is accepted on its double-precision
+    /// residual either way.
+    pub preconditioner: crate::solver::PreconditionerPrecision,
     /// What an unusable Newton iterate (an inverted cell, a failed return map, a diverged
     /// residual, a singular tangent) leads to (`steps.line_search`): `"on-failure"` (the
     /// default: backtrack along the update, `s` = 1/2 … 1/16, before the step is cut; steps
@@ -2477,6 +2486,15 @@ impl Checker<'_> {
                 ("krylov-held", LinearUpdates::KrylovHeld),
             ],
         )?;
+        let preconditioner = self.keyword(
+            "steps.preconditioner",
+            s.preconditioner.as_deref(),
+            crate::solver::PreconditionerPrecision::Single,
+            &[
+                ("single", crate::solver::PreconditionerPrecision::Single),
+                ("double", crate::solver::PreconditionerPrecision::Double),
+            ],
+        )?;
         let line_search = self.keyword(
             "steps.line_search",
             s.line_search.as_deref(),
@@ -2586,6 +2604,7 @@ impl Checker<'_> {
             easy_iterations,
             predictor,
             linear_updates,
+            preconditioner,
             line_search,
             stop_failure,
             stops: s.stops.clone(),

@@ -91,11 +91,39 @@ impl Parallelism {
     }
 }
 
+/// The precision of the triangular solves that apply a held factorisation as GMRES's
+/// preconditioner ([`LinearSolver::precondition_columns_in_place`]; [`Method::SupernodalLu`]
+/// only, every other method solves in double precision).
+///
+/// The default is [`PreconditionerPrecision::Single`]: a preconditioner solve reads every
+/// stored entry of the factors once, and GMRES on a tangent held over several Newton iterates
+/// is bound by that traffic. A factorisation held over iterates differs from the current
+/// tangent by far more than single precision's rounding, so the Arnoldi steps hardly change,
+/// and every solution is still accepted on its true residual in double precision. Measured on
+/// the plastic hemisphere (`verification/hemisphere-plastic`, whole runs, 2 cores, the two
+/// settings alternated in one sitting): 65 × 65, the solves 28.8–29.0 → 17.1–17.9 s for
+/// 566 → 616 Arnoldi steps, the run 104.1–104.7 → 91.4–93.2 s; 33 × 33, the solves
+/// 3.3–3.5 → 2.5–2.6 s for 439 → 510 steps, the run 14.6–15.2 → 13.9–14.7 s; 17 × 17,
+/// 219 → 228 steps, 2.48–2.64 → 2.42–2.49 s; the same Newton iterations, the monitors equal to
+/// 1e-13. The continuum DSA's solves ([`super::krylov::gmres_columns_to`]) stay in double
+/// precision.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PreconditionerPrecision {
+    /// Factors rounded to single precision once per factorisation, solves in single
+    /// precision (half the memory traffic).
+    #[default]
+    Single,
+    /// The double-precision factors and solve.
+    Double,
+}
+
 /// Options of [`LinearSolver`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SolverOptions {
     /// faer's threading for factorisation and solves.
     pub parallelism: Parallelism,
+    /// The precision of the preconditioner's solves.
+    pub preconditioner: PreconditionerPrecision,
     /// Singularity probe (LU only): after each factorisation solve `A x = A p` for a fixed
     /// vector `p` with entries in [0.5, 1.5] and reject the factorisation if `max|x − p|`
     /// exceeds this bound or is not finite. faer's LU does not report exactly-zero numerical
@@ -110,6 +138,7 @@ impl Default for SolverOptions {
     fn default() -> Self {
         SolverOptions {
             parallelism: Parallelism::Sequential,
+            preconditioner: PreconditionerPrecision::Single,
             singularity_probe: Some(1e-2),
         }
     }
@@ -391,6 +420,10 @@ impl LinearSolver {
             Factor::Dense { .. } => (2.0 / 3.0 * n * n * n, n * n),
             _ => return DEFAULT_REFACTORISATION_COST,
         };
+        // In the units of double-precision solves whatever the preconditioner's precision:
+        // counting a single-precision solve as half (more Arnoldi steps allowed per
+        // factorisation) took the plastic hemisphere's 65² run from 616 to 738 Arnoldi steps
+        // for 37 and 36 factorisations, 91 s to 95 s.
         let step = 2.0 * nnz + 2.0 * factor_entries;
         // The probe is one more solve and product.
         flops / (FACTOR_RATE_RATIO * step.max(1.0)) + 1.0
@@ -766,6 +799,47 @@ impl LinearSolver {
                     solve(rhs);
                 }
             }
+        }
+    }
+
+    /// Apply the factorisation's inverse as a preconditioner to the `k` columns of `b`
+    /// (column-major, length `n·k`), in place: for the supernodal LU with
+    /// [`PreconditionerPrecision::Single`] (the default), in single precision from the
+    /// factors rounded to it, half the memory traffic of [`Self::solve_columns_in_place`]
+    /// (the result differs from that solve's by single precision's rounding, amplified by
+    /// the matrix's conditioning); otherwise that solve itself. Errors as that solve's.
+    pub fn precondition_columns_in_place(
+        &self,
+        b: &mut [f64],
+        k: usize,
+    ) -> Result<(), SolverError> {
+        match &self.factor {
+            Factor::Supernodal {
+                symbolic,
+                numeric,
+                active: false,
+                ..
+            } if self.factorized
+                && self.options.preconditioner == PreconditionerPrecision::Single =>
+            {
+                check_len("precondition: rhs", b.len(), self.n * k)?;
+                if let Some((i, v)) = b.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+                    return Err(SolverError::NonFiniteRhs {
+                        rhs: i / self.n,
+                        row: i % self.n,
+                        value: *v,
+                    });
+                }
+                let mut single = Mat::<f32>::from_fn(self.n, k, |i, j| b[j * self.n + i] as f32);
+                symbolic.solve_single(numeric, single.as_mut());
+                for j in 0..k {
+                    for (i, x) in b[j * self.n..(j + 1) * self.n].iter_mut().enumerate() {
+                        *x = single[(i, j)] as f64;
+                    }
+                }
+                Ok(())
+            }
+            _ => self.solve_columns_in_place(b, k),
         }
     }
 

@@ -30,7 +30,7 @@ pub use assembly::{
     assemble, assemble_vector, assemble_with, AssemblyBuffers, AssemblyError, Execution,
 };
 pub use dirichlet::EssentialBc;
-pub use linear::{LinearSolver, Method, Parallelism, SolverOptions};
+pub use linear::{LinearSolver, Method, Parallelism, PreconditionerPrecision, SolverOptions};
 pub use newton::{
     Acceptance, ArcLength, ArcLengthReport, Backtrack, ConvergedStep, ConvergedTangent,
     CriticalKind, CriticalPoint, FactorisedAt, Failure, FailureReason, LineSearch, LinearUpdates,

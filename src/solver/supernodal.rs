@@ -132,6 +132,10 @@ struct SupernodeFactor {
     u12: Mat<f64>,
     /// Row `i` of the factored block is the block's row `piv[i]`.
     piv: Vec<usize>,
+    /// `panel` and `u12` rounded to single precision, read by the preconditioner's solves
+    /// ([`SupernodalSymbolic::solve_single`]).
+    panel_single: Mat<f32>,
+    u12_single: Mat<f32>,
 }
 
 impl Default for SupernodeFactor {
@@ -140,6 +144,8 @@ impl Default for SupernodeFactor {
             panel: Mat::new(),
             u12: Mat::new(),
             piv: Vec::new(),
+            panel_single: Mat::new(),
+            u12_single: Mat::new(),
         }
     }
 }
@@ -489,6 +495,15 @@ impl SupernodalSymbolic {
         fac.u12.resize_with(k, r, |_, _| 0.0);
         fac.u12.copy_from(f.submatrix(0, k, k, r));
         fac.piv = piv;
+        let SupernodeFactor {
+            panel,
+            u12,
+            panel_single,
+            u12_single,
+            ..
+        } = &mut *fac;
+        round_into(panel.as_ref(), panel_single);
+        round_into(u12.as_ref(), u12_single);
         drop(fac);
         Front { m, data }
     }
@@ -532,10 +547,22 @@ impl SupernodalSymbolic {
     /// front. Subtrees then write disjoint rows only, so independent subtrees run as rayon
     /// tasks; every operation and its order is fixed by the pattern alone, and the result is
     /// bit-identical for any number of threads.
-    pub fn solve(&self, numeric: &SupernodalNumeric, mut rhs: MatMut<'_, f64>) {
+    pub fn solve(&self, numeric: &SupernodalNumeric, rhs: MatMut<'_, f64>) {
+        self.solve_with::<f64>(numeric, rhs);
+    }
+
+    /// [`Self::solve`] with the factors rounded to single precision, in single precision:
+    /// half the memory traffic of the double-precision solve, for a preconditioner (the
+    /// rounding perturbs the factors by a relative 6e-8, far less than the staleness of a
+    /// factorisation held over Newton iterates).
+    pub fn solve_single(&self, numeric: &SupernodalNumeric, rhs: MatMut<'_, f32>) {
+        self.solve_with::<f32>(numeric, rhs);
+    }
+
+    fn solve_with<T: Precision>(&self, numeric: &SupernodalNumeric, mut rhs: MatMut<'_, T>) {
         let n = self.n;
         let nrhs = rhs.ncols();
-        let mut x = Mat::<f64>::zeros(n, nrhs);
+        let mut x = Mat::<T>::zeros(n, nrhs);
         for j in 0..nrhs {
             for (new, &old) in self.perm.iter().enumerate() {
                 x[(new, j)] = rhs[(old, j)];
@@ -551,7 +578,7 @@ impl SupernodalSymbolic {
                     parts.push((s, a));
                     rest = b;
                 }
-                let no_rows = Mat::<f64>::zeros(0, nrhs);
+                let no_rows = Mat::<T>::zeros(0, nrhs);
                 parts
                     .into_par_iter()
                     .with_max_len(1)
@@ -570,12 +597,13 @@ impl SupernodalSymbolic {
     }
 
     /// The children of `s` with their rows of `x` (the subtree's rows, children first).
-    fn split_children<'a>(
+    #[allow(clippy::type_complexity)]
+    fn split_children<'a, T: Precision>(
         &self,
         first: &[usize],
         s: usize,
-        x: MatMut<'a, f64>,
-    ) -> (Vec<(usize, MatMut<'a, f64>)>, MatMut<'a, f64>) {
+        x: MatMut<'a, T>,
+    ) -> (Vec<(usize, MatMut<'a, T>)>, MatMut<'a, T>) {
         let (mut rest, own) = x.split_at_row_mut(self.begin[s] - self.begin[first[s]]);
         let kids = self.kids(s);
         let mut parts = Vec::with_capacity(kids.len());
@@ -595,15 +623,15 @@ impl SupernodalSymbolic {
     /// Forward substitution `L y = P b` over the subtree of `s`, whose rows of `x` (children's
     /// subtrees, then `s`'s own columns) hold `P b` and receive `y`; returns the subtree's
     /// update to the rows of `s`'s pattern (to be added to the parent's front).
-    fn forward(
+    fn forward<T: Precision>(
         &self,
         numeric: &SupernodalNumeric,
         first: &[usize],
         s: usize,
-        x: MatMut<'_, f64>,
-    ) -> Mat<f64> {
+        x: MatMut<'_, T>,
+    ) -> Mat<T> {
         let (parts, mut own) = self.split_children(first, s, x);
-        let updates: Vec<Mat<f64>> = if self.solve_in_parallel(s) {
+        let updates: Vec<Mat<T>> = if self.solve_in_parallel(s) {
             parts
                 .into_par_iter()
                 .with_max_len(1)
@@ -617,7 +645,7 @@ impl SupernodalSymbolic {
         };
         let nrhs = own.ncols();
         let (k, r) = (self.k(s), self.r(s));
-        let mut front = Mat::<f64>::zeros(k + r, nrhs);
+        let mut front = Mat::<T>::zeros(k + r, nrhs);
         front.as_mut().subrows_mut(0, k).copy_from(own.rb());
         for (&c, upd) in self.kids(s).iter().zip(&updates) {
             let rel = &self.rel[self.rows_ptr[c]..self.rows_ptr[c + 1]];
@@ -633,7 +661,7 @@ impl SupernodalSymbolic {
                 own[(i, j)] = front[(p, j)];
             }
         }
-        let panel = fac.panel.as_ref();
+        let panel = T::panel(&fac);
         tri::solve_unit_lower_triangular_in_place(
             panel.submatrix(0, 0, k, k),
             own.rb_mut(),
@@ -646,7 +674,7 @@ impl SupernodalSymbolic {
                 Accum::Add,
                 panel.submatrix(k, 0, r, k),
                 own.rb(),
-                -1.0,
+                T::MINUS_ONE,
                 Par::Seq,
             );
         }
@@ -655,13 +683,13 @@ impl SupernodalSymbolic {
 
     /// Backward substitution `U x = y` over the subtree of `s`: its rows of `x` hold `y` and
     /// receive `x`; `above` holds the solution at the rows of `s`'s pattern.
-    fn backward(
+    fn backward<T: Precision>(
         &self,
         numeric: &SupernodalNumeric,
         first: &[usize],
         s: usize,
-        x: MatMut<'_, f64>,
-        above: MatRef<'_, f64>,
+        x: MatMut<'_, T>,
+        above: MatRef<'_, T>,
     ) {
         let (parts, mut own) = self.split_children(first, s, x);
         let (k, r) = (self.k(s), self.r(s));
@@ -671,14 +699,14 @@ impl SupernodalSymbolic {
                 matmul(
                     own.rb_mut(),
                     Accum::Add,
-                    fac.u12.as_ref(),
+                    T::u12(&fac),
                     above,
-                    -1.0,
+                    T::MINUS_ONE,
                     Par::Seq,
                 );
             }
             tri::solve_upper_triangular_in_place(
-                fac.panel.as_ref().submatrix(0, 0, k, k),
+                T::panel(&fac).submatrix(0, 0, k, k),
                 own.rb_mut(),
                 Par::Seq,
             );
@@ -687,12 +715,12 @@ impl SupernodalSymbolic {
             return;
         }
         let nrhs = own.ncols();
-        let mut front = Mat::<f64>::zeros(k + r, nrhs);
+        let mut front = Mat::<T>::zeros(k + r, nrhs);
         front.as_mut().subrows_mut(0, k).copy_from(own.rb());
         front.as_mut().subrows_mut(k, r).copy_from(above);
-        let child = |(c, xc): (usize, MatMut<'_, f64>)| {
+        let child = |(c, xc): (usize, MatMut<'_, T>)| {
             let rel = &self.rel[self.rows_ptr[c]..self.rows_ptr[c + 1]];
-            let mut a = Mat::<f64>::zeros(rel.len(), nrhs);
+            let mut a = Mat::<T>::zeros(rel.len(), nrhs);
             for j in 0..nrhs {
                 for (q, &p) in rel.iter().enumerate() {
                     a[(q, j)] = front[(p as usize, j)];
@@ -709,15 +737,15 @@ impl SupernodalSymbolic {
 
     /// The solve supernode by supernode in their order, for trees whose subtrees are not
     /// consecutive.
-    fn solve_sequential(&self, numeric: &SupernodalNumeric, mut x: MatMut<'_, f64>) {
+    fn solve_sequential<T: Precision>(&self, numeric: &SupernodalNumeric, mut x: MatMut<'_, T>) {
         let nrhs = x.ncols();
-        let mut tmp = Mat::<f64>::zeros(0, 0);
+        let mut tmp = Mat::<T>::zeros(0, 0);
         let ns = self.n_supernodes();
         // Forward: L y = P b.
         for s in 0..ns {
             let fac = factors_ref(numeric, s);
             let (f0, k, r) = (self.begin[s], self.k(s), self.r(s));
-            tmp.resize_with(k.max(r), nrhs, |_, _| 0.0);
+            tmp.resize_with(k.max(r), nrhs, |_, _| T::ZERO);
             for j in 0..nrhs {
                 for (i, &p) in fac.piv.iter().enumerate() {
                     tmp[(i, j)] = x[(f0 + p, j)];
@@ -726,7 +754,7 @@ impl SupernodalSymbolic {
                     x[(f0 + i, j)] = tmp[(i, j)];
                 }
             }
-            let panel = fac.panel.as_ref();
+            let panel = T::panel(&fac);
             tri::solve_unit_lower_triangular_in_place(
                 panel.submatrix(0, 0, k, k),
                 x.rb_mut().subrows_mut(f0, k),
@@ -739,7 +767,7 @@ impl SupernodalSymbolic {
                     Accum::Replace,
                     panel.submatrix(k, 0, r, k),
                     x.rb().subrows(f0, k),
-                    1.0,
+                    T::ONE,
                     Par::Seq,
                 );
                 let rows = &self.rows[self.rows_ptr[s]..self.rows_ptr[s + 1]];
@@ -755,7 +783,7 @@ impl SupernodalSymbolic {
             let fac = factors_ref(numeric, s);
             let (f0, k, r) = (self.begin[s], self.k(s), self.r(s));
             if r > 0 {
-                tmp.resize_with(r, nrhs, |_, _| 0.0);
+                tmp.resize_with(r, nrhs, |_, _| T::ZERO);
                 let rows = &self.rows[self.rows_ptr[s]..self.rows_ptr[s + 1]];
                 for j in 0..nrhs {
                     for (a, &ra) in rows.iter().enumerate() {
@@ -765,14 +793,14 @@ impl SupernodalSymbolic {
                 matmul(
                     x.rb_mut().subrows_mut(f0, k),
                     Accum::Add,
-                    fac.u12.as_ref(),
+                    T::u12(&fac),
                     tmp.as_ref(),
-                    -1.0,
+                    T::MINUS_ONE,
                     Par::Seq,
                 );
             }
             tri::solve_upper_triangular_in_place(
-                fac.panel.as_ref().submatrix(0, 0, k, k),
+                T::panel(&fac).submatrix(0, 0, k, k),
                 x.rb_mut().subrows_mut(f0, k),
                 Par::Seq,
             );
@@ -815,6 +843,50 @@ fn postorder_ranges(
         next = s + 1;
     }
     (next == ns).then_some(first)
+}
+
+/// The precision of a solve: which copy of the factors it reads.
+trait Precision: faer::traits::RealField + Copy + std::ops::AddAssign + std::ops::SubAssign {
+    const ZERO: Self;
+    const ONE: Self;
+    const MINUS_ONE: Self;
+    fn panel(f: &SupernodeFactor) -> MatRef<'_, Self>;
+    fn u12(f: &SupernodeFactor) -> MatRef<'_, Self>;
+}
+
+impl Precision for f64 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const MINUS_ONE: Self = -1.0;
+    fn panel(f: &SupernodeFactor) -> MatRef<'_, Self> {
+        f.panel.as_ref()
+    }
+    fn u12(f: &SupernodeFactor) -> MatRef<'_, Self> {
+        f.u12.as_ref()
+    }
+}
+
+impl Precision for f32 {
+    const ZERO: Self = 0.0;
+    const ONE: Self = 1.0;
+    const MINUS_ONE: Self = -1.0;
+    fn panel(f: &SupernodeFactor) -> MatRef<'_, Self> {
+        f.panel_single.as_ref()
+    }
+    fn u12(f: &SupernodeFactor) -> MatRef<'_, Self> {
+        f.u12_single.as_ref()
+    }
+}
+
+/// `to = from` rounded to single precision (resized to its shape).
+fn round_into(from: MatRef<'_, f64>, to: &mut Mat<f32>) {
+    to.resize_with(from.nrows(), from.ncols(), |_, _| 0.0);
+    for j in 0..from.ncols() {
+        let (src, dst) = (from.col(j), to.as_mut().col_mut(j));
+        for (d, s) in dst.iter_mut().zip(src.iter()) {
+            *d = *s as f32;
+        }
+    }
 }
 
 fn factors_ref(
