@@ -393,6 +393,7 @@ fn the_single_precision_preconditioner_solves_to_single_precision_and_gmres_to_d
     // 1e-12 (the single path is really taken). With `Double` the preconditioner is the solve
     // itself, bit for bit. GMRES with the single-precision preconditioner on the matrix it
     // factorised still reaches a double-precision tolerance (1e-13), in a few steps.
+    // Factorised again, the preconditioner reads the new factors' copies.
     use shelldsa::solver::krylov::gmres_to;
     let (p, values) = shell_like(10, 0.3);
     let n = p.n_dofs();
@@ -428,6 +429,22 @@ fn the_single_precision_preconditioner_solves_to_single_precision_and_gmres_to_d
         diff <= 1e-5 * scale && diff >= 1e-12 * scale,
         "single against double: {diff:.2e} of {scale:.2e}"
     );
+    // The single-precision copies follow a new factorisation (they are made on first use
+    // after it): the matrix doubled halves the result, exactly (a power of two scales every
+    // rounding alike).
+    let mut refactorised = solver(PreconditionerPrecision::Single);
+    let doubled: Vec<f64> = values.iter().map(|v| 2.0 * v).collect();
+    refactorised
+        .precondition_columns_in_place(&mut b.clone(), k)
+        .unwrap();
+    refactorised.factorize(&doubled).unwrap();
+    let mut halved = b.clone();
+    refactorised
+        .precondition_columns_in_place(&mut halved, k)
+        .unwrap();
+    for (h, r) in halved.iter().zip(&rounded) {
+        assert_eq!(2.0 * h, *r, "the copies of the new factorisation are used");
+    }
     for c in 0..k {
         let bc = &b[c * n..(c + 1) * n];
         let mut x = vec![0.0; n];

@@ -109,7 +109,8 @@ impl Parallelism {
 /// precision.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum PreconditionerPrecision {
-    /// Factors rounded to single precision once per factorisation, solves in single
+    /// Factors rounded to single precision at the first preconditioner solve after each
+    /// factorisation (none in a run without one), solves in single
     /// precision (half the memory traffic).
     #[default]
     Single,

@@ -133,7 +133,8 @@ struct SupernodeFactor {
     /// Row `i` of the factored block is the block's row `piv[i]`.
     piv: Vec<usize>,
     /// `panel` and `u12` rounded to single precision, read by the preconditioner's solves
-    /// ([`SupernodalSymbolic::solve_single`]).
+    /// ([`SupernodalSymbolic::solve_single`]), made on their first use after a
+    /// factorisation (`SupernodalNumeric::single_current`).
     panel_single: Mat<f32>,
     u12_single: Mat<f32>,
 }
@@ -165,6 +166,10 @@ pub(crate) struct SupernodalNumeric {
     /// (a fresh large allocation costs page faults and, when freed, a TLB shootdown on every
     /// core).
     pool: FrontPool,
+    /// Whether the factors' single-precision copies are those of the current factorisation
+    /// (made by the first single-precision solve after it, so that a run without one pays
+    /// neither their time nor their memory).
+    single_current: Mutex<bool>,
 }
 
 /// Buffers of released fronts.
@@ -436,6 +441,10 @@ impl SupernodalSymbolic {
         if numeric.factors.len() != ns {
             numeric.factors = (0..ns).map(|_| Mutex::default()).collect();
         }
+        *numeric
+            .single_current
+            .get_mut()
+            .unwrap_or_else(|e| e.into_inner()) = false;
         let (factors, pool) = (&numeric.factors, &numeric.pool);
         self.roots
             .par_iter()
@@ -495,15 +504,6 @@ impl SupernodalSymbolic {
         fac.u12.resize_with(k, r, |_, _| 0.0);
         fac.u12.copy_from(f.submatrix(0, k, k, r));
         fac.piv = piv;
-        let SupernodeFactor {
-            panel,
-            u12,
-            panel_single,
-            u12_single,
-            ..
-        } = &mut *fac;
-        round_into(panel.as_ref(), panel_single);
-        round_into(u12.as_ref(), u12_single);
         drop(fac);
         Front { m, data }
     }
@@ -556,6 +556,27 @@ impl SupernodalSymbolic {
     /// rounding perturbs the factors by a relative 6e-8, far less than the staleness of a
     /// factorisation held over Newton iterates).
     pub fn solve_single(&self, numeric: &SupernodalNumeric, rhs: MatMut<'_, f32>) {
+        {
+            let mut current = numeric
+                .single_current
+                .lock()
+                .unwrap_or_else(|e| e.into_inner());
+            if !*current {
+                numeric.factors.par_iter().for_each(|f| {
+                    let mut fac = f.lock().unwrap_or_else(|e| e.into_inner());
+                    let SupernodeFactor {
+                        panel,
+                        u12,
+                        panel_single,
+                        u12_single,
+                        ..
+                    } = &mut *fac;
+                    round_into(panel.as_ref(), panel_single);
+                    round_into(u12.as_ref(), u12_single);
+                });
+                *current = true;
+            }
+        }
         self.solve_with::<f32>(numeric, rhs);
     }
 
