@@ -875,29 +875,24 @@ trait Precision: faer::traits::RealField + Copy + std::ops::AddAssign + std::ops
     fn u12(f: &SupernodeFactor) -> MatRef<'_, Self>;
 }
 
-impl Precision for f64 {
-    const ZERO: Self = 0.0;
-    const ONE: Self = 1.0;
-    const MINUS_ONE: Self = -1.0;
-    fn panel(f: &SupernodeFactor) -> MatRef<'_, Self> {
-        f.panel.as_ref()
-    }
-    fn u12(f: &SupernodeFactor) -> MatRef<'_, Self> {
-        f.u12.as_ref()
-    }
+/// The two precisions, each reading its own copy of the factors.
+macro_rules! precision {
+    ($t:ty, $panel:ident, $u12:ident) => {
+        impl Precision for $t {
+            const ZERO: Self = 0.0;
+            const ONE: Self = 1.0;
+            const MINUS_ONE: Self = -1.0;
+            fn panel(f: &SupernodeFactor) -> MatRef<'_, Self> {
+                f.$panel.as_ref()
+            }
+            fn u12(f: &SupernodeFactor) -> MatRef<'_, Self> {
+                f.$u12.as_ref()
+            }
+        }
+    };
 }
-
-impl Precision for f32 {
-    const ZERO: Self = 0.0;
-    const ONE: Self = 1.0;
-    const MINUS_ONE: Self = -1.0;
-    fn panel(f: &SupernodeFactor) -> MatRef<'_, Self> {
-        f.panel_single.as_ref()
-    }
-    fn u12(f: &SupernodeFactor) -> MatRef<'_, Self> {
-        f.u12_single.as_ref()
-    }
-}
+precision!(f64, panel, u12);
+precision!(f32, panel_single, u12_single);
 
 /// `to = from` rounded to single precision (resized to its shape).
 fn round_into(from: MatRef<'_, f64>, to: &mut Mat<f32>) {
