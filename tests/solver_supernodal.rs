@@ -429,6 +429,13 @@ fn the_single_precision_preconditioner_solves_to_single_precision_and_gmres_to_d
         diff <= 1e-5 * scale && diff >= 1e-12 * scale,
         "single against double: {diff:.2e} of {scale:.2e}"
     );
+    // A non-finite entry is named as by the solve.
+    let mut bad = b.clone();
+    bad[n + 7] = f64::NAN;
+    match single.precondition_columns_in_place(&mut bad, k) {
+        Err(SolverError::NonFiniteRhs { rhs: 1, row: 7, .. }) => {}
+        other => panic!("expected NonFiniteRhs at column 1, row 7: {other:?}"),
+    }
     // The single-precision copies follow a new factorisation (they are made on first use
     // after it): the matrix doubled halves the result, exactly (a power of two scales every
     // rounding alike).

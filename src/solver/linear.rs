@@ -9,7 +9,7 @@ use faer::linalg::cholesky::llt::factor::LltError;
 use faer::linalg::lu::partial_pivoting as dense_lu;
 use faer::sparse::linalg::{cholesky, lu, LuError};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat, SymbolicSparseColMatRef};
-use faer::{Conj, Mat, MatMut, Par, Side};
+use faer::{Conj, Mat, MatMut, MatRef, Par, Side};
 
 /// Factorisation method.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -824,13 +824,7 @@ impl LinearSolver {
                 && self.options.preconditioner == PreconditionerPrecision::Single =>
             {
                 check_len("precondition: rhs", b.len(), self.n * k)?;
-                if let Some((i, v)) = b.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-                    return Err(SolverError::NonFiniteRhs {
-                        rhs: i / self.n,
-                        row: i % self.n,
-                        value: *v,
-                    });
-                }
+                check_finite(MatRef::from_column_major_slice(b, self.n, k))?;
                 let mut single = Mat::<f32>::from_fn(self.n, k, |i, j| b[j * self.n + i] as f32);
                 symbolic.solve_single(numeric, single.as_mut());
                 for j in 0..k {
@@ -861,19 +855,26 @@ impl LinearSolver {
             return Err(SolverError::NotFactorized);
         }
         check_len("solve: rhs rows", b.nrows(), self.n)?;
-        for c in 0..b.ncols() {
-            for r in 0..b.nrows() {
-                let v = b[(r, c)];
-                if !v.is_finite() {
-                    return Err(SolverError::NonFiniteRhs {
-                        rhs: c,
-                        row: r,
-                        value: v,
-                    });
-                }
-            }
-        }
+        check_finite(b.as_ref())?;
         self.solve_unchecked(b);
         Ok(())
     }
+}
+
+/// The first non-finite entry of the right-hand sides `b`, as an error naming its column and
+/// row.
+fn check_finite(b: MatRef<'_, f64>) -> Result<(), SolverError> {
+    for c in 0..b.ncols() {
+        for r in 0..b.nrows() {
+            let v = b[(r, c)];
+            if !v.is_finite() {
+                return Err(SolverError::NonFiniteRhs {
+                    rhs: c,
+                    row: r,
+                    value: v,
+                });
+            }
+        }
+    }
+    Ok(())
 }
