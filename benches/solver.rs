@@ -3,13 +3,16 @@
 //! within 2 spacings (13 particles, 65 DOFs per cell); 4500 unknowns, one edge clamped.
 //! Symbolic analysis once; measured: assembly (serial / parallel), numeric factorisation (LU and
 //! Cholesky, faer sequential / rayon), solves with 1, 4, 16 right-hand sides, and one full
-//! Newton iteration (assemble + eliminate + factorise + solve).
-//! Run: `cargo bench --bench solver`.
+//! Newton iteration (assemble + eliminate + factorise + solve). Also the sparse products of the
+//! Krylov solves (`csc_mul`, and `csc_mul_columns` with 4 columns) on the plastic hemisphere's
+//! pattern shape at 33 × 33 and 65 × 65 particles (each column coupling the 11 × 11
+//! particles around its own, as the cells of 6 × 6 neighbours do).
+//! Run: `cargo bench --bench solver` (products alone: `cargo bench --bench solver -- product`).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use nalgebra::{DMatrix, DVector};
 use shelldsa::solver::{
-    assemble, EssentialBc, Execution, LinearSolver, Method, Parallelism, SolverOptions,
+    assemble, krylov, EssentialBc, Execution, LinearSolver, Method, Parallelism, SolverOptions,
     SparsityPattern,
 };
 use std::convert::Infallible;
@@ -169,6 +172,32 @@ fn bench(c: &mut Criterion) {
                 );
             }
         }
+    }
+
+    for nx in [33usize, 65] {
+        let p = SparsityPattern::particle_grid(nx, DOF, 5).unwrap();
+        let values = p.values_from(|i, j| 1.0 / (1.0 + i.abs_diff(j) as f64));
+        let np = p.n_dofs();
+        let x: Vec<f64> = (0..4 * np).map(|i| (i as f64 * 0.37).sin()).collect();
+        let mut y = vec![0.0; 4 * np];
+        g.bench_function(
+            BenchmarkId::new("product/csc_mul", format!("{nx}x{nx}")),
+            |b| {
+                b.iter(|| {
+                    krylov::csc_mul(&p, &values, black_box(&x[..np]), &mut y[..np]);
+                    black_box(&y);
+                })
+            },
+        );
+        g.bench_function(
+            BenchmarkId::new("product/csc_mul_columns/k=4", format!("{nx}x{nx}")),
+            |b| {
+                b.iter(|| {
+                    krylov::csc_mul_columns(&p, &values, black_box(&x), 4, &mut y);
+                    black_box(&y);
+                })
+            },
+        );
     }
 
     let mut solver = LinearSolver::new(&m.pattern, Method::Lu, SolverOptions::default()).unwrap();

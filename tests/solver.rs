@@ -122,6 +122,80 @@ fn cell_column_runs_reproduce_the_cell_slots() {
     assert!(longest >= 10, "longest run {longest}");
 }
 
+/// The runs of every column cover its stored rows once, in order (so the `k`-th entry of a
+/// column is the `k`-th row of its runs), and the products read through them give the
+/// entry-by-entry sums bit for bit: on random cells (short runs), particle-like cells (long runs),
+/// a pattern of entries, and with a zero entry in `x` (the products skip its column).
+#[test]
+fn column_runs_cover_the_rows_and_the_products_equal_the_entrywise_sums() {
+    use shelldsa::solver::krylov::{csc_abs_mul_columns, csc_mul, csc_mul_columns};
+    let mut rng = Rng(0xC0FFEE);
+    let n = 80;
+    let patterns = [
+        SparsityPattern::from_cells(n, &random_cells(n, 60, &mut rng)).unwrap(),
+        SparsityPattern::particle_grid(9, 5, 2).unwrap(),
+        SparsityPattern::from_entries(n, &[(3, 7), (4, 7), (5, 7), (9, 7), (79, 0)]).unwrap(),
+    ];
+    for (k, p) in patterns.iter().enumerate() {
+        let (cp, ri) = (p.col_ptr(), p.row_idx());
+        let n = p.n_dofs();
+        let mut longest = 0;
+        for j in 0..n {
+            let mut q = cp[j];
+            for run in p.column_runs(j) {
+                assert!(run.len >= 1, "pattern {k} column {j}: empty run");
+                for t in 0..run.len as usize {
+                    assert_eq!(ri[q], run.row as usize + t, "pattern {k} column {j}");
+                    q += 1;
+                }
+                longest = longest.max(run.len);
+            }
+            assert_eq!(q, cp[j + 1], "pattern {k} column {j}: every entry once");
+        }
+        // The particle grid's columns hold its 5 × 5 particle blocks: runs of 25 rows.
+        if k == 1 {
+            assert!(longest >= 25, "longest run {longest}");
+        }
+        let values: Vec<f64> = (0..p.nnz()).map(|_| rng.next()).collect();
+        let cols = 3;
+        let mut x: Vec<f64> = (0..n * cols).map(|_| rng.next()).collect();
+        x[n / 2] = 0.0;
+        let abs_values: Vec<f64> = values.iter().map(|v| v.abs()).collect();
+        let (mut y, mut ys, mut yabs) = (
+            vec![0.0; n * cols],
+            vec![0.0; n * cols],
+            vec![0.0; n * cols],
+        );
+        csc_mul_columns(p, &values, &x, cols, &mut ys);
+        csc_abs_mul_columns(p, &values, &x, cols, &mut yabs);
+        for c in 0..cols {
+            let xc = &x[c * n..(c + 1) * n];
+            let mut reference = vec![0.0; n];
+            p.mat_vec(&values, xc, &mut reference).unwrap();
+            csc_mul(p, &values, xc, &mut y[c * n..(c + 1) * n]);
+            // `mat_vec` reads the entries one by one in the same order; equal sums (`==`: a
+            // skipped zero column and an added `0 · a` differ only in the sign of a zero).
+            assert_eq!(
+                &y[c * n..(c + 1) * n],
+                &reference[..],
+                "pattern {k} csc_mul"
+            );
+            assert_eq!(
+                &ys[c * n..(c + 1) * n],
+                &reference[..],
+                "pattern {k} columns"
+            );
+            let xa: Vec<f64> = xc.iter().map(|v| v.abs()).collect();
+            p.mat_vec(&abs_values, &xa, &mut reference).unwrap();
+            assert_eq!(
+                &yabs[c * n..(c + 1) * n],
+                &reference[..],
+                "pattern {k} |A||x|"
+            );
+        }
+    }
+}
+
 #[test]
 fn pattern_rejects_out_of_range_dof_naming_cell_and_index() {
     let err = SparsityPattern::from_cells(4, &[vec![0, 1], vec![2, 7, 1]]).unwrap_err();

@@ -38,7 +38,7 @@ pub use newton::{
     Predictor, ProblemError, StepRecord, StepTiming, StopFailure, BACKTRACK_BUDGET,
     BACKTRACK_LENGTHS,
 };
-pub use pattern::{SlotRun, SparsityPattern};
+pub use pattern::{RowRun, SlotRun, SparsityPattern};
 pub use supernodal::{FillOrdering, FRONT_ENTRY_FLOPS, ORDERING_MARGIN};
 
 /// Errors of the linear-algebra layer. Every variant names where the problem was found.

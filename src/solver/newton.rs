@@ -102,7 +102,7 @@
 //! `min_step` the run stops with a [`NewtonFailure`] naming the load level, the reason and the
 //! residual norms, and keeping every converged step.
 
-use super::krylov::{gmres, gmres_to};
+use super::krylov::{csc_abs_mul_columns, gmres, gmres_to};
 use super::{EssentialBc, LinearSolver, SolverError, SparsityPattern};
 use std::fmt;
 use std::time::Instant;
@@ -919,6 +919,7 @@ pub struct NewtonSolver {
 
 struct Work {
     r: Vec<f64>,
+    /// Scratch of [`unknowns_term_scale`] (`4 n`).
     s: Vec<f64>,
     rhs: Vec<f64>,
     du: Vec<f64>,
@@ -1027,7 +1028,7 @@ impl NewtonSolver {
         }
         let mut work = Work {
             r: vec![0.0; n],
-            s: vec![0.0; n],
+            s: vec![0.0; 4 * n],
             rhs: vec![0.0; n],
             du: vec![0.0; n],
             values: vec![0.0; pattern.nnz()],
@@ -1766,7 +1767,8 @@ fn stops_error(st: &LoadStepping) -> Option<String> {
 
 /// `max(‖ |K| |u| ‖, ‖ |K| |u − u_n| ‖)` over the free rows (the raw tangent, before
 /// elimination): the change of the residual when the unknowns (or their increment in the step)
-/// are perturbed by their own round-off, divided by `ε`.
+/// are perturbed by their own round-off, divided by `ε`. Both products in one pass over the
+/// matrix ([`csc_abs_mul_columns`]); `s` is scratch of length `4 n`.
 fn unknowns_term_scale(
     pattern: &SparsityPattern,
     values: &[f64],
@@ -1775,28 +1777,22 @@ fn unknowns_term_scale(
     bc: &EssentialBc,
     s: &mut [f64],
 ) -> f64 {
-    let (cp, ri) = (pattern.col_ptr(), pattern.row_idx());
-    let mut norm = |x: &dyn Fn(usize) -> f64| {
-        s.fill(0.0);
-        for j in 0..u.len() {
-            let xj = x(j);
-            if xj == 0.0 {
-                continue;
-            }
-            for p in cp[j]..cp[j + 1] {
-                s[ri[p]] += values[p].abs() * xj;
-            }
-        }
-        s.iter()
+    let n = u.len();
+    let (x, y) = s[..4 * n].split_at_mut(2 * n);
+    for (j, (a, b)) in u.iter().zip(u_n).enumerate() {
+        x[j] = a.abs();
+        x[n + j] = (a - b).abs();
+    }
+    csc_abs_mul_columns(pattern, values, x, 2, y);
+    let norm = |col: &[f64]| {
+        col.iter()
             .enumerate()
             .filter(|(i, _)| !bc.is_constrained(*i))
             .map(|(_, v)| v * v)
             .sum::<f64>()
             .sqrt()
     };
-    let total = norm(&|j| u[j].abs());
-    let step = norm(&|j| (u[j] - u_n[j]).abs());
-    total.max(step)
+    norm(&y[..n]).max(norm(&y[n..]))
 }
 
 fn free_dot(bc: &EssentialBc, a: &[f64], b: &[f64]) -> f64 {
@@ -2052,7 +2048,7 @@ impl NewtonSolver {
             du_r: vec![0.0; n],
             du_q: vec![0.0; n],
             values: vec![0.0; pattern.nnz()],
-            s: vec![0.0; n],
+            s: vec![0.0; 4 * n],
         };
         let mut ds = arc.initial_length.min(arc.max_length);
         let mut prev: Option<Vec<f64>> = None;
@@ -2389,5 +2385,6 @@ struct ArcWork {
     du_r: Vec<f64>,
     du_q: Vec<f64>,
     values: Vec<f64>,
+    /// Scratch of [`unknowns_term_scale`] (`4 n`).
     s: Vec<f64>,
 }

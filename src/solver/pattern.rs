@@ -21,6 +21,10 @@ pub struct SparsityPattern {
     /// rejected.
     run_ptr: Vec<usize>,
     runs: Vec<SlotRun>,
+    /// Every column's rows as runs of consecutive rows (`column_run_ptr` over the columns): the
+    /// products with the matrix read its values slice by slice, without a row index per entry.
+    column_run_ptr: Vec<usize>,
+    column_runs: Vec<RowRun>,
     diag: Vec<usize>,
     /// First DOF of the multipliers of a bordered (saddle-point) system, `n` when none: the
     /// DOFs from here on have a zero diagonal block ([`Self::with_multipliers_from`]).
@@ -37,6 +41,41 @@ pub struct SlotRun {
     pub slot: u32,
     /// Number of rows.
     pub len: u32,
+}
+
+/// A run of a column's stored rows ([`SparsityPattern::column_runs`]): rows `row..row + len`,
+/// stored in consecutive slots.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RowRun {
+    /// First row.
+    pub row: u32,
+    /// Number of rows.
+    pub len: u32,
+}
+
+/// The maximal runs of consecutive rows of every column of a CSC structure with sorted rows:
+/// (pointers per column, runs).
+fn row_runs(col_ptr: &[usize], row_idx: &[usize]) -> (Vec<usize>, Vec<RowRun>) {
+    let mut ptr = Vec::with_capacity(col_ptr.len());
+    ptr.push(0);
+    let mut runs = Vec::new();
+    for w in col_ptr.windows(2) {
+        let rows = &row_idx[w[0]..w[1]];
+        let mut a = 0;
+        while a < rows.len() {
+            let mut len = 1;
+            while a + len < rows.len() && rows[a + len] == rows[a] + len {
+                len += 1;
+            }
+            runs.push(RowRun {
+                row: rows[a] as u32,
+                len: len as u32,
+            });
+            a += len;
+        }
+        ptr.push(runs.len());
+    }
+    (ptr, runs)
 }
 
 impl SparsityPattern {
@@ -150,6 +189,7 @@ impl SparsityPattern {
             cell_dofs.extend_from_slice(dofs);
             cell_ptr.push(cell_dofs.len());
         }
+        let (column_run_ptr, column_runs) = row_runs(&col_ptr, &row_idx);
         let symbolic = SymbolicSparseColMat::new_checked(n_dofs, n_dofs, col_ptr, None, row_idx);
         Ok(Self {
             n: n_dofs,
@@ -158,6 +198,8 @@ impl SparsityPattern {
             cell_dofs,
             run_ptr,
             runs,
+            column_run_ptr,
+            column_runs,
             diag,
             multipliers_from: n_dofs,
         })
@@ -233,6 +275,10 @@ impl SparsityPattern {
                         .expect("diagonal inserted")
             })
             .collect();
+        if row_idx.len() > u32::MAX as usize {
+            return Err(SolverError::TooManyEntries { nnz: row_idx.len() });
+        }
+        let (column_run_ptr, column_runs) = row_runs(&col_ptr, &row_idx);
         let symbolic = SymbolicSparseColMat::new_checked(n_dofs, n_dofs, col_ptr, None, row_idx);
         Ok(Self {
             n: n_dofs,
@@ -241,6 +287,8 @@ impl SparsityPattern {
             cell_dofs: Vec::new(),
             run_ptr: vec![0],
             runs: Vec::new(),
+            column_run_ptr,
+            column_runs,
             diag,
             multipliers_from: n_dofs,
         })
@@ -285,6 +333,13 @@ impl SparsityPattern {
     /// Row indices, sorted within each column.
     pub fn row_idx(&self) -> &[usize] {
         self.symbolic.row_idx()
+    }
+
+    /// The rows of column `j` as runs of consecutive rows, in order: the `k`-th stored entry of
+    /// the column is in the run holding the `k`-th row, so the runs' lengths add up to the
+    /// column's entries, from slot `col_ptr()[j]` on.
+    pub fn column_runs(&self, j: usize) -> &[RowRun] {
+        &self.column_runs[self.column_run_ptr[j]..self.column_run_ptr[j + 1]]
     }
 
     /// Global DOFs of cell `c`.
