@@ -438,20 +438,7 @@ impl<'a> ThicknessTangent<'a> {
                 // Columns of the unit director: the direction v enters as N′v on t/2 Ψ and
                 // t/2 Ψ,α and as t/2 Ψ H(r,α) v on the ζ-moment's column α, so each row's
                 // entries met by rotation columns are mapped once (N′, H symmetric).
-                for r in 0..nr {
-                    let at = |o: usize| {
-                        Vector3::new(x[o * nr + r], x[(o + 1) * nr + r], x[(o + 2) * nr + r])
-                    };
-                    let (x3, x1, x2) = (at(6), at(9), at(12));
-                    let y3 = un.np * x3 + un.h[0] * x1 + un.h[1] * x2;
-                    let y1 = un.np * x1;
-                    let y2 = un.np * x2;
-                    for (o, y) in [(6, y3), (9, y1), (12, y2)] {
-                        for i in 0..3 {
-                            x[(o + i) * nr + r] = y[i];
-                        }
-                    }
-                }
+                map_unit_rows(&mut x, nr, un);
                 // The unit director couples every pair of rotations through N″ and N‴:
                 // K[(I, b), (J, γ)] += a_Ibᵀ [Ψ_I Ψ_J S + Σ_α (Ψ_I Ψ_J,α + Ψ̃_I,α Ψ_J) H(y_α)] v_Jγ,
                 // S = H(y₃) + Σ_α T(y_α, r,α), y₃ = t/2 (Σ P)_{:3}, y_α = t/2 (Σ ζP)_{:α}, with
@@ -511,6 +498,96 @@ impl<'a> ThicknessTangent<'a> {
             }
         }
         Ok(())
+    }
+}
+
+/// The rows' images met by rotation columns mapped for a normalised director field, in place:
+/// per row `r`, with `x_o` the images `o..o + 3` (entries `o · nr + r`),
+/// `x₆ ← N′x₆ + H(r,1) x₉ + H(r,2) x₁₂`, `x₉ ← N′x₉`, `x₁₂ ← N′x₁₂`, rows in vectors of
+/// [`W`] (the images are stored structure of arrays). Each entry is formed as nalgebra's
+/// matrix–vector product forms it, `(a₀ v₀ + a₁ v₁) + a₂ v₂`, and the three products summed
+/// left to right: bitwise the same as those products. Compiled for wider vectors where the
+/// processor has them, as [`add_columns`].
+fn map_unit_rows(x: &mut [f64], nr: usize, un: &UnitMaps) {
+    let m = |a: &M3<f64>| -> [[f64; 3]; 3] {
+        std::array::from_fn(|i| [a[(i, 0)], a[(i, 1)], a[(i, 2)]])
+    };
+    let maps = [m(&un.np), m(&un.h[0]), m(&un.h[1])];
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the processor supports AVX-512F, the only requirement.
+            unsafe { map_unit_rows_avx512(x, nr, &maps) };
+            return;
+        }
+        if std::arch::is_x86_feature_detected!("avx") {
+            // SAFETY: the processor supports AVX, the only requirement.
+            unsafe { map_unit_rows_avx(x, nr, &maps) };
+            return;
+        }
+    }
+    map_unit_rows_generic(x, nr, &maps);
+}
+
+/// The matrices `N′`, `H(r,1)`, `H(r,2)` by rows.
+type UnitRowMaps = [[[f64; 3]; 3]; 3];
+
+/// [`map_unit_rows_generic`] compiled with AVX-512F enabled.
+///
+/// # Safety
+/// The processor must support AVX-512F.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn map_unit_rows_avx512(x: &mut [f64], nr: usize, maps: &UnitRowMaps) {
+    map_unit_rows_generic(x, nr, maps);
+}
+
+/// [`map_unit_rows_generic`] compiled with AVX enabled.
+///
+/// # Safety
+/// The processor must support AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn map_unit_rows_avx(x: &mut [f64], nr: usize, maps: &UnitRowMaps) {
+    map_unit_rows_generic(x, nr, maps);
+}
+
+#[inline(always)]
+fn map_unit_rows_generic(x: &mut [f64], nr: usize, maps: &UnitRowMaps) {
+    let full = nr - nr % W;
+    let mut r = 0;
+    while r < full {
+        unit_rows::<W>(x, nr, r, maps);
+        r += W;
+    }
+    while r < nr {
+        unit_rows::<1>(x, nr, r, maps);
+        r += 1;
+    }
+}
+
+/// Rows `r..r + N` of [`map_unit_rows`].
+#[inline(always)]
+fn unit_rows<const N: usize>(x: &mut [f64], nr: usize, r: usize, maps: &UnitRowMaps) {
+    let ld = |x: &[f64], o: usize| -> [f64; N] {
+        let s = &x[o * nr + r..o * nr + r + N];
+        std::array::from_fn(|l| s[l])
+    };
+    let v = |o: usize| -> [[f64; N]; 3] { [ld(x, o), ld(x, o + 1), ld(x, o + 2)] };
+    let (x3, x1, x2) = (v(6), v(9), v(12));
+    // `a v` by rows: (a_i0 v0 + a_i1 v1) + a_i2 v2.
+    let mul = |a: &[[f64; 3]; 3], v: &[[f64; N]; 3], i: usize| -> [f64; N] {
+        std::array::from_fn(|l| a[i][0] * v[0][l] + a[i][1] * v[1][l] + a[i][2] * v[2][l])
+    };
+    let [np, h1, h2] = maps;
+    for i in 0..3 {
+        let (a, b, c) = (mul(np, &x3, i), mul(h1, &x1, i), mul(h2, &x2, i));
+        let y3: [f64; N] = std::array::from_fn(|l| a[l] + b[l] + c[l]);
+        let y1 = mul(np, &x1, i);
+        let y2 = mul(np, &x2, i);
+        for (o, y) in [(6, y3), (9, y1), (12, y2)] {
+            x[(o + i) * nr + r..(o + i) * nr + r + N].copy_from_slice(&y);
+        }
     }
 }
 
