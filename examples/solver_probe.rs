@@ -55,13 +55,16 @@ fn main() {
             }
         }
     }
+    let runs: usize = (0..n).map(|j| pattern.column_runs(j).len()).sum();
     println!(
-        "grid {:?}: n = {n}, nnz = {} ({:.1} per row, {:.1} % of n²), structurally symmetric: \
-         {structurally_symmetric}, ‖A−Aᵀ‖/‖A‖ = {:.2e}, assembly {:.3} s",
+        "grid {:?}: n = {n}, nnz = {} ({:.1} per row, {:.1} % of n², {:.1} rows per run of \
+         consecutive rows), structurally symmetric: {structurally_symmetric}, ‖A−Aᵀ‖/‖A‖ = \
+         {:.2e}, assembly {:.3} s",
         case.particles.counts,
         pattern.nnz(),
         pattern.nnz() as f64 / n as f64,
         100.0 * pattern.nnz() as f64 / (n * n) as f64,
+        pattern.nnz() as f64 / runs as f64,
         (skew / 2.0).sqrt() / all.sqrt(),
         t_asm
     );
