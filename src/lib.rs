@@ -5,6 +5,9 @@
 //! derivative is computable three ways: the hand-derived continuum method, a dual-number reference
 //! through the same generic kernels, and finite differences ([`verification`]).
 
+#[macro_use]
+mod wide;
+
 pub mod cli;
 pub mod contact;
 pub mod geometry;

@@ -512,44 +512,15 @@ fn map_unit_rows(x: &mut [f64], nr: usize, un: &UnitMaps) {
     let m = |a: &M3<f64>| -> [[f64; 3]; 3] {
         std::array::from_fn(|i| [a[(i, 0)], a[(i, 1)], a[(i, 2)]])
     };
-    let maps = [m(&un.np), m(&un.h[0]), m(&un.h[1])];
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the processor supports AVX-512F, the only requirement.
-            unsafe { map_unit_rows_avx512(x, nr, &maps) };
-            return;
-        }
-        if std::arch::is_x86_feature_detected!("avx") {
-            // SAFETY: the processor supports AVX, the only requirement.
-            unsafe { map_unit_rows_avx(x, nr, &maps) };
-            return;
-        }
-    }
-    map_unit_rows_generic(x, nr, &maps);
+    map_unit_rows_wide(x, nr, &[m(&un.np), m(&un.h[0]), m(&un.h[1])]);
 }
 
 /// The matrices `N′`, `H(r,1)`, `H(r,2)` by rows.
 type UnitRowMaps = [[[f64; 3]; 3]; 3];
 
-/// [`map_unit_rows_generic`] compiled with AVX-512F enabled.
-///
-/// # Safety
-/// The processor must support AVX-512F.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-unsafe fn map_unit_rows_avx512(x: &mut [f64], nr: usize, maps: &UnitRowMaps) {
-    map_unit_rows_generic(x, nr, maps);
-}
-
-/// [`map_unit_rows_generic`] compiled with AVX enabled.
-///
-/// # Safety
-/// The processor must support AVX.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-unsafe fn map_unit_rows_avx(x: &mut [f64], nr: usize, maps: &UnitRowMaps) {
-    map_unit_rows_generic(x, nr, maps);
+wide_vectors! {
+    fn map_unit_rows_wide(x: &mut [f64], nr: usize, maps: &UnitRowMaps)
+        => map_unit_rows_generic, avx512 = map_unit_rows_avx512, avx = map_unit_rows_avx;
 }
 
 #[inline(always)]
@@ -648,71 +619,22 @@ struct ColumnCoefficients {
     q: Option<[[f64; 3]; 3]>,
 }
 
-/// The column loop of [`ThicknessTangent::add_to_cell`]: adds `K[:, (J, c)] = X₀·g₀ + X₁·g₁`
-/// for every neighbour column into the column-major `nr × nr` `data`, from the row images `x`
-/// (NY arrays of length `nr`). On x86-64 processors with AVX-512 or AVX the same code runs
-/// compiled for wider vectors; the operations and their order per entry are the same (Rust
-/// does not contract `a * b + c` into fused multiply-adds), so all builds give bitwise equal
-/// results.
-fn add_columns(
-    x: &[f64],
-    nr: usize,
-    ht: f64,
-    shape: &[ShapeData],
-    dirs: &[DirectorDerivatives],
-    slots: Option<&[CellSlot]>,
-    data: &mut [f64],
-) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the processor supports AVX-512F, the only requirement.
-            unsafe { add_columns_avx512(x, nr, ht, shape, dirs, slots, data) };
-            return;
-        }
-        if std::arch::is_x86_feature_detected!("avx") {
-            // SAFETY: the processor supports AVX, the only requirement.
-            unsafe { add_columns_avx(x, nr, ht, shape, dirs, slots, data) };
-            return;
-        }
-    }
-    add_columns_generic(x, nr, ht, shape, dirs, slots, data);
-}
-
-/// [`add_columns_generic`] compiled with AVX-512F enabled.
-///
-/// # Safety
-/// The processor must support AVX-512F.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-unsafe fn add_columns_avx512(
-    x: &[f64],
-    nr: usize,
-    ht: f64,
-    shape: &[ShapeData],
-    dirs: &[DirectorDerivatives],
-    slots: Option<&[CellSlot]>,
-    data: &mut [f64],
-) {
-    add_columns_generic(x, nr, ht, shape, dirs, slots, data);
-}
-
-/// [`add_columns_generic`] compiled with AVX enabled.
-///
-/// # Safety
-/// The processor must support AVX.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-unsafe fn add_columns_avx(
-    x: &[f64],
-    nr: usize,
-    ht: f64,
-    shape: &[ShapeData],
-    dirs: &[DirectorDerivatives],
-    slots: Option<&[CellSlot]>,
-    data: &mut [f64],
-) {
-    add_columns_generic(x, nr, ht, shape, dirs, slots, data);
+wide_vectors! {
+    /// The column loop of [`ThicknessTangent::add_to_cell`]: adds `K[:, (J, c)] = X₀·g₀ + X₁·g₁`
+    /// for every neighbour column into the column-major `nr × nr` `data`, from the row images `x`
+    /// (NY arrays of length `nr`). On x86-64 processors with AVX-512 or AVX the same code runs
+    /// compiled for wider vectors; the operations and their order per entry are the same (Rust
+    /// does not contract `a * b + c` into fused multiply-adds), so all builds give bitwise equal
+    /// results.
+    fn add_columns(
+        x: &[f64],
+        nr: usize,
+        ht: f64,
+        shape: &[ShapeData],
+        dirs: &[DirectorDerivatives],
+        slots: Option<&[CellSlot]>,
+        data: &mut [f64],
+    ) => add_columns_generic, avx512 = add_columns_avx512, avx = add_columns_avx;
 }
 
 #[inline(always)]
@@ -841,6 +763,59 @@ pub fn point_tangent_fast(
 mod tests {
     use super::*;
     use nalgebra::Vector3;
+
+    /// The unit director's row map equals the `nalgebra` products it replaces bit for bit
+    /// (`N′x₆ + H(r,1) x₉ + H(r,2) x₁₂`, `N′x₉`, `N′x₁₂` per row), in every build, on a row
+    /// count that is not a multiple of the vector width, leaving the other images alone.
+    #[test]
+    fn unit_row_map_equals_the_matrix_products_bitwise() {
+        let nr = 5 * 7;
+        assert_ne!(nr % W, 0);
+        let f = |i: usize| ((i as f64) * 0.617 + 0.3).sin();
+        let mat = |k: usize| M3::from_fn(|i, j| f(100 * k + 3 * i + j) * 2.0);
+        let un = UnitMaps {
+            np: mat(1),
+            h: [mat(2), mat(3)],
+            hy: [M3::zeros(); 2],
+            s: M3::zeros(),
+        };
+        let x0: Vec<f64> = (0..NY * nr).map(|i| f(i) * 1e2).collect();
+        let mut reference = x0.clone();
+        for r in 0..nr {
+            let at =
+                |o: usize| Vector3::new(x0[o * nr + r], x0[(o + 1) * nr + r], x0[(o + 2) * nr + r]);
+            let (x3, x1, x2) = (at(6), at(9), at(12));
+            let y = [
+                un.np * x3 + un.h[0] * x1 + un.h[1] * x2,
+                un.np * x1,
+                un.np * x2,
+            ];
+            for (o, y) in [6, 9, 12].into_iter().zip(y) {
+                for i in 0..3 {
+                    reference[(o + i) * nr + r] = y[i];
+                }
+            }
+        }
+        let bits = |a: &[f64]| a.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        let mut a = x0.clone();
+        map_unit_rows(&mut a, nr, &un);
+        assert_eq!(bits(&a), bits(&reference));
+        assert_ne!(bits(&a), bits(&x0));
+        let m = |a: &M3<f64>| -> [[f64; 3]; 3] {
+            std::array::from_fn(|i| [a[(i, 0)], a[(i, 1)], a[(i, 2)]])
+        };
+        let maps = [m(&un.np), m(&un.h[0]), m(&un.h[1])];
+        let mut b = x0.clone();
+        map_unit_rows_generic(&mut b, nr, &maps);
+        assert_eq!(bits(&b), bits(&reference));
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx") {
+            let mut c = x0.clone();
+            // SAFETY: AVX is available.
+            unsafe { map_unit_rows_avx(&mut c, nr, &maps) };
+            assert_eq!(bits(&c), bits(&reference));
+        }
+    }
 
     /// The AVX-512, AVX and baseline builds of the column loop agree bitwise, with real and
     /// image neighbours, shared blocks and a row count that is not a multiple of the block.

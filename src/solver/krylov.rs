@@ -64,63 +64,18 @@ where
     }
 }
 
-/// `y += A[:, cols] x[cols]`, each column's values run by run
-/// ([`SparsityPattern::column_runs`]): slices of consecutive rows, no row index per entry read,
-/// the same sums in the same order as entry by entry. Compiled for wider vectors where the
-/// processor has them, as [`csc_mul_many`].
-fn csc_mul_range(
-    pattern: &SparsityPattern,
-    values: &[f64],
-    x: &[f64],
-    cols: std::ops::Range<usize>,
-    y: &mut [f64],
-) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the processor supports AVX-512F, the only requirement.
-            unsafe { csc_mul_range_avx512(pattern, values, x, cols, y) };
-            return;
-        }
-        if std::arch::is_x86_feature_detected!("avx") {
-            // SAFETY: the processor supports AVX, the only requirement.
-            unsafe { csc_mul_range_avx(pattern, values, x, cols, y) };
-            return;
-        }
-    }
-    csc_mul_range_generic(pattern, values, x, cols, y);
-}
-
-/// [`csc_mul_range_generic`] compiled with AVX-512F enabled.
-///
-/// # Safety
-/// The processor must support AVX-512F.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-unsafe fn csc_mul_range_avx512(
-    pattern: &SparsityPattern,
-    values: &[f64],
-    x: &[f64],
-    cols: std::ops::Range<usize>,
-    y: &mut [f64],
-) {
-    csc_mul_range_generic(pattern, values, x, cols, y);
-}
-
-/// [`csc_mul_range_generic`] compiled with AVX enabled.
-///
-/// # Safety
-/// The processor must support AVX.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-unsafe fn csc_mul_range_avx(
-    pattern: &SparsityPattern,
-    values: &[f64],
-    x: &[f64],
-    cols: std::ops::Range<usize>,
-    y: &mut [f64],
-) {
-    csc_mul_range_generic(pattern, values, x, cols, y);
+wide_vectors! {
+    /// `y += A[:, cols] x[cols]`, each column's values run by run
+    /// ([`SparsityPattern::column_runs`]): slices of consecutive rows, no row index per entry read,
+    /// the same sums in the same order as entry by entry. Compiled for wider vectors where the
+    /// processor has them, as [`csc_mul_many`].
+    fn csc_mul_range(
+        pattern: &SparsityPattern,
+        values: &[f64],
+        x: &[f64],
+        cols: std::ops::Range<usize>,
+        y: &mut [f64],
+    ) => csc_mul_range_generic, avx512 = csc_mul_range_avx512, avx = csc_mul_range_avx;
 }
 
 #[inline(always)]
@@ -292,66 +247,19 @@ fn csc_mul_columns_with<const ABS: bool>(
 /// this many interleaved values (two SIMD lanes of two, or one of four).
 const PRODUCT_GROUP: usize = 4;
 
-/// `Y += A[:, cols] X[cols, :]` for `k` column-major columns, in groups of
-/// [`PRODUCT_GROUP`] columns interleaved row by row (with `ABS`, of `|A|` and `|X|`). On
-/// x86-64 processors with AVX-512 or AVX the same code runs compiled for wider vectors (the
-/// same operations in the same order per entry: bitwise equal results).
-fn csc_mul_many<const ABS: bool>(
-    pattern: &SparsityPattern,
-    values: &[f64],
-    x: &[f64],
-    k: usize,
-    cols: std::ops::Range<usize>,
-    y: &mut [f64],
-) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the processor supports AVX-512F, the only requirement.
-            unsafe { csc_mul_many_avx512::<ABS>(pattern, values, x, k, cols, y) };
-            return;
-        }
-        if std::arch::is_x86_feature_detected!("avx") {
-            // SAFETY: the processor supports AVX, the only requirement.
-            unsafe { csc_mul_many_avx::<ABS>(pattern, values, x, k, cols, y) };
-            return;
-        }
-    }
-    csc_mul_many_generic::<ABS>(pattern, values, x, k, cols, y);
-}
-
-/// [`csc_mul_many_generic`] compiled with AVX-512F enabled.
-///
-/// # Safety
-/// The processor must support AVX-512F.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-unsafe fn csc_mul_many_avx512<const ABS: bool>(
-    pattern: &SparsityPattern,
-    values: &[f64],
-    x: &[f64],
-    k: usize,
-    cols: std::ops::Range<usize>,
-    y: &mut [f64],
-) {
-    csc_mul_many_generic::<ABS>(pattern, values, x, k, cols, y);
-}
-
-/// [`csc_mul_many_generic`] compiled with AVX enabled.
-///
-/// # Safety
-/// The processor must support AVX.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-unsafe fn csc_mul_many_avx<const ABS: bool>(
-    pattern: &SparsityPattern,
-    values: &[f64],
-    x: &[f64],
-    k: usize,
-    cols: std::ops::Range<usize>,
-    y: &mut [f64],
-) {
-    csc_mul_many_generic::<ABS>(pattern, values, x, k, cols, y);
+wide_vectors! {
+    /// `Y += A[:, cols] X[cols, :]` for `k` column-major columns, in groups of
+    /// [`PRODUCT_GROUP`] columns interleaved row by row (with `ABS`, of `|A|` and `|X|`). On
+    /// x86-64 processors with AVX-512 or AVX the same code runs compiled for wider vectors (the
+    /// same operations in the same order per entry: bitwise equal results).
+    fn csc_mul_many[const ABS: bool](
+        pattern: &SparsityPattern,
+        values: &[f64],
+        x: &[f64],
+        k: usize,
+        cols: std::ops::Range<usize>,
+        y: &mut [f64],
+    ) => csc_mul_many_generic[ABS], avx512 = csc_mul_many_avx512, avx = csc_mul_many_avx;
 }
 
 #[inline(always)]
