@@ -4,15 +4,17 @@
 //! kernel's operations and their order per result are the same in every build (Rust does not
 //! contract `a * b + c` into fused multiply-adds), so the results are bitwise equal.
 
-/// `wide_vectors! { fn name[generics](args) => kernel[generic arguments], avx512 = name_a, avx
-/// = name_b; }` defines `fn name` (returning `()`), which calls `kernel(args)` through
-/// `unsafe fn name_a` (compiled with AVX-512F) or `unsafe fn name_b` (with AVX) where the
-/// processor has them, and directly otherwise.
+/// `wide_vectors! { fn name[generics](args) => kernel[generic arguments], avx512 = name_a,
+/// avx = name_b { body } }` defines the kernel `fn kernel(args) { body }` (inlined into its
+/// callers), and `fn name` (returning `()`), which runs it through `unsafe fn name_a` (compiled
+/// with AVX-512F) or `unsafe fn name_b` (with AVX) where the processor has them, and directly
+/// otherwise.
 macro_rules! wide_vectors {
     (
         $(#[$doc:meta])*
         fn $name:ident $([$($gen:tt)*])? ($($arg:ident: $ty:ty),* $(,)?)
-            => $kernel:ident $([$($garg:tt)*])?, avx512 = $avx512:ident, avx = $avx:ident;
+            => $kernel:ident $([$($garg:tt)*])?, avx512 = $avx512:ident, avx = $avx:ident
+            $body:block
     ) => {
         $(#[$doc])*
         fn $name $(<$($gen)*>)? ($($arg: $ty),*) {
@@ -31,6 +33,10 @@ macro_rules! wide_vectors {
             }
             $kernel $(::<$($garg)*>)? ($($arg),*)
         }
+
+        #[doc = concat!("The kernel of [`", stringify!($name), "`], in the target's baseline build.")]
+        #[inline(always)]
+        fn $kernel $(<$($gen)*>)? ($($arg: $ty),*) $body
 
         #[doc = concat!("[`", stringify!($kernel), "`] compiled with AVX-512F enabled.")]
         ///

@@ -520,20 +520,17 @@ type UnitRowMaps = [[[f64; 3]; 3]; 3];
 
 wide_vectors! {
     fn map_unit_rows_wide(x: &mut [f64], nr: usize, maps: &UnitRowMaps)
-        => map_unit_rows_generic, avx512 = map_unit_rows_avx512, avx = map_unit_rows_avx;
-}
-
-#[inline(always)]
-fn map_unit_rows_generic(x: &mut [f64], nr: usize, maps: &UnitRowMaps) {
-    let full = nr - nr % W;
-    let mut r = 0;
-    while r < full {
-        unit_rows::<W>(x, nr, r, maps);
-        r += W;
-    }
-    while r < nr {
-        unit_rows::<1>(x, nr, r, maps);
-        r += 1;
+        => map_unit_rows_generic, avx512 = map_unit_rows_avx512, avx = map_unit_rows_avx {
+        let full = nr - nr % W;
+        let mut r = 0;
+        while r < full {
+            unit_rows::<W>(x, nr, r, maps);
+            r += W;
+        }
+        while r < nr {
+            unit_rows::<1>(x, nr, r, maps);
+            r += 1;
+        }
     }
 }
 
@@ -634,52 +631,41 @@ wide_vectors! {
         dirs: &[DirectorDerivatives],
         slots: Option<&[CellSlot]>,
         data: &mut [f64],
-    ) => add_columns_generic, avx512 = add_columns_avx512, avx = add_columns_avx;
-}
-
-#[inline(always)]
-fn add_columns_generic(
-    x: &[f64],
-    nr: usize,
-    ht: f64,
-    shape: &[ShapeData],
-    dirs: &[DirectorDerivatives],
-    slots: Option<&[CellSlot]>,
-    data: &mut [f64],
-) {
-    let xs: [&[f64]; NY] = std::array::from_fn(|o| &x[o * nr..(o + 1) * nr]);
-    let full = nr - nr % W;
-    for (j, (sh, dir)) in shape.iter().zip(dirs).enumerate() {
-        let (slot, image) = match slots {
-            Some(s) => (s[j].slot, s[j].image),
-            None => (j, None),
-        };
-        let [d1, d2] = sh.dpsi;
-        let det = image.map_or(1.0, |(_, det)| det);
-        let cc = ColumnCoefficients {
-            d: [d1, d2],
-            a: [ht * sh.psi, ht * d1, ht * d2],
-            v: dir.d_a.map(|v| {
-                let v = if image.is_some() { v * det } else { v };
-                [v[0], v[1], v[2]]
-            }),
-            q: image.map(|(q, _)| std::array::from_fn(|r| std::array::from_fn(|c| q[(r, c)]))),
-        };
-        let c0 = DOFS_PER_PARTICLE * slot * nr;
-        let block = &mut data[c0..c0 + DOFS_PER_PARTICLE * nr];
-        let (k0, rest) = block.split_at_mut(nr);
-        let (k1, rest) = rest.split_at_mut(nr);
-        let (k2, rest) = rest.split_at_mut(nr);
-        let (k3, k4) = rest.split_at_mut(nr);
-        let mut ks = [k0, k1, k2, k3, k4];
-        let mut r = 0;
-        while r < full {
-            rows::<W>(&xs, r, &cc, &mut ks);
-            r += W;
-        }
-        while r < nr {
-            rows::<1>(&xs, r, &cc, &mut ks);
-            r += 1;
+    ) => add_columns_generic, avx512 = add_columns_avx512, avx = add_columns_avx {
+        let xs: [&[f64]; NY] = std::array::from_fn(|o| &x[o * nr..(o + 1) * nr]);
+        let full = nr - nr % W;
+        for (j, (sh, dir)) in shape.iter().zip(dirs).enumerate() {
+            let (slot, image) = match slots {
+                Some(s) => (s[j].slot, s[j].image),
+                None => (j, None),
+            };
+            let [d1, d2] = sh.dpsi;
+            let det = image.map_or(1.0, |(_, det)| det);
+            let cc = ColumnCoefficients {
+                d: [d1, d2],
+                a: [ht * sh.psi, ht * d1, ht * d2],
+                v: dir.d_a.map(|v| {
+                    let v = if image.is_some() { v * det } else { v };
+                    [v[0], v[1], v[2]]
+                }),
+                q: image.map(|(q, _)| std::array::from_fn(|r| std::array::from_fn(|c| q[(r, c)]))),
+            };
+            let c0 = DOFS_PER_PARTICLE * slot * nr;
+            let block = &mut data[c0..c0 + DOFS_PER_PARTICLE * nr];
+            let (k0, rest) = block.split_at_mut(nr);
+            let (k1, rest) = rest.split_at_mut(nr);
+            let (k2, rest) = rest.split_at_mut(nr);
+            let (k3, k4) = rest.split_at_mut(nr);
+            let mut ks = [k0, k1, k2, k3, k4];
+            let mut r = 0;
+            while r < full {
+                rows::<W>(&xs, r, &cc, &mut ks);
+                r += W;
+            }
+            while r < nr {
+                rows::<1>(&xs, r, &cc, &mut ks);
+                r += 1;
+            }
         }
     }
 }

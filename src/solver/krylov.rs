@@ -75,30 +75,21 @@ wide_vectors! {
         x: &[f64],
         cols: std::ops::Range<usize>,
         y: &mut [f64],
-    ) => csc_mul_range_generic, avx512 = csc_mul_range_avx512, avx = csc_mul_range_avx;
-}
-
-#[inline(always)]
-fn csc_mul_range_generic(
-    pattern: &SparsityPattern,
-    values: &[f64],
-    x: &[f64],
-    cols: std::ops::Range<usize>,
-    y: &mut [f64],
-) {
-    let cp = pattern.col_ptr();
-    for j in cols {
-        let xj = x[j];
-        if xj == 0.0 {
-            continue;
-        }
-        let mut p = cp[j];
-        for run in pattern.column_runs(j) {
-            let (r, len) = (run.row as usize, run.len as usize);
-            for (yi, a) in y[r..r + len].iter_mut().zip(&values[p..p + len]) {
-                *yi += a * xj;
+    ) => csc_mul_range_generic, avx512 = csc_mul_range_avx512, avx = csc_mul_range_avx {
+        let cp = pattern.col_ptr();
+        for j in cols {
+            let xj = x[j];
+            if xj == 0.0 {
+                continue;
             }
-            p += len;
+            let mut p = cp[j];
+            for run in pattern.column_runs(j) {
+                let (r, len) = (run.row as usize, run.len as usize);
+                for (yi, a) in y[r..r + len].iter_mut().zip(&values[p..p + len]) {
+                    *yi += a * xj;
+                }
+                p += len;
+            }
         }
     }
 }
@@ -259,51 +250,41 @@ wide_vectors! {
         k: usize,
         cols: std::ops::Range<usize>,
         y: &mut [f64],
-    ) => csc_mul_many_generic[ABS], avx512 = csc_mul_many_avx512, avx = csc_mul_many_avx;
-}
-
-#[inline(always)]
-fn csc_mul_many_generic<const ABS: bool>(
-    pattern: &SparsityPattern,
-    values: &[f64],
-    x: &[f64],
-    k: usize,
-    cols: std::ops::Range<usize>,
-    y: &mut [f64],
-) {
-    const G: usize = PRODUCT_GROUP;
-    let n = pattern.n_dofs();
-    let cp = pattern.col_ptr();
-    let mut xi = vec![[0.0f64; G]; n];
-    let mut yi = vec![[0.0f64; G]; n];
-    for g in (0..k).step_by(G) {
-        let w = (k - g).min(G);
-        for j in cols.clone() {
-            let mut row = [0.0; G];
-            for (c, r) in row.iter_mut().enumerate().take(w) {
-                let v = x[(g + c) * n + j];
-                *r = if ABS { v.abs() } else { v };
-            }
-            xi[j] = row;
-        }
-        yi.fill([0.0; G]);
-        for j in cols.clone() {
-            let xj = xi[j];
-            let mut p = cp[j];
-            for run in pattern.column_runs(j) {
-                let (r, len) = (run.row as usize, run.len as usize);
-                for (yr, &a) in yi[r..r + len].iter_mut().zip(&values[p..p + len]) {
-                    let a = if ABS { a.abs() } else { a };
-                    for c in 0..G {
-                        yr[c] += a * xj[c];
-                    }
+    ) => csc_mul_many_generic[ABS], avx512 = csc_mul_many_avx512, avx = csc_mul_many_avx {
+        const G: usize = PRODUCT_GROUP;
+        let n = pattern.n_dofs();
+        let cp = pattern.col_ptr();
+        let mut xi = vec![[0.0f64; G]; n];
+        let mut yi = vec![[0.0f64; G]; n];
+        for g in (0..k).step_by(G) {
+            let w = (k - g).min(G);
+            for j in cols.clone() {
+                let mut row = [0.0; G];
+                for (c, r) in row.iter_mut().enumerate().take(w) {
+                    let v = x[(g + c) * n + j];
+                    *r = if ABS { v.abs() } else { v };
                 }
-                p += len;
+                xi[j] = row;
             }
-        }
-        for c in 0..w {
-            for (yv, r) in y[(g + c) * n..(g + c + 1) * n].iter_mut().zip(&yi) {
-                *yv += r[c];
+            yi.fill([0.0; G]);
+            for j in cols.clone() {
+                let xj = xi[j];
+                let mut p = cp[j];
+                for run in pattern.column_runs(j) {
+                    let (r, len) = (run.row as usize, run.len as usize);
+                    for (yr, &a) in yi[r..r + len].iter_mut().zip(&values[p..p + len]) {
+                        let a = if ABS { a.abs() } else { a };
+                        for c in 0..G {
+                            yr[c] += a * xj[c];
+                        }
+                    }
+                    p += len;
+                }
+            }
+            for c in 0..w {
+                for (yv, r) in y[(g + c) * n..(g + c + 1) * n].iter_mut().zip(&yi) {
+                    *yv += r[c];
+                }
             }
         }
     }
