@@ -53,9 +53,27 @@ pub struct RowRun {
     pub len: u32,
 }
 
-/// The maximal runs of consecutive rows of every column of a CSC structure with sorted rows:
-/// (pointers per column, runs).
-fn row_runs(col_ptr: &[usize], row_idx: &[usize]) -> (Vec<usize>, Vec<RowRun>) {
+/// What both constructors derive from a CSC structure with sorted rows and the full diagonal:
+/// the diagonal's slots, and the maximal runs of consecutive rows of every column (pointers per
+/// column, runs). Structures with more than `u32::MAX` entries are rejected (slots and rows are
+/// kept as `u32`).
+#[allow(clippy::type_complexity)]
+fn column_structure(
+    col_ptr: &[usize],
+    row_idx: &[usize],
+) -> Result<(Vec<usize>, Vec<usize>, Vec<RowRun>), SolverError> {
+    if row_idx.len() > u32::MAX as usize {
+        return Err(SolverError::TooManyEntries { nnz: row_idx.len() });
+    }
+    let diag = col_ptr
+        .windows(2)
+        .enumerate()
+        .map(|(j, w)| {
+            w[0] + row_idx[w[0]..w[1]]
+                .binary_search(&j)
+                .expect("diagonal inserted")
+        })
+        .collect();
     let mut ptr = Vec::with_capacity(col_ptr.len());
     ptr.push(0);
     let mut runs = Vec::new();
@@ -75,7 +93,7 @@ fn row_runs(col_ptr: &[usize], row_idx: &[usize]) -> (Vec<usize>, Vec<RowRun>) {
         }
         ptr.push(runs.len());
     }
-    (ptr, runs)
+    Ok((diag, ptr, runs))
 }
 
 impl SparsityPattern {
@@ -132,15 +150,7 @@ impl SparsityPattern {
             row_idx.extend_from_slice(&col);
             col_ptr.push(row_idx.len());
         }
-        let diag = (0..n_dofs)
-            .map(|j| {
-                let rows = &row_idx[col_ptr[j]..col_ptr[j + 1]];
-                col_ptr[j] + rows.binary_search(&j).expect("diagonal inserted")
-            })
-            .collect();
-        if row_idx.len() > u32::MAX as usize {
-            return Err(SolverError::TooManyEntries { nnz: row_idx.len() });
-        }
+        let (diag, column_run_ptr, column_runs) = column_structure(&col_ptr, &row_idx)?;
         let mut cell_ptr = Vec::with_capacity(cells.len() + 1);
         cell_ptr.push(0);
         let mut cell_dofs = Vec::new();
@@ -189,7 +199,6 @@ impl SparsityPattern {
             cell_dofs.extend_from_slice(dofs);
             cell_ptr.push(cell_dofs.len());
         }
-        let (column_run_ptr, column_runs) = row_runs(&col_ptr, &row_idx);
         let symbolic = SymbolicSparseColMat::new_checked(n_dofs, n_dofs, col_ptr, None, row_idx);
         Ok(Self {
             n: n_dofs,
@@ -267,18 +276,7 @@ impl SparsityPattern {
             row_idx.extend_from_slice(col);
             col_ptr.push(row_idx.len());
         }
-        let diag = (0..n_dofs)
-            .map(|j| {
-                col_ptr[j]
-                    + row_idx[col_ptr[j]..col_ptr[j + 1]]
-                        .binary_search(&j)
-                        .expect("diagonal inserted")
-            })
-            .collect();
-        if row_idx.len() > u32::MAX as usize {
-            return Err(SolverError::TooManyEntries { nnz: row_idx.len() });
-        }
-        let (column_run_ptr, column_runs) = row_runs(&col_ptr, &row_idx);
+        let (diag, column_run_ptr, column_runs) = column_structure(&col_ptr, &row_idx)?;
         let symbolic = SymbolicSparseColMat::new_checked(n_dofs, n_dofs, col_ptr, None, row_idx);
         Ok(Self {
             n: n_dofs,
