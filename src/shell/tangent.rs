@@ -509,10 +509,17 @@ impl<'a> ThicknessTangent<'a> {
 /// left to right: bitwise the same as those products. Compiled for wider vectors where the
 /// processor has them, as [`add_columns`].
 fn map_unit_rows(x: &mut [f64], nr: usize, un: &UnitMaps) {
-    let m = |a: &M3<f64>| -> [[f64; 3]; 3] {
-        std::array::from_fn(|i| [a[(i, 0)], a[(i, 1)], a[(i, 2)]])
-    };
-    map_unit_rows_wide(x, nr, &[m(&un.np), m(&un.h[0]), m(&un.h[1])]);
+    map_unit_rows_wide(
+        x,
+        nr,
+        &[by_rows(&un.np), by_rows(&un.h[0]), by_rows(&un.h[1])],
+    );
+}
+
+/// A 3×3 matrix as plain arrays, row by row (`[i][j]` = entry `(i, j)`), as the vector kernels
+/// take their small matrices.
+fn by_rows(a: &M3<f64>) -> [[f64; 3]; 3] {
+    std::array::from_fn(|i| [a[(i, 0)], a[(i, 1)], a[(i, 2)]])
 }
 
 /// The matrices `N′`, `H(r,1)`, `H(r,2)` by rows.
@@ -648,7 +655,7 @@ wide_vectors! {
                     let v = if image.is_some() { v * det } else { v };
                     [v[0], v[1], v[2]]
                 }),
-                q: image.map(|(q, _)| std::array::from_fn(|r| std::array::from_fn(|c| q[(r, c)]))),
+                q: image.map(|(q, _)| by_rows(&q)),
             };
             let c0 = DOFS_PER_PARTICLE * slot * nr;
             let block = &mut data[c0..c0 + DOFS_PER_PARTICLE * nr];
@@ -787,10 +794,7 @@ mod tests {
         map_unit_rows(&mut a, nr, &un);
         assert_eq!(bits(&a), bits(&reference));
         assert_ne!(bits(&a), bits(&x0));
-        let m = |a: &M3<f64>| -> [[f64; 3]; 3] {
-            std::array::from_fn(|i| [a[(i, 0)], a[(i, 1)], a[(i, 2)]])
-        };
-        let maps = [m(&un.np), m(&un.h[0]), m(&un.h[1])];
+        let maps = [by_rows(&un.np), by_rows(&un.h[0]), by_rows(&un.h[1])];
         let mut b = x0.clone();
         map_unit_rows_generic(&mut b, nr, &maps);
         assert_eq!(bits(&b), bits(&reference));
