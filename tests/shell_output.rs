@@ -139,6 +139,8 @@ fn record(load_start: f64, load: f64, converged: bool) -> StepRecord {
         factorised_at: converged.then_some(shelldsa::solver::FactorisedAt::PreviousIterate),
         timing: Default::default(),
         krylov: Vec::new(),
+        krylov_gave_up: Vec::new(),
+        krylov_skipped: Vec::new(),
         backtracks: Vec::new(),
         continuation: Vec::new(),
         failure: (!converged).then_some(FailureReason::MaxIterations(2)),

@@ -1939,6 +1939,20 @@ fn held_factorisation_updates_keep_the_newton_iterates_across_steps() {
         );
         assert!(f_held < f_direct, "{f_held} vs {f_direct}");
         assert!(at_start > 0);
+        // GMRES is skipped (the tangent factorised without a try) only at an iteration where
+        // it gave up, or was skipped, in each of the two attempts before.
+        let given_up = |s: &StepRecord, k: usize| {
+            s.krylov_gave_up.contains(&k) || s.krylov_skipped.contains(&k)
+        };
+        for (i, s) in held.attempts.iter().enumerate() {
+            for &k in &s.krylov_skipped {
+                assert!(
+                    i >= 2,
+                    "attempt {i} skipped {k} without two attempts before"
+                );
+                assert!(given_up(&held.attempts[i - 1], k) && given_up(&held.attempts[i - 2], k));
+            }
+        }
         assert_eq!(its(&direct), its(&held));
         let scale = norm(&direct.u);
         let diff = direct

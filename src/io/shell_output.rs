@@ -554,6 +554,11 @@ pub struct StepSummary {
     pub timing: StepTiming,
     /// Updates solved by preconditioned GMRES: `(k, Arnoldi steps)`.
     pub krylov: Vec<(usize, usize)>,
+    /// Iterations whose GMRES update gave up ([`crate::solver::StepRecord::krylov_gave_up`]).
+    pub krylov_gave_up: Vec<usize>,
+    /// Iterations factorised without trying GMRES
+    /// ([`crate::solver::StepRecord::krylov_skipped`]).
+    pub krylov_skipped: Vec<usize>,
     /// Backtracking tries of the Newton line search
     /// ([`crate::solver::StepRecord::backtracks`]).
     pub backtracks: Vec<crate::solver::Backtrack>,
@@ -938,6 +943,8 @@ impl ShellOutput {
             accepted_residual_only: record.factorised_at == Some(FactorisedAt::PreviousIterate),
             timing: record.timing,
             krylov: record.krylov.clone(),
+            krylov_gave_up: record.krylov_gave_up.clone(),
+            krylov_skipped: record.krylov_skipped.clone(),
             backtracks: record.backtracks.clone(),
             continuation: record.continuation.clone(),
             monitors,
@@ -1139,6 +1146,8 @@ impl ShellOutput {
             "accepted_residual_only": s.accepted_residual_only,
             "timing_s": timing_json(&s.timing),
             "krylov_updates": s.krylov,
+            "krylov_gave_up": s.krylov_gave_up,
+            "krylov_skipped": s.krylov_skipped,
             "converged": true,
             "monitors": self.monitors_json(&s.monitors),
             "vtu": s.vtu,

@@ -403,7 +403,10 @@ pub enum LinearUpdates {
     /// [`HELD_MIN_BUDGET`] and [`HELD_MAX_BUDGET`] steps), or when the preconditioner has gone
     /// stale: the last solve's Arnoldi steps reached the average cost per solve since the last
     /// factorisation (factorisation included), beyond which keeping the factors no longer
-    /// lowers that average (the replacement rule of a cost that grows with age). The
+    /// lowers that average (the replacement rule of a cost that grows with age). It is
+    /// factorised without trying GMRES at an iteration `k` where GMRES gave up in each of the
+    /// two step attempts before ([`HELD_PROBE_EVERY`]: the attempt that gives up is pure loss,
+    /// and the first iterations of a plastic step give up step after step). The
     /// residual-first energy test solves with the previous iterate's tangent by GMRES too, and
     /// an accepted iterate is factorised before [`NonlinearProblem::on_converged`] when the
     /// problem requires the converged tangent.
@@ -470,6 +473,19 @@ pub const HELD_MIN_BUDGET: usize = 10;
 /// this many vectors of the system's size).
 pub const HELD_MAX_BUDGET: usize = 60;
 
+/// Under [`LinearUpdates::KrylovHeld`], an iteration `k` at which GMRES gave up in each of the
+/// two step attempts before factorises at once, without trying (one give-up alone, as at the
+/// third iteration of some steps, does not predict the next); every `HELD_PROBE_EVERY`-th
+/// attempt, and an attempt whose load step is less than half the last one, tries again at
+/// every iteration, so a change of regime (GMRES converging there again) is noticed within
+/// that many attempts. Measured on the plastic hemisphere (2 cores, 2026-11-28): GMRES gave up
+/// at the first two iterations of 18 of its 19 steps at 33², and at 45 updates of 18 steps at
+/// 17², each after the first early-abort test (three Arnoldi steps); those attempts were
+/// 3.1 % and 3.9 % of the run. With the rule 23 of the 38 at 33² and 25 of the 45 at 17² are
+/// not tried, and both runs take the same iterates, bit for bit (GMRES would have given up at
+/// every iteration skipped).
+pub const HELD_PROBE_EVERY: usize = 4;
+
 impl LinearUpdates {
     /// The mode used with `solver` ([`LinearUpdates::Auto`] resolved by its method).
     pub fn resolve(self, solver: &LinearSolver) -> LinearUpdates {
@@ -497,6 +513,19 @@ struct Held {
     spent: f64,
     /// Solves since the last factorisation (the direct one included).
     solves: usize,
+    /// Iterations `k < 64` (bit `k`) at which GMRES gave up in each of the two attempts
+    /// before this one, or was not tried there for that reason.
+    gave_up_twice: u64,
+    /// The same for the last attempt alone.
+    gave_up_before: u64,
+    /// The same for this attempt.
+    gave_up_now: u64,
+    /// Attempts since GMRES was last tried at every iteration (a probe).
+    since_probe: usize,
+    /// This attempt tries GMRES wherever the factors allow it.
+    probe: bool,
+    /// The last attempt's load step `|Δλ|`.
+    last_step: f64,
 }
 
 impl Held {
@@ -525,6 +554,37 @@ impl Held {
     /// GMRES budget in Arnoldi steps.
     fn budget(&self) -> usize {
         (self.cost.ceil() as usize).clamp(HELD_MIN_BUDGET, HELD_MAX_BUDGET)
+    }
+
+    /// A step attempt of load step `step` starts: what the previous two met becomes the
+    /// prediction, unless this step is less than half the last one (the tangent then moves
+    /// less within the step, and GMRES converges where it gave up before: measured on the
+    /// plastic hemisphere's last step, clipped to land on the end load); every
+    /// [`HELD_PROBE_EVERY`]-th attempt tries GMRES everywhere again.
+    fn begin_attempt(&mut self, step: f64) {
+        let now = std::mem::take(&mut self.gave_up_now);
+        self.gave_up_twice = now & self.gave_up_before;
+        self.gave_up_before = now;
+        let shorter = step.abs() < 0.5 * self.last_step;
+        self.last_step = step.abs();
+        self.since_probe += 1;
+        self.probe = shorter || self.since_probe >= HELD_PROBE_EVERY;
+        if self.probe {
+            self.since_probe = 0;
+        }
+    }
+
+    /// Whether GMRES at iteration `k` is predicted to give up (it did at the same iteration
+    /// of each of the previous two attempts, and this attempt is no probe).
+    fn predicts_giving_up(&self, k: usize) -> bool {
+        !self.probe && k < 64 && self.gave_up_twice & (1 << k) != 0
+    }
+
+    /// GMRES gave up at iteration `k`, or was not tried there because it was predicted to.
+    fn gave_up(&mut self, k: usize) {
+        if k < 64 {
+            self.gave_up_now |= 1 << k;
+        }
     }
 }
 
@@ -806,6 +866,11 @@ pub struct StepRecord {
     pub timing: StepTiming,
     /// Updates solved by GMRES ([`LinearUpdates::KrylovNearConvergence`]): `(k, Arnoldi steps)`.
     pub krylov: Vec<(usize, usize)>,
+    /// Iterations `k` whose GMRES update gave up (the tangent was then factorised).
+    pub krylov_gave_up: Vec<usize>,
+    /// Iterations `k` factorised without trying GMRES, because it gave up at the same
+    /// iteration of each of the two attempts before ([`HELD_PROBE_EVERY`]).
+    pub krylov_skipped: Vec<usize>,
     /// Why it failed, if it did.
     pub failure: Option<FailureReason>,
     /// Backtracking tries of the line search ([`LineSearch::OnFailure`]), in order.
@@ -836,6 +901,8 @@ impl StepRecord {
             factorised_at: None,
             timing: StepTiming::default(),
             krylov: Vec::new(),
+            krylov_gave_up: Vec::new(),
+            krylov_skipped: Vec::new(),
             failure: None,
             backtracks: Vec::new(),
             continuation: Vec::new(),
@@ -1211,6 +1278,7 @@ impl NewtonSolver {
         let o = self.options;
         let policy = problem.converged_tangent();
         let residual_first = policy != ConvergedTangent::Required;
+        w.held.begin_attempt(rec.step_size);
         // Residual and tangent already evaluated at `u` by the residual-first test
         // (`ConvergedTangent::Assembled`), which did not accept the iterate.
         let mut evaluated_here = false;
@@ -1364,7 +1432,14 @@ impl NewtonSolver {
                     held_in_step && k >= 1 && constraints_met && rnorm <= 1e-2 * r_ref
                 }
                 LinearUpdates::KrylovHeld => {
-                    w.held.valid && !w.held.stale && solver.is_factorized()
+                    let usable = w.held.valid && !w.held.stale && solver.is_factorized();
+                    if usable && w.held.predicts_giving_up(k) {
+                        w.held.gave_up(k);
+                        rec.krylov_skipped.push(k);
+                        false
+                    } else {
+                        usable
+                    }
                 }
                 LinearUpdates::Direct | LinearUpdates::Auto => false,
             };
@@ -1429,6 +1504,10 @@ impl NewtonSolver {
                     w.held.krylov_solve(info.iterations);
                 }
                 None => {
+                    if krylov {
+                        w.held.gave_up(k);
+                        rec.krylov_gave_up.push(k);
+                    }
                     if !factorised_here {
                         if let Err(e) = factorise_held(solver, &w.values, rec, &mut w.held) {
                             reject!(e);
@@ -2387,4 +2466,48 @@ struct ArcWork {
     values: Vec<f64>,
     /// Scratch of [`unknowns_term_scale`] (`4 n`).
     s: Vec<f64>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Held, HELD_PROBE_EVERY};
+
+    /// One attempt of load step `step` at which GMRES is tried where the policy lets it and
+    /// gives up at the iterations in `gives_up`: the iterations it was not tried at.
+    fn attempt(h: &mut Held, step: f64, gives_up: &[usize]) -> Vec<usize> {
+        h.begin_attempt(step);
+        let mut skipped = Vec::new();
+        for k in 0..6 {
+            if h.predicts_giving_up(k) {
+                h.gave_up(k);
+                skipped.push(k);
+            } else if gives_up.contains(&k) {
+                h.gave_up(k);
+            }
+        }
+        skipped
+    }
+
+    #[test]
+    fn held_factors_skip_gmres_where_it_gave_up_twice() {
+        let mut h = Held::default();
+        // Gave up at 0 and 1 in two attempts in a row, at 2 once: 0 and 1 are factorised at
+        // once in the next attempts, 2 is tried.
+        assert!(attempt(&mut h, 1.0, &[0, 1, 2]).is_empty());
+        assert!(attempt(&mut h, 1.0, &[0, 1]).is_empty());
+        assert_eq!(attempt(&mut h, 1.0, &[]), [0, 1]);
+        // The probe: every HELD_PROBE_EVERY-th attempt tries everywhere (here the 4th).
+        assert_eq!(HELD_PROBE_EVERY, 4);
+        assert!(attempt(&mut h, 1.0, &[1]).is_empty());
+        // Iteration 0 converged in the probe, 1 gave up again: only 1 is skipped.
+        assert_eq!(attempt(&mut h, 1.0, &[]), [1]);
+        assert_eq!(attempt(&mut h, 1.0, &[]), [1]);
+        // A step shorter than half the last one tries everywhere (and counts as a probe).
+        assert!(attempt(&mut h, 0.4, &[]).is_empty());
+        // The next normal step: 1 gave up in the attempt before the short one but not in it.
+        assert!(attempt(&mut h, 1.0, &[1]).is_empty());
+        // Iterations beyond the memory's 64 are always tried.
+        h.gave_up(70);
+        assert!(!h.predicts_giving_up(70));
+    }
 }
