@@ -152,3 +152,56 @@ fn tangent_equals_dual_jacobian_at_plastic_states() {
         "dual vs central differences: {worst_fd:e}"
     );
 }
+
+/// GMRES updates on the held factorisation (`linear_updates = "krylov-held"`) on the coarse
+/// plastic hemisphere to P = 100: the first iterations of plastic steps give up GMRES step
+/// after step, and the driver stops trying there (`HELD_PROBE_EVERY`) only where it gave up in
+/// both attempts before; the converged unknowns equal those of direct updates to far below the
+/// Newton tolerance (both stop at 1e-8 of the force and GMRES solves to 1e-12 of it).
+#[test]
+fn held_factors_stop_trying_gmres_where_it_keeps_giving_up() {
+    use shelldsa::solver::LinearUpdates;
+    let run = |updates: LinearUpdates| {
+        let mut built = build(&coarse_case(100.0)).unwrap();
+        built.newton.options.linear_updates = updates;
+        let pattern = built.problem.pattern().clone();
+        let mut solver =
+            LinearSolver::new(&pattern, Method::SupernodalLu, SolverOptions::default()).unwrap();
+        let n = built.problem.n_dofs();
+        built
+            .newton
+            .run(&mut built.problem, &pattern, &mut solver, &vec![0.0; n])
+            .expect("the coarse plastic hemisphere reaches P = 100")
+    };
+    let direct = run(LinearUpdates::Direct);
+    let held = run(LinearUpdates::KrylovHeld);
+    let a = &held.attempts;
+    let gave_up: usize = a.iter().map(|s| s.krylov_gave_up.len()).sum();
+    let skipped: usize = a.iter().map(|s| s.krylov_skipped.len()).sum();
+    println!(
+        "{} attempts: GMRES gave up {gave_up} times, not tried {skipped} times",
+        a.len()
+    );
+    assert!(skipped > 0);
+    let tried_and_failed = |s: &shelldsa::solver::StepRecord, k: usize| {
+        s.krylov_gave_up.contains(&k) || s.krylov_skipped.contains(&k)
+    };
+    for (i, s) in a.iter().enumerate() {
+        for &k in &s.krylov_skipped {
+            assert!(i >= 2 && tried_and_failed(&a[i - 1], k) && tried_and_failed(&a[i - 2], k));
+        }
+    }
+    let its = |r: &shelldsa::solver::NewtonReport| {
+        r.converged_steps()
+            .map(|s| s.iterations)
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(its(&direct), its(&held));
+    let scale = direct.u.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+    let diff = direct
+        .u
+        .iter()
+        .zip(&held.u)
+        .fold(0.0_f64, |m, (x, y)| m.max((x - y).abs()));
+    assert!(diff <= 1e-10 * scale, "{diff:e} of {scale:e}");
+}
