@@ -882,6 +882,13 @@ pub struct StepRecord {
 }
 
 impl StepRecord {
+    /// Whether GMRES gave up at iteration `k` of this attempt, or was not tried there because
+    /// it had given up at `k` in the two attempts before ([`Self::krylov_gave_up`],
+    /// [`Self::krylov_skipped`]).
+    pub fn gmres_gave_up_at(&self, k: usize) -> bool {
+        self.krylov_gave_up.contains(&k) || self.krylov_skipped.contains(&k)
+    }
+
     /// A record of an attempt from `load_start` to `load` of step size `step_size`, started
     /// from `predictor`, with nothing evaluated yet.
     pub fn new(load_start: f64, load: f64, step_size: f64, predictor: Predictor) -> Self {
