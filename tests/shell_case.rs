@@ -265,6 +265,18 @@ fn wrong_top_level_and_discretisation_values_are_named() {
         "thickness_points = 1",
         &["`integration.thickness_points`", "= 1 ", "2..=7"],
     );
+    // One Gauss point through the thickness: no bending stiffness (the plate's deflection
+    // came out 146 times too large without a word).
+    rejects(
+        "thickness_points = 5\nthickness_rule = \"lobatto\"",
+        "thickness_points = 1\nthickness_rule = \"gauss\"",
+        &[
+            "`integration.thickness_points`",
+            "= 1 ",
+            "2..=10",
+            "no bending stiffness",
+        ],
+    );
     rejects(
         "thickness_rule = \"lobatto\"",
         "thickness_rule = \"simpson\"",

@@ -1361,10 +1361,22 @@ impl Checker<'_> {
             Some(MAX_GAUSS_POINTS as i64),
         )?;
         let thickness_rule = match i.thickness_rule.as_str() {
+            // One point at the mid-surface integrates no bending stiffness (the strain's
+            // linear part in ζ vanishes there): at least two.
+            "gauss" if i.thickness_points == 1 => {
+                return Err(self.err(
+                    "integration.thickness_points",
+                    "1".to_string(),
+                    format!(
+                        "an integer in 2..={MAX_GAUSS_POINTS} (one point through the thickness \
+                         sits on the mid-surface and integrates no bending stiffness)"
+                    ),
+                ))
+            }
             "gauss" => ThicknessRule::Gauss(self.count(
                 "integration.thickness_points",
                 i.thickness_points,
-                1,
+                2,
                 Some(MAX_GAUSS_POINTS as i64),
             )?),
             "lobatto" => ThicknessRule::Lobatto(self.count(

@@ -402,7 +402,6 @@ pub fn run_with_output(
     // (1) The plain analysis.
     let t = Instant::now();
     let (problem, newton) = analysis.build(base)?;
-    let with_contact = super::contact_load(&problem).is_some();
     // The design variables at the nominal design and every finite-difference design (shape:
     // the perturbed surface with a regular normal at every particle and point of the model;
     // tool shape: a valid perturbed tool) are checked before the analysis.
@@ -498,27 +497,23 @@ pub fn run_with_output(
     update(&result);
     let nominal = result.nominal.clone();
 
-    // With contact, the later runs replay the plain run's load levels: every converged level
-    // becomes a `stops` entry and the step size starts at `max_step` (≥ every gap), so each
-    // step is clipped to the next level and keeps its size (a clipped step neither grows nor
+    // The later runs replay the plain run's load levels: every converged level becomes a
+    // `stops` entry and the step size starts at `max_step` (≥ every gap), so each step is
+    // clipped to the next level and keeps its size (a clipped step neither grows nor
     // shrinks): the runs land on the same levels whatever their iteration counts (the hooked
-    // run needs the converged tangent, and near a change of the contact set an iteration more
-    // or less changes the adaptive growth; the discrete response depends on the levels). A
+    // run needs the converged tangent, the re-runs converge to tighter tolerances, and near a
+    // change of the contact set or of the plastic zone an iteration more or less changes the
+    // adaptive growth; the discrete response depends on the levels). Prescribed steps are
+    // replayed as they were (the levels are the plain run's own numbers, bit for bit). A
     // re-run whose attempt at a level fails reaches it by continuation (`StopFailure`: a
     // shorter step solved from the same committed state, not committed, starts a new attempt
     // at the level), so it solves the same equations at the same levels; a re-run that still
     // has to cut a step differs and is reported (`StepSequence`).
-    let replay;
-    let analysis: &dyn Analysis = match with_contact {
-        false => analysis,
-        true => {
-            replay = Replay {
-                analysis,
-                levels: nominal.loads.clone(),
-            };
-            &replay
-        }
+    let replay = Replay {
+        analysis,
+        levels: nominal.loads.clone(),
     };
+    let analysis: &dyn Analysis = &replay;
 
     // (2) The continuum DSA and the dual reference: both observe one hooked run when both are
     // asked for (they share the analysis and its converged tangents), else each its own.
