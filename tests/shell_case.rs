@@ -649,3 +649,30 @@ fn load_steps_are_required_with_load_stepping_and_not_with_arc_length() {
     let c = parse(&arc).unwrap();
     assert_eq!(c.steps.arc_length, Some([0.1, 1e-5, 0.1]));
 }
+
+/// Supports too small for the basis: the build's error names `kernel.support` and its value,
+/// wherever the shape functions fail (here at a boundary point of the VCI contour integrals,
+/// with linear supports of one spacing: two particles cover a point of the edge).
+#[test]
+fn supports_too_small_name_the_support_and_its_value() {
+    let text = GOOD.replacen(
+        "basis = \"quadratic\"\nsupport = 3.0",
+        "basis = \"linear\"\nsupport = 1.0",
+        1,
+    );
+    assert_ne!(text, GOOD, "test set-up: the kernel lines moved");
+    let case = parse(&text).expect("a valid case file");
+    let e = match shelldsa::io::shell_build::build(&case) {
+        Ok(_) => panic!("built a model whose supports do not cover the basis"),
+        Err(e) => e.to_string(),
+    };
+    println!("{e}");
+    for want in [
+        "`kernel.support`",
+        "1 (particle spacings)",
+        "VCI",
+        "the linear basis needs at least 3",
+    ] {
+        assert!(e.contains(want), "error lacks {want:?}: {e}");
+    }
+}

@@ -76,6 +76,21 @@ fn model_err(key: &str, e: impl std::fmt::Display) -> BuildError {
     }
 }
 
+/// A model error of `key`, unless the shape functions failed (too few particles cover a
+/// point): that names `kernel.support` and its value, whatever step of the build met it.
+fn shell_err(case: &ShellCase, key: &str, e: ShellError) -> BuildError {
+    match e {
+        e @ ShellError::Shape { .. } => BuildError::Model {
+            key: "kernel.support".into(),
+            message: format!(
+                "{} (particle spacings): {e}",
+                case.kernel.support
+            ),
+        },
+        other => model_err(key, other),
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Stable half.
 
@@ -392,7 +407,7 @@ pub fn check_boundary(case: &ShellCase) -> Result<ConstraintSet, BuildError> {
         symmetry: symmetry_planes(case)?,
     };
     let model = ShellModel::new(&case.surface, disc, case.material)
-        .map_err(|e| model_err("kernel.support", e))?;
+        .map_err(|e| shell_err(case, "kernel.support", e))?;
     let rows = boundary_constraints(case, &model)?;
     assemble(&model, rows, SymmetryRows::Eliminate).map_err(|e| model_err("boundary", e))
 }
@@ -505,13 +520,14 @@ pub fn connect_with_contact(
 ) -> Result<(ShellProblem, Option<Arc<ShellContact>>), BuildError> {
     disc.symmetry = symmetry_planes(case)?;
     let mut model = ShellModel::new(&case.surface, disc, case.material)
-        .map_err(|e| model_err("kernel.support", e))?;
+        .map_err(|e| shell_err(case, "kernel.support", e))?;
     model.director = case.integration.director;
     if case.integration.vci != VciOrder::Off {
         let rule =
-            boundary_rule(&model, case.param_box).map_err(|e| model_err("integration.vci", e))?;
+            boundary_rule(&model, case.param_box)
+            .map_err(|e| shell_err(case, "integration.vci", e))?;
         apply_vci(&mut model, case.integration.vci, &rule)
-            .map_err(|e| model_err("integration.vci", e))?;
+            .map_err(|e| shell_err(case, "integration.vci", e))?;
     }
 
     let constraints = boundary_constraints(case, &model)?;
@@ -740,7 +756,7 @@ pub fn run(
     let surface = &case.surface;
     let contact = built.contact.clone();
     let mut resolution = DirectorResolution::new(problem_model(&built.problem))
-        .map_err(|e| model_err("kernel.support", e))?;
+        .map_err(|e| shell_err(case, "kernel.support", e))?;
     let hook = CommitHook {
         record: None,
         error: None,

@@ -119,5 +119,11 @@ pub fn apply_vci(
 }
 
 fn vci_error(e: VciError) -> ShellError {
-    ShellError::InvalidInput(e.to_string())
+    match e {
+        VciError::Shape(source) => ShellError::Shape {
+            context: "at a boundary point of the VCI contour integrals: ",
+            source,
+        },
+        other => ShellError::InvalidInput(other.to_string()),
+    }
 }

@@ -69,4 +69,13 @@ pub enum ShellError {
     /// Invalid linear constraint.
     #[error(transparent)]
     Constraint(#[from] constraints::ConstraintError),
+    /// The reproducing-kernel functions could not be evaluated (too few particles cover a
+    /// point: the supports are too small for the basis); `context` says where.
+    #[error("{context}{source}")]
+    Shape {
+        /// Where the evaluation was, with a trailing separator (empty at quadrature points).
+        context: &'static str,
+        /// The meshfree error.
+        source: crate::meshfree::MeshfreeError,
+    },
 }

@@ -1167,5 +1167,8 @@ impl ShellModel {
 }
 
 fn mf(e: MeshfreeError) -> ShellError {
-    ShellError::InvalidInput(e.to_string())
+    ShellError::Shape {
+        context: "",
+        source: e,
+    }
 }
