@@ -336,7 +336,8 @@ fn dsa(
         if step == 0 || step as f64 > most {
             err!(
                 "error: --terms {step}: expected a load step in 1..={most} (the case takes at \
-                 most final_load / min_step = {} / {} steps, plus its {} stop(s))",
+                 most ⌈final_load / min_step⌉ = ⌈{} / {}⌉ steps, one more for rounding, and one \
+                 for each of its {} stop(s))",
                 c.steps.final_load,
                 c.steps.min_step,
                 c.steps.stops.len()
@@ -669,12 +670,19 @@ fn run_shell(con: &Console, c: &ShellCase, out: &Path, quiet: bool) -> i32 {
             return EXIT_BAD_INPUT;
         }
     };
+    let unknowns = crate::solver::NonlinearProblem::n_dofs(&built.problem);
+    let particle_dofs = shell_build::problem_model(&built.problem).n_dofs();
+    let multipliers = match unknowns.saturating_sub(particle_dofs) {
+        0 => String::new(),
+        m => format!(" ({particle_dofs} of the particles, {m} constraint multiplier(s))"),
+    };
     say!(
         con,
-        "{}: {} particles, {} unknowns, {} quadrature points × {} layers (built in {:.2} s)",
+        "{}: {} particles, {} unknowns{multipliers}, {} quadrature points × {} layers (built in \
+         {:.2} s)",
         c.title,
         built.n_particles,
-        crate::solver::NonlinearProblem::n_dofs(&built.problem),
+        unknowns,
         shell_build::problem_model(&built.problem).points.len(),
         shell_build::problem_model(&built.problem)
             .thickness_rule
@@ -738,7 +746,27 @@ fn run_shell(con: &Console, c: &ShellCase, out: &Path, quiet: bool) -> i32 {
             for w in &summary.warnings {
                 say!(con, "warning: {w}");
             }
-            if let (Some(cs), None) = (&c.contact, &summary.separation) {
+            let complete = matches!(summary.status, RunStatus::Complete);
+            // Arc-length control stops at the first converged step at or past `final_load`:
+            // a step long against the path to it overshoots, and the run has few points.
+            if let (Some([ds, _, ds_max]), Some(s), true) = (c.steps.arc_length, last, complete) {
+                let end = c.steps.final_load;
+                let past = (s.load_factor - end) / end.abs();
+                if past > 0.1 {
+                    say!(
+                        con,
+                        "warning: the arc-length run ended at load factor {:.6e}, {:.0} % past \
+                         steps.final_load = {end:e}, in {} converged step(s): the arc lengths \
+                         (steps.arc_length = {ds:e}, steps.max_arc_length = {ds_max:e}) are long \
+                         against this path; shorter ones land closer and trace it with more \
+                         points",
+                        s.load_factor,
+                        100.0 * past,
+                        summary.steps.len()
+                    );
+                }
+            }
+            if let (Some(cs), None, true) = (&c.contact, &summary.separation, complete) {
                 if let Some(r) = &cs.release {
                     say!(
                         con,
@@ -809,9 +837,18 @@ fn run_shell(con: &Console, c: &ShellCase, out: &Path, quiet: bool) -> i32 {
                      \"arc-length\"."
                 );
             }
-            match summary.status {
+            match &summary.status {
                 RunStatus::Complete => EXIT_OK,
-                RunStatus::Failed(_) => EXIT_STOPPED,
+                RunStatus::Failed(reason) => {
+                    // The reason on standard error too, for a caller that keeps only that.
+                    err!(
+                        "error: the analysis stopped after {} converged step(s), at load factor {:e}: \
+                         {reason}",
+                        summary.steps.len(),
+                        last.map_or(0.0, |s| s.load_factor)
+                    );
+                    EXIT_STOPPED
+                }
             }
         }
         Err(e) => {

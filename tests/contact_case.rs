@@ -377,3 +377,31 @@ fn a_stop_where_every_attempt_switches_contact_names_the_penalty() {
         assert!(a["active_set_iterations"].as_u64().unwrap() >= 1, "{a}");
     }
 }
+
+/// A tool placed through the sheet is refused when the model is built, naming the tool and
+/// its deepest gap; the die set flush with the sheet (overlapping it by 1e-4 of the 0.1
+/// thickness) is the penalty's to resolve and builds.
+#[test]
+fn tool_through_the_undeformed_sheet_is_refused_at_build() {
+    let good = parse(&text(GOOD_CONTACT, GOOD_PATH)).unwrap();
+    assert!(shelldsa::io::shell_build::build(&good).is_ok());
+    // The punch's axis at z = 0.5, radius 1: its lowest line at z = −0.5, through the plate.
+    let through = text(GOOD_CONTACT, GOOD_PATH).replacen(
+        "origin = [2.0, -1.0, 1.05]",
+        "origin = [2.0, -1.0, 0.5]",
+        1,
+    );
+    let case = parse(&through).unwrap();
+    let e = match shelldsa::io::shell_build::build(&case) {
+        Ok(_) => panic!("built a sheet with a tool through it"),
+        Err(e) => e.to_string(),
+    };
+    println!("{e}");
+    for want in [
+        "tool `punch`",
+        "already penetrates the undeformed sheet at t = 0",
+        "expected a gap ≥ −1e-1",
+    ] {
+        assert!(e.contains(want), "error lacks {want:?}: {e}");
+    }
+}

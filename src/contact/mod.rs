@@ -97,6 +97,29 @@ pub enum ContactError {
         /// Sheet thickness.
         thickness: f64,
     },
+    /// A tool that penetrates the undeformed sheet at `t = 0` deeper than the sheet thickness
+    /// ([`crate::shell::contact::ShellContact::initial_penetration`]): placed through the
+    /// sheet, or facing it with the wrong side.
+    #[error(
+        "tool `{tool}` already penetrates the undeformed sheet at t = 0: a slave point of \
+         quadrature point {point} (ζ = {zeta}, (u, v) = {uv:?}) has the gap {gap:e}, expected \
+         a gap ≥ −{thickness:e} (minus the sheet thickness); move the tool off the sheet (its \
+         surface's position) or check its `side`"
+    )]
+    InitialPenetration {
+        /// Tool name.
+        tool: String,
+        /// Quadrature point index.
+        point: usize,
+        /// Face (`+1` top, `−1` bottom).
+        zeta: f64,
+        /// Parameter coordinates of the point.
+        uv: [f64; 2],
+        /// The deepest gap of the tool.
+        gap: f64,
+        /// Sheet thickness.
+        thickness: f64,
+    },
     /// Tools that had no active slave point in any evaluation since the tracking started
     /// ([`crate::shell::contact::ShellContact::check_engaged`]).
     #[error("tools {tools:?} never touched the sheet: expected every tool to make contact")]

@@ -82,10 +82,7 @@ fn shell_err(case: &ShellCase, key: &str, e: ShellError) -> BuildError {
     match e {
         e @ ShellError::Shape { .. } => BuildError::Model {
             key: "kernel.support".into(),
-            message: format!(
-                "{} (particle spacings): {e}",
-                case.kernel.support
-            ),
+            message: format!("{} (particle spacings): {e}", case.kernel.support),
         },
         other => model_err(key, other),
     }
@@ -523,8 +520,7 @@ pub fn connect_with_contact(
         .map_err(|e| shell_err(case, "kernel.support", e))?;
     model.director = case.integration.director;
     if case.integration.vci != VciOrder::Off {
-        let rule =
-            boundary_rule(&model, case.param_box)
+        let rule = boundary_rule(&model, case.param_box)
             .map_err(|e| shell_err(case, "integration.vci", e))?;
         apply_vci(&mut model, case.integration.vci, &rule)
             .map_err(|e| shell_err(case, "integration.vci", e))?;
@@ -537,6 +533,8 @@ pub fn connect_with_contact(
         ShellProblem::new(model, loads, constraints).map_err(|e| model_err("boundary", e))?;
     if let Some(c) = &contact {
         c.reset_tracking();
+        c.initial_penetration(problem_model(&problem))
+            .map_err(|e| model_err("tool", e))?;
     }
     Ok((problem, contact))
 }

@@ -728,6 +728,40 @@ impl ShellContact {
         Ok(evals)
     }
 
+    /// `Err(InitialPenetration)` for the tool whose slave point lies deepest inside it, deeper
+    /// than the sheet thickness, on the undeformed sheet at `t = 0` (the committed state of
+    /// `model` before any step): the penalty cannot push such a sheet out, and the first step's
+    /// evaluations would report a crossing instead. A smaller overlap (a die set flush with the
+    /// sheet) is the penalty's to resolve and passes. Not tracked.
+    pub fn initial_penetration(&self, model: &ShellModel) -> Result<(), ContactError> {
+        let q = vec![0.0; model.n_dofs()];
+        let surfaces: Vec<Surface<f64>> = self.tools.iter().map(|tl| tl.surface.clone()).collect();
+        let evals = self.evaluate(model, &q, 0.0, &surfaces)?;
+        let mut deepest: Option<(f64, usize, f64, usize)> = None;
+        for (site, ev) in self.sites.iter().zip(&evals) {
+            for fe in &ev.faces {
+                for (i, c) in fe.contacts.iter().enumerate() {
+                    if let Some(c) = c {
+                        if c.gap < -self.thickness && deepest.is_none_or(|d| c.gap < d.0) {
+                            deepest = Some((c.gap, i, fe.zeta, site.point));
+                        }
+                    }
+                }
+            }
+        }
+        match deepest {
+            None => Ok(()),
+            Some((gap, i, zeta, point)) => Err(ContactError::InitialPenetration {
+                tool: self.tools[i].name.clone(),
+                point,
+                zeta,
+                uv: model.points[point].uv,
+                gap,
+                thickness: self.thickness,
+            }),
+        }
+    }
+
     /// Forget the tracked gaps and the touched tools (call after a `ShellProblem` is built: its
     /// set-up evaluates the loads at `t = 1`).
     pub fn reset_tracking(&self) {

@@ -969,10 +969,14 @@ impl fmt::Display for NewtonFailure {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             f,
-            "Newton stopped at load factor {:.6e} (last converged {:.6e}, step {:.3e}): {}; \
-             residual norms of the last attempt: [",
+            "Newton stopped at load factor {:.6e} (last converged {:.6e}, step {:.3e}): {}",
             self.attempted_load, self.converged_load, self.step_size, self.reason
         )?;
+        if self.last_residuals.is_empty() {
+            // No iteration was made (a cap or a set-up error before the attempt).
+            return Ok(());
+        }
+        write!(f, "; residual norms of the last attempt: [")?;
         for (k, r) in self.last_residuals.iter().enumerate() {
             write!(f, "{}{r:.3e}", if k > 0 { ", " } else { "" })?;
         }
