@@ -1084,6 +1084,18 @@ fn geometry_warnings(
     // hemisphere, R/t = 250, 2 × 2 Gauss points per cell, jitter 0.2 on 17 × 17: quadratic
     // −29 %, cubic with supports of 3.5 spacings −1.7 %).
     let radius_over_t = 1.0 / (kappa_max * thickness);
+    // The linear basis on a thin curved shell locks on any particle set: it cannot bend the
+    // surface without stretching it (the linear hemisphere, R/t = 250, supports of 2
+    // spacings: δ_A/P −66 % on 17 × 17 particles, −19 % on 33 × 33).
+    if basis == Basis::Linear && kappa_max > 0.0 && radius_over_t >= JITTER_LOCKING_RADIUS_OVER_T {
+        out.push(format!(
+            "`kernel.basis` = \"linear\" on a curved shell of radius over thickness \
+             {radius_over_t:.0}: the linear basis locks in membrane on thin curved shells (the \
+             linear hemisphere at R/t = 250 is 66 % too stiff on 17 × 17 particles, 19 % on \
+             33 × 33; verification/hemisphere-linear/README.md); use `kernel.basis` = \
+             \"quadratic\" (supports of 3 spacings)"
+        ));
+    }
     if particles.jitter > 0.0
         && basis != Basis::Cubic
         && kappa_max > 0.0
@@ -2842,6 +2854,35 @@ fd_steps = [1e-3]
          length = [0.0, 12.0]",
         )
         .replacen("thickness = 0.1", &format!("thickness = {thickness}"), 1)
+    }
+
+    #[test]
+    fn linear_basis_on_a_thin_curved_shell_is_a_warning() {
+        // A cylinder of radius 1 with t = 0.01 (R/t = 100).
+        let linear = cylinder_case("0.01")
+            .replacen("basis = \"quadratic\"", "basis = \"linear\"", 1)
+            .replacen("support = 3.0", "support = 2.0", 1);
+        assert!(linear.contains("\"linear\""));
+        let locks = |text: &str| {
+            parse(text)
+                .unwrap()
+                .warnings
+                .iter()
+                .any(|w| w.contains("the linear basis locks"))
+        };
+        assert!(locks(&linear));
+        // Not with the quadratic basis, not on a plate, not at R/t = 20.
+        assert!(!locks(&cylinder_case("0.01")));
+        assert!(!locks(&linear.replacen(
+            "thickness = 0.01",
+            "thickness = 0.05",
+            1
+        )));
+        let plate = GOOD
+            .replacen("basis = \"quadratic\"", "basis = \"linear\"", 1)
+            .replacen("support = 3.0", "support = 2.0", 1);
+        assert!(plate.contains("\"linear\""));
+        assert!(!locks(&plate));
     }
 
     #[test]
