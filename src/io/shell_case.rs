@@ -1621,6 +1621,15 @@ impl Checker<'_> {
             geometry_warnings(thickness, &surface, &param_box, &particles, kernel.basis);
         warnings.extend(wide_cubic_warning(&kernel));
         warnings.extend(resonance_warning(&kernel));
+        if boundary.is_empty() {
+            warnings.push(
+                "no `[[boundary]]` entry: nothing holds the shell against rigid-body motion, \
+                 so its tangent is singular (the run stops at its first factorisation) unless \
+                 tools or loads stiffen every such motion; fix or support at least one edge or \
+                 point"
+                    .into(),
+            );
+        }
         Ok(ShellCase {
             limits,
             warnings,
@@ -2854,6 +2863,20 @@ fd_steps = [1e-3]
          length = [0.0, 12.0]",
         )
         .replacen("thickness = 0.1", &format!("thickness = {thickness}"), 1)
+    }
+
+    #[test]
+    fn no_boundary_entry_is_a_warning() {
+        let free = with("[[boundary]]\nkind = \"clamped\"\nedge = \"u-min\"\n", "");
+        let c = parse(&free).unwrap();
+        assert!(c.boundary.is_empty());
+        assert!(
+            c.warnings
+                .iter()
+                .any(|w| w.contains("no `[[boundary]]` entry") && w.contains("singular")),
+            "{:?}",
+            c.warnings
+        );
     }
 
     #[test]
