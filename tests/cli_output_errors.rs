@@ -733,3 +733,48 @@ fn a_killed_run_leaves_valid_results() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A run into the output directory of a longer earlier run: the earlier run's step files are
+/// removed, so `steps/` holds this run's files only (the PVD lists them); other files stay.
+#[test]
+fn a_rerun_into_the_same_directory_removes_the_earlier_step_files() {
+    let dir = unique_dir("rerun");
+    let out = dir.join("out");
+    let run = |n: usize| {
+        let case = write_case(&dir, &elastic(n));
+        let o = shelldsa()
+            .args([
+                "run",
+                case.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+            ])
+            .output()
+            .unwrap();
+        assert_no_panic(&o);
+        assert_eq!(o.status.code(), Some(EXIT_OK));
+    };
+    let vtus = || {
+        let mut v: Vec<String> = std::fs::read_dir(out.join("steps"))
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    };
+    run(6);
+    assert_eq!(vtus().len(), 7, "{:?}", vtus());
+    std::fs::write(out.join("steps/notes.txt"), "kept").unwrap();
+    run(2);
+    assert_complete_run(&out, 2);
+    assert_eq!(
+        vtus(),
+        [
+            "notes.txt",
+            "step_0000.vtu",
+            "step_0001.vtu",
+            "step_0002.vtu"
+        ]
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -72,8 +72,15 @@ impl StepWriter for StepVtu<'_> {
         let grid = OutputGrid::new(&cq, case.output.subdivide)
             .map_err(|e| Failure::new("the VTU files' grid", e))?;
         let steps = self.dir.join("steps");
-        std::fs::create_dir_all(&steps)
-            .map_err(|e| Failure::new(format!("cannot create {}", steps.display()), e))?;
+        super::shell_output::fresh_steps_dir(&steps).map_err(|e| {
+            Failure::new(
+                format!(
+                    "cannot create or clear the step files of {}",
+                    steps.display()
+                ),
+                e,
+            )
+        })?;
         self.grid = Some(grid);
         self.contact = contact;
         self.variables = variables;

@@ -124,6 +124,26 @@ pub fn csv_field(text: &str) -> String {
     }
 }
 
+/// Create `dir` (the step files' folder of an output directory) and remove the step files
+/// (`step_NNNN.vtu`, four or more digits) an earlier run left there, so that the folder holds
+/// this run's steps only. Other files are left alone.
+pub(crate) fn fresh_steps_dir(dir: &Path) -> std::io::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    for entry in std::fs::read_dir(dir)? {
+        let entry = entry?;
+        let name = entry.file_name();
+        let Some(name) = name.to_str() else { continue };
+        let digits = name
+            .strip_prefix("step_")
+            .and_then(|n| n.strip_suffix(".vtu"));
+        let ours = digits.is_some_and(|d| d.len() >= 4 && d.bytes().all(|b| b.is_ascii_digit()));
+        if ours && entry.file_type()?.is_file() {
+            std::fs::remove_file(entry.path())?;
+        }
+    }
+    Ok(())
+}
+
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> OutputError + '_ {
     move |source| OutputError::Io {
         path: path.to_owned(),
@@ -713,7 +733,7 @@ impl ShellOutput {
         std::fs::create_dir_all(dir).map_err(io_err(dir))?;
         if spec.vtu {
             let steps = dir.join("steps");
-            std::fs::create_dir_all(&steps).map_err(io_err(&steps))?;
+            fresh_steps_dir(&steps).map_err(io_err(&steps))?;
         }
         Ok(ShellOutput {
             dir: dir.to_owned(),
