@@ -165,8 +165,8 @@ impl Console {
             } else {
                 self.state.set(Stdout::Failed);
                 eline(&format!(
-                    "error: cannot write to standard output: {e} (the run goes on and writes \
-                     its files)"
+                    "error: cannot write to standard output: {e} (the command goes on, and a \
+                     run still writes its files)"
                 ));
             }
         }
@@ -205,11 +205,16 @@ pub fn main_with_args<I: IntoIterator<Item = String>>(args: I) -> i32 {
     let cli = match Cli::try_parse_from(args) {
         Ok(c) => c,
         Err(e) => {
-            let _ = e.print();
-            return if e.use_stderr() {
-                EXIT_BAD_INPUT
-            } else {
-                EXIT_OK
+            let printed = e.print();
+            return match (e.use_stderr(), printed) {
+                (true, _) => EXIT_BAD_INPUT,
+                // `--help` or `--version` on standard output: a closed pipe is no error, a
+                // failed write (a full device) is an output error like any other.
+                (false, Err(w)) if w.kind() != std::io::ErrorKind::BrokenPipe => {
+                    eline(&format!("error: cannot write to standard output: {w}"));
+                    EXIT_OUTPUT
+                }
+                (false, _) => EXIT_OK,
             };
         }
     };

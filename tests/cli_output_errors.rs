@@ -778,3 +778,28 @@ fn a_rerun_into_the_same_directory_removes_the_earlier_step_files() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `shelldsa --help > /dev/full` and `--version`: the output error is reported and the exit
+/// status says so, as for any command.
+#[test]
+fn help_on_a_full_device_is_an_output_error() {
+    for flag in ["--help", "--version"] {
+        let Ok(full) = std::fs::OpenOptions::new().write(true).open("/dev/full") else {
+            println!("no /dev/full on this system: nothing to test");
+            return;
+        };
+        let o = shelldsa()
+            .arg(flag)
+            .stdout(full)
+            .stderr(Stdio::piped())
+            .output()
+            .unwrap();
+        assert_no_panic(&o);
+        assert_eq!(o.status.code(), Some(EXIT_OUTPUT), "{flag}");
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            stderr.contains("cannot write to standard output"),
+            "{stderr}"
+        );
+    }
+}
