@@ -490,3 +490,38 @@ fn degree_keys_and_arc_length_with_dsa_are_refused_up_front() {
         "{e}"
     );
 }
+
+/// Arc lengths far too short for the path to the end load: the run stops after its first
+/// step, saying so, instead of using up every attempt; a short first arc length that may grow
+/// runs to the end.
+#[test]
+fn arc_lengths_far_too_short_stop_after_the_first_step() {
+    let pattern = SparsityPattern::from_cells(1, &[vec![0]]).unwrap();
+    let mut solver = LinearSolver::new(&pattern, Method::Lu, SolverOptions::default()).unwrap();
+    let newton = NewtonSolver::default();
+    // dλ/du = 1 at the start: about 1e6 steps of 1e-6 to λ = 1, against 10 000 attempts.
+    let short = ArcLength {
+        end: 1.0,
+        initial_length: 1e-6,
+        max_length: 1e-6,
+        ..ArcLength::default()
+    };
+    let e = newton
+        .run_arc_length(&mut Snap, &pattern, &mut solver, &[0.0], &short, |_| {})
+        .expect_err("arc lengths of 1e-6 to λ = 1");
+    assert!(
+        matches!(e.reason, FailureReason::ArcLengthTooShort { steps, .. } if steps > 4e5),
+        "{e}"
+    );
+    assert_eq!(e.report.converged_steps().count(), 1);
+    assert!(e.to_string().contains("too short for this path"), "{e}");
+    // The same first step with room to grow (easy steps grow 1.5 times up to 0.05).
+    let growing = ArcLength {
+        max_length: 0.05,
+        ..short
+    };
+    let out = newton
+        .run_arc_length(&mut Snap, &pattern, &mut solver, &[0.0], &growing, |_| {})
+        .expect("the path to λ = 1 with growing arc lengths");
+    assert!(out.report.load >= 1.0);
+}

@@ -705,6 +705,21 @@ pub enum FailureReason {
     Setup(String),
     /// `max_attempts` step attempts used up.
     TooManyAttempts(usize),
+    /// Arc-length continuation: after the first converged step, the arc lengths allowed would
+    /// need far more steps to reach the end load than the attempts left (the first step's load
+    /// increment per arc length, at the largest arc length, more than four times short).
+    ArcLengthTooShort {
+        /// The first step's load increment.
+        first_step: f64,
+        /// Its arc length.
+        arc_length: f64,
+        /// The largest arc length.
+        max_length: f64,
+        /// Steps that estimate needs.
+        steps: f64,
+        /// Attempts left.
+        attempts_left: usize,
+    },
     /// An arc-length step converged to a point behind the last one: its increment makes an
     /// obtuse angle with the previous step's (over the path unknowns), so the corrector went
     /// back along the path instead of on (a turn sharper than the arc length resolves, a cusp,
@@ -731,6 +746,20 @@ impl fmt::Display for FailureReason {
             FailureReason::Problem(e) => write!(f, "problem: {e}"),
             FailureReason::Setup(s) => write!(f, "setup: {s}"),
             FailureReason::TooManyAttempts(n) => write!(f, "{n} step attempts used up"),
+            FailureReason::ArcLengthTooShort {
+                first_step,
+                arc_length,
+                max_length,
+                steps,
+                attempts_left,
+            } => write!(
+                f,
+                "the arc lengths are too short for this path: the first step (arc length \
+                 {arc_length:e}) advanced the load factor by {first_step:e}; at the largest arc \
+                 length {max_length:e} the end load takes about {steps:.0} steps, more than four \
+                 times the {attempts_left} attempts left; a longer arc length (or a larger \
+                 maximum) reaches it"
+            ),
             FailureReason::PathReversed { cosine } => write!(
                 f,
                 "the arc-length step went back along the path (cosine {cosine:.3} between its \
@@ -787,6 +816,7 @@ impl FailureReason {
             FailureReason::Problem(ProblemError::Fatal(_) | ProblemError::Failed(_))
                 | FailureReason::Setup(_)
                 | FailureReason::TooManyAttempts(_)
+                | FailureReason::ArcLengthTooShort { .. }
         )
     }
 }
@@ -2248,6 +2278,7 @@ impl NewtonSolver {
                     last_stiffness = Some(stiffness);
                     last_sign = sign;
                     n_converged += 1;
+                    let ds_taken = ds;
                     prev = Some(u[..np].iter().zip(&u_n[..np]).map(|(a, b)| a - b).collect());
                     if rec.iterations <= arc.easy_iterations {
                         ds = (ds * arc.grow_factor).min(arc.max_length);
@@ -2255,6 +2286,24 @@ impl NewtonSolver {
                     out.report.u = u;
                     out.report.load = load;
                     out.report.attempts.push(rec);
+                    // After the first step: the steps the end still takes at the largest arc
+                    // length, if the load advances per arc length as in this step (it does
+                    // less on a softening path), against the attempts left.
+                    if n_converged == 1 {
+                        let rate = (load - l_n).abs() / ds_taken;
+                        let steps = (arc.end - load) / (rate * arc.max_length);
+                        let left = arc.max_attempts.saturating_sub(out.report.attempts.len());
+                        if steps > 4.0 * left as f64 {
+                            let reason = FailureReason::ArcLengthTooShort {
+                                first_step: load - l_n,
+                                arc_length: ds_taken,
+                                max_length: arc.max_length,
+                                steps,
+                                attempts_left: left,
+                            };
+                            return Err(fail(out, load, ds, reason, vec![]));
+                        }
+                    }
                 }
                 Err(reason) => {
                     problem.restore();
