@@ -668,7 +668,9 @@ fn step_line(c: &ShellCase, s: &StepSummary) -> String {
 
 fn run_shell(con: &Console, c: &ShellCase, out: &Path, quiet: bool) -> i32 {
     let start = Instant::now();
-    let mut built = match shell_build::build(c) {
+    let built =
+        shell_build::build(c).and_then(|b| shell_build::tools_clear_of_the_sheet(&b).map(|()| b));
+    let mut built = match built {
         Ok(b) => b,
         Err(e) => {
             err!("error: {}: {e}", c.path.display());

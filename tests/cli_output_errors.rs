@@ -88,6 +88,19 @@ fn elastic(n: usize) -> String {
     )
 }
 
+/// `shelldsa run CASE --out OUT`, its output captured.
+fn run_into(case: &Path, out: &Path) -> Output {
+    shelldsa()
+        .args([
+            "run",
+            case.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap()
+}
+
 fn write_case(dir: &Path, text: &str) -> PathBuf {
     let case = dir.join("case.toml");
     std::fs::write(&case, text).unwrap();
@@ -262,15 +275,7 @@ fn a_full_disk_while_writing_results_is_an_output_error() {
     let out = dir.join("out");
     std::fs::create_dir_all(out.join("steps")).unwrap();
     std::os::unix::fs::symlink("/dev/full", out.join("steps/step_0003.vtu.tmp")).unwrap();
-    let o = shelldsa()
-        .args([
-            "run",
-            case.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
+    let o = run_into(&case, &out);
     assert_no_panic(&o);
     assert_eq!(o.status.code(), Some(EXIT_OUTPUT));
     let stderr = String::from_utf8_lossy(&o.stderr);
@@ -648,15 +653,7 @@ keys = [{{ t = 0.0, translation = [0.0, 0.0, 0.0] }}]
     let dir = unique_dir("csv-quoting");
     let path = write_case(&dir, &case);
     let out = dir.join("out");
-    let o = shelldsa()
-        .args([
-            "run",
-            path.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
+    let o = run_into(&path, &out);
     assert_no_panic(&o);
     assert_eq!(
         o.status.code(),
@@ -742,15 +739,7 @@ fn a_rerun_into_the_same_directory_removes_the_earlier_step_files() {
     let out = dir.join("out");
     let run = |n: usize| {
         let case = write_case(&dir, &elastic(n));
-        let o = shelldsa()
-            .args([
-                "run",
-                case.to_str().unwrap(),
-                "--out",
-                out.to_str().unwrap(),
-            ])
-            .output()
-            .unwrap();
+        let o = run_into(&case, &out);
         assert_no_panic(&o);
         assert_eq!(o.status.code(), Some(EXIT_OK));
     };

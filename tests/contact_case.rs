@@ -378,13 +378,14 @@ fn a_stop_where_every_attempt_switches_contact_names_the_penalty() {
     }
 }
 
-/// A tool placed through the sheet is refused when the model is built, naming the tool and
-/// its deepest gap; the die set flush with the sheet (overlapping it by 1e-4 of the 0.1
-/// thickness) is the penalty's to resolve and builds.
+/// A tool placed through the sheet is refused before an analysis, naming the tool and its
+/// deepest gap; the die set flush with the sheet (overlapping it by 1e-4 of the 0.1
+/// thickness) is the penalty's to resolve and passes.
 #[test]
-fn tool_through_the_undeformed_sheet_is_refused_at_build() {
+fn tool_through_the_undeformed_sheet_is_refused_before_an_analysis() {
+    use shelldsa::io::shell_build::{build, tools_clear_of_the_sheet};
     let good = parse(&text(GOOD_CONTACT, GOOD_PATH)).unwrap();
-    assert!(shelldsa::io::shell_build::build(&good).is_ok());
+    assert!(tools_clear_of_the_sheet(&build(&good).unwrap()).is_ok());
     // The punch's axis at z = 0.5, radius 1: its lowest line at z = −0.5, through the plate.
     let through = text(GOOD_CONTACT, GOOD_PATH).replacen(
         "origin = [2.0, -1.0, 1.05]",
@@ -392,8 +393,8 @@ fn tool_through_the_undeformed_sheet_is_refused_at_build() {
         1,
     );
     let case = parse(&through).unwrap();
-    let e = match shelldsa::io::shell_build::build(&case) {
-        Ok(_) => panic!("built a sheet with a tool through it"),
+    let e = match tools_clear_of_the_sheet(&build(&case).unwrap()) {
+        Ok(()) => panic!("passed a sheet with a tool through it"),
         Err(e) => e.to_string(),
     };
     println!("{e}");

@@ -20,26 +20,14 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-#[test]
-fn thickness_re_runs_reach_the_separation_level() {
-    let ci = std::fs::read_to_string(root().join("verification/cylindrical-bending-dsa/ci.toml"))
-        .unwrap();
-    // The die variables' tables and the [dsa] table replaced by the thickness alone, with the
-    // continuum method (the finite differences' reference) and one step size.
-    let head = &ci[..ci
-        .find("\n[[design]]\n")
-        .expect("ci.toml has [[design]] tables")
-        + 1];
-    let case = format!(
-        "{head}[[design]]\nname = \"t\"\nkind = \"thickness\"\nfd_steps = [2e-4]\n\n\
-         [dsa]\nmethods = [\"continuum\", \"fd\"]\n\
-         monitors = [\"center.uz\", \"mid.uz\", \"arm.uz\", \"edge.uz\", \"edge.ux\"]\n"
-    );
+/// `shelldsa dsa` on `case` (written to `target/dsa-replay-tests/NAME.toml`, output in
+/// `out-NAME`), which must complete without a failure: its sensitivity.json.
+fn dsa_complete(name: &str, case: &str) -> Value {
     let dir = root().join("target/dsa-replay-tests");
     std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("ci_thickness.toml");
+    let path = dir.join(format!("{name}.toml"));
     std::fs::write(&path, case).unwrap();
-    let out = dir.join("out");
+    let out = dir.join(format!("out-{name}"));
     let code = cli(&[
         "dsa",
         path.to_str().unwrap(),
@@ -56,15 +44,17 @@ fn thickness_re_runs_reach_the_separation_level() {
         s["failures"]
     );
     assert_eq!(code, 0);
-    let v = &s["variables"][0];
-    let steps = v["steps"].as_array().unwrap();
-    // Every level of the nominal run, the separation (t ≈ 1.2467) and the end included.
-    let loads = s["loads"].as_array().unwrap();
-    assert_eq!(steps.len(), loads.len());
-    assert_eq!(loads.last().unwrap().as_f64(), Some(1.4));
-    let (mut worst, mut compared) = (0.0f64, 0);
+    s
+}
+
+/// Over the steps not flagged by the active-set test: the largest `|FD / continuum − 1|` of
+/// the components above 1e-3 of the step's largest, the components compared, and the flagged
+/// steps.
+fn continuum_vs_fd(steps: &[Value]) -> (f64, usize, usize) {
+    let (mut worst, mut compared, mut flagged) = (0.0f64, 0, 0);
     for st in steps {
         if st["fd_flagged"][0].as_bool().unwrap() {
+            flagged += 1;
             continue;
         }
         let m = st["monitors"].as_object().unwrap();
@@ -81,6 +71,32 @@ fn thickness_re_runs_reach_the_separation_level() {
             compared += 1;
         }
     }
+    (worst, compared, flagged)
+}
+
+#[test]
+fn thickness_re_runs_reach_the_separation_level() {
+    let ci = std::fs::read_to_string(root().join("verification/cylindrical-bending-dsa/ci.toml"))
+        .unwrap();
+    // The die variables' tables and the [dsa] table replaced by the thickness alone, with the
+    // continuum method (the finite differences' reference) and one step size.
+    let head = &ci[..ci
+        .find("\n[[design]]\n")
+        .expect("ci.toml has [[design]] tables")
+        + 1];
+    let case = format!(
+        "{head}[[design]]\nname = \"t\"\nkind = \"thickness\"\nfd_steps = [2e-4]\n\n\
+         [dsa]\nmethods = [\"continuum\", \"fd\"]\n\
+         monitors = [\"center.uz\", \"mid.uz\", \"arm.uz\", \"edge.uz\", \"edge.ux\"]\n"
+    );
+    let s = dsa_complete("ci_thickness", &case);
+    let v = &s["variables"][0];
+    let steps = v["steps"].as_array().unwrap();
+    // Every level of the nominal run, the separation (t ≈ 1.2467) and the end included.
+    let loads = s["loads"].as_array().unwrap();
+    assert_eq!(steps.len(), loads.len());
+    assert_eq!(loads.last().unwrap().as_f64(), Some(1.4));
+    let (worst, compared, _) = continuum_vs_fd(steps);
     println!("t: continuum vs FD {worst:.2e} over {compared} unflagged components");
     assert!(compared > 0);
     // Measured 8.4e-6 at h/τ = 2e-4 (the truncation error of the central difference, O(h²),
@@ -115,27 +131,7 @@ fn adaptive_steps_without_contact_are_replayed() {
          [dsa]\nmethods = [\"continuum\", \"fd\"]\n",
     );
     assert!(!case.contains("initial_step = max_step"));
-    let dir = root().join("target/dsa-replay-tests");
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("hemisphere_adaptive.toml");
-    std::fs::write(&path, case).unwrap();
-    let out = dir.join("out-hemisphere");
-    let code = cli(&[
-        "dsa",
-        path.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
-    let s: Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("sensitivity.json")).unwrap())
-            .unwrap();
-    assert_eq!(
-        s["failures"].as_array().unwrap().len(),
-        0,
-        "{}",
-        s["failures"]
-    );
-    assert_eq!(code, 0);
+    let s = dsa_complete("hemisphere_adaptive", &case);
     let loads: Vec<f64> = s["loads"]
         .as_array()
         .unwrap()
@@ -149,21 +145,9 @@ fn adaptive_steps_without_contact_are_replayed() {
     }
     let steps = s["variables"][0]["steps"].as_array().unwrap();
     assert_eq!(steps.len(), loads.len());
-    let mut worst = 0.0f64;
-    for st in steps {
-        assert!(!st["fd_flagged"][0].as_bool().unwrap());
-        let m = st["monitors"].as_object().unwrap();
-        let big = m
-            .values()
-            .map(|c| c["continuum"].as_f64().unwrap().abs())
-            .fold(0.0, f64::max);
-        for c in m.values() {
-            let g = c["continuum"].as_f64().unwrap();
-            if g.abs() >= 1e-3 * big {
-                worst = worst.max((c["fd_central"][0].as_f64().unwrap() / g - 1.0).abs());
-            }
-        }
-    }
+    let (worst, compared, flagged) = continuum_vs_fd(steps);
+    assert_eq!(flagged, 0);
+    assert!(compared > 0);
     println!("t: continuum vs FD {worst:.2e} over {} steps", steps.len());
     // Measured 1.5e-8 at h/τ = 1e-4: the central difference's O(h²) truncation and the
     // re-runs' convergence noise (1e-12 of the force over h = 1e-4 τ, about 1e-8 relative).

@@ -91,10 +91,12 @@ impl Analysis for CaseAnalysis<'_> {
                 })?;
             }
         }
-        let b = shell_build::build(&c).map_err(|e| SensitivityError::Build {
-            context: self.case.path.display().to_string(),
-            source: Box::new(e),
-        })?;
+        let b = shell_build::build(&c)
+            .and_then(|b| shell_build::tools_clear_of_the_sheet(&b).map(|()| b))
+            .map_err(|e| SensitivityError::Build {
+                context: self.case.path.display().to_string(),
+                source: Box::new(e),
+            })?;
         Ok((b.problem, b.newton))
     }
 }
