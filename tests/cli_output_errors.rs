@@ -88,17 +88,22 @@ fn elastic(n: usize) -> String {
     )
 }
 
-/// `shelldsa run CASE --out OUT`, its output captured.
-fn run_into(case: &Path, out: &Path) -> Output {
+/// `shelldsa COMMAND CASE --out OUT`, its output captured.
+fn command_into(command: &str, case: &Path, out: &Path) -> Output {
     shelldsa()
         .args([
-            "run",
+            command,
             case.to_str().unwrap(),
             "--out",
             out.to_str().unwrap(),
         ])
         .output()
         .unwrap()
+}
+
+/// `shelldsa run CASE --out OUT`, its output captured.
+fn run_into(case: &Path, out: &Path) -> Output {
+    command_into("run", case, out)
 }
 
 fn write_case(dir: &Path, text: &str) -> PathBuf {
@@ -112,15 +117,7 @@ fn write_case(dir: &Path, text: &str) -> PathBuf {
 fn dsa_in(dir: &Path, text: &str) -> (Output, PathBuf) {
     let case = write_case(dir, text);
     let out = dir.join("out");
-    let o = shelldsa()
-        .args([
-            "dsa",
-            case.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ])
-        .output()
-        .unwrap();
+    let o = command_into("dsa", &case, &out);
     assert_no_panic(&o);
     (o, out)
 }
