@@ -12,7 +12,7 @@
 
 #[path = "common/cli.rs"]
 mod cli;
-use cli::cli;
+use cli::dsa_case_text;
 use serde_json::Value;
 use std::path::PathBuf;
 
@@ -21,19 +21,10 @@ fn root() -> PathBuf {
 }
 
 /// `shelldsa dsa` on `case` (written to `target/dsa-replay-tests/NAME.toml`, output in
-/// `out-NAME`), which must complete without a failure: its sensitivity.json.
+/// `target/dsa-replay-tests/NAME`), which must complete without a failure: its
+/// sensitivity.json.
 fn dsa_complete(name: &str, case: &str) -> Value {
-    let dir = root().join("target/dsa-replay-tests");
-    std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join(format!("{name}.toml"));
-    std::fs::write(&path, case).unwrap();
-    let out = dir.join(format!("out-{name}"));
-    let code = cli(&[
-        "dsa",
-        path.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let (code, out) = dsa_case_text(&root().join("target/dsa-replay-tests"), name, case, &[]);
     let s: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("sensitivity.json")).unwrap())
             .unwrap();
